@@ -1,0 +1,309 @@
+"""P1 finite-element kit on triangles, vectorized over elements.
+
+Everything here works on plain arrays (``points`` (N, 2) in mm, ``triangles``
+(M, 3) int) so it serves any triangulation, not only the annulus.
+
+Layout of several fields: node-major, global dof = ``n_fields * node + field``.
+
+Quadrature.  Linear forms of P1 functions need no quadrature (closed forms
+below).  Nonlinear coefficients (permeability, relative permeabilities,
+degradation, spectral split...) are evaluated at the 3-point interior Strang
+rule (barycentric (2/3, 1/6, 1/6) and permutations), exact for polynomials of
+degree 2: it integrates the P1 x P1 mass products exactly, samples the
+coefficients away from element edges (where several of them are not smooth),
+and costs three evaluations per element.  ``VERTEX`` is the nodal (lumped)
+rule used where a diagonal mass is wanted (projection of the saturation
+gradient, reaction terms of the damage equation).
+
+Sparse assembly: :class:`BlockAssembler` computes the CSR sparsity pattern of
+a block system once per mesh and maps every element-matrix entry to its slot
+in the CSR data array; afterwards assembling a new Jacobian is one
+``np.bincount`` over the element entries, with no index sorting.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .ad import Dual
+
+
+# --------------------------------------------------------------------------
+# geometry
+# --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Geometry:
+    """Element geometry: ``areas`` (M,) mm², ``grads`` (M, 3, 2) 1/mm (∇N_a)."""
+
+    areas: np.ndarray
+    grads: np.ndarray
+
+
+def geometry(points: np.ndarray, triangles: np.ndarray) -> Geometry:
+    """Areas and constant shape-function gradients of P1 triangles (mm)."""
+    x = points[triangles]  # (M, 3, 2)
+    e1 = x[:, 1] - x[:, 0]
+    e2 = x[:, 2] - x[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    if np.any(det <= 0):
+        raise ValueError("triangles must be counter-clockwise with positive area")
+    # gradients of barycentric coordinates: ∇N_a = rot90(opposite edge) / det
+    grads = np.empty((len(triangles), 3, 2))
+    for a in range(3):  # loop over the 3 local nodes, vectorized over elements
+        b, c = (a + 1) % 3, (a + 2) % 3
+        edge = x[:, c] - x[:, b]
+        grads[:, a, 0] = -edge[:, 1] / det
+        grads[:, a, 1] = edge[:, 0] / det
+    return Geometry(areas=0.5 * det, grads=grads)
+
+
+@dataclass(frozen=True)
+class Quadrature:
+    """Rule on the reference triangle: barycentric points (nq, 3), weights (nq,) summing to 1."""
+
+    bary: np.ndarray
+    weights: np.ndarray
+
+
+STRANG3 = Quadrature(
+    bary=np.array([[2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]]),
+    weights=np.full(3, 1 / 3),
+)
+VERTEX = Quadrature(bary=np.eye(3), weights=np.full(3, 1 / 3))
+
+
+def at_quadrature(nodal: np.ndarray, triangles: np.ndarray, quad: Quadrature) -> np.ndarray:
+    """Interpolate nodal values (N, ...) to quadrature points -> (M, nq, ...)."""
+    return np.einsum("qa,ma...->mq...", quad.bary, nodal[triangles])
+
+
+def element_gradient(nodal: np.ndarray, triangles: np.ndarray, geom: Geometry) -> np.ndarray:
+    """Constant gradient per element of a nodal P1 field (N,) -> (M, 2)."""
+    return np.einsum("ma,mai->mi", nodal[triangles], geom.grads)
+
+
+def nodal_average(elem_values: np.ndarray, triangles: np.ndarray, areas: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Area-weighted (lumped L2) projection of element values (M,) to nodes (N,)."""
+    w = np.repeat(areas / 3.0, 3)
+    num = np.bincount(triangles.ravel(), weights=np.repeat(elem_values, 3) * w, minlength=n_nodes)
+    den = np.bincount(triangles.ravel(), weights=w, minlength=n_nodes)
+    return num / den
+
+
+# --------------------------------------------------------------------------
+# sparse assembly
+# --------------------------------------------------------------------------
+class BlockAssembler:
+    """CSR assembly of ``n_fields`` P1 fields with a pattern computed once.
+
+    ``matrix(Ke)`` takes element matrices (M, 3 nf, 3 nf) with local index
+    ``a * nf + f`` (node a, field f) and returns a CSR matrix sharing the
+    stored pattern; ``vector(Fe)`` takes (M, 3 nf).
+    """
+
+    def __init__(self, triangles: np.ndarray, n_nodes: int, n_fields: int):
+        self.n_nodes = int(n_nodes)
+        self.n_fields = int(n_fields)
+        self.ndof = self.n_nodes * self.n_fields
+        nf = self.n_fields
+        self.edofs = (nf * triangles[:, :, None] + np.arange(nf)[None, None, :]).reshape(len(triangles), 3 * nf)
+        rows = np.repeat(self.edofs, 3 * nf, axis=1).ravel()
+        cols = np.tile(self.edofs, (1, 3 * nf)).ravel()
+        key = rows.astype(np.int64) * self.ndof + cols
+        ukey, self._slot = np.unique(key, return_inverse=True)
+        self._ukey = ukey
+        self.indices = (ukey % self.ndof).astype(np.int32)
+        urows = ukey // self.ndof
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(urows, minlength=self.ndof))]).astype(np.int32)
+        self.nnz = len(ukey)
+        # slot of each diagonal entry (every dof touches its own element)
+        self.diag_slot = np.searchsorted(ukey, np.arange(self.ndof, dtype=np.int64) * (self.ndof + 1))
+
+    def slots(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """CSR data positions of entries (rows, cols); they must lie in the pattern."""
+        key = np.asarray(rows, np.int64) * self.ndof + np.asarray(cols, np.int64)
+        pos = np.searchsorted(self._ukey, key)
+        if np.any(pos >= self.nnz) or np.any(self._ukey[np.minimum(pos, self.nnz - 1)] != key):
+            raise ValueError("entries outside the element sparsity pattern")
+        return pos
+
+    def matrix(self, Ke: np.ndarray) -> sp.csr_matrix:
+        data = np.bincount(self._slot, weights=Ke.ravel(), minlength=self.nnz)
+        return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.ndof, self.ndof))
+
+    def vector(self, Fe: np.ndarray) -> np.ndarray:
+        return np.bincount(self.edofs.ravel(), weights=Fe.ravel(), minlength=self.ndof)
+
+    def dirichlet_rows(self, dofs: np.ndarray) -> "DirichletRows":
+        return DirichletRows(self, np.asarray(dofs, dtype=np.int64))
+
+
+class DirichletRows:
+    """Dirichlet conditions that keep the CSR structure: rows zeroed, unit diagonal."""
+
+    def __init__(self, asm: BlockAssembler, dofs: np.ndarray):
+        self.dofs = np.unique(dofs)
+        starts = asm.indptr[self.dofs]
+        ends = asm.indptr[self.dofs + 1]
+        counts = ends - starts
+        self.row_slots = np.repeat(starts, counts) + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+        self.diag_slots = asm.diag_slot[self.dofs]
+
+    def apply_matrix(self, A: sp.csr_matrix) -> sp.csr_matrix:
+        A.data[self.row_slots] = 0.0
+        A.data[self.diag_slots] = 1.0
+        return A
+
+    def apply_residual(self, R: np.ndarray, x: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """Residual rows become ``x - values`` on the constrained dofs."""
+        R[self.dofs] = x[self.dofs] - values
+        return R
+
+
+# --------------------------------------------------------------------------
+# linear operators (closed forms for P1)
+# --------------------------------------------------------------------------
+_LOCAL_MASS = (np.ones((3, 3)) + np.eye(3)) / 12.0
+
+
+def mass_matrix(points, triangles, lumped: bool = False) -> sp.csr_matrix:
+    """Scalar P1 mass matrix ∫ N_a N_b (mm²); ``lumped`` gives the row-sum diagonal."""
+    g = geometry(points, triangles)
+    n = len(points)
+    if lumped:
+        return sp.diags(np.bincount(triangles.ravel(), weights=np.repeat(g.areas / 3, 3), minlength=n)).tocsr()
+    Ke = g.areas[:, None, None] * _LOCAL_MASS
+    return BlockAssembler(triangles, n, 1).matrix(Ke)
+
+
+def stiffness_matrix(points, triangles, coef=None) -> sp.csr_matrix:
+    """Scalar P1 stiffness ∫ c ∇N_a·∇N_b with element-constant ``coef`` (M,) (default 1)."""
+    g = geometry(points, triangles)
+    c = np.ones(len(triangles)) if coef is None else np.broadcast_to(coef, (len(triangles),))
+    Ke = np.einsum("m,mai,mbi->mab", c * g.areas, g.grads, g.grads)
+    return BlockAssembler(triangles, len(points), 1).matrix(Ke)
+
+
+def strain_matrix(geom: Geometry) -> np.ndarray:
+    """B (M, 3, 6): Voigt strain (εxx, εyy, 2εxy) from local dofs (ux0, uy0, ux1, ...)."""
+    M = len(geom.areas)
+    B = np.zeros((M, 3, 6))
+    B[:, 0, 0::2] = geom.grads[:, :, 0]
+    B[:, 1, 1::2] = geom.grads[:, :, 1]
+    B[:, 2, 0::2] = geom.grads[:, :, 1]
+    B[:, 2, 1::2] = geom.grads[:, :, 0]
+    return B
+
+
+def plane_strain_D(E: float, nu: float) -> np.ndarray:
+    """Plane-strain elasticity matrix in Voigt notation (kPa), E in kPa."""
+    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
+    mu = E / (2 * (1 + nu))
+    return np.array([[lam + 2 * mu, lam, 0.0], [lam, lam + 2 * mu, 0.0], [0.0, 0.0, mu]])
+
+
+def elasticity_matrix(points, triangles, E: float, nu: float) -> sp.csr_matrix:
+    """Vector plane-strain stiffness ∫ ε(v):C:ε(u) (kPa·mm² per mm² of dof), 2 fields node-major."""
+    g = geometry(points, triangles)
+    B = strain_matrix(g)
+    Ke = np.einsum("m,mki,kl,mlj->mij", g.areas, B, plane_strain_D(E, nu), B)
+    return BlockAssembler(triangles, len(points), 2).matrix(Ke)
+
+
+# --------------------------------------------------------------------------
+# boundary integrals on tagged edges
+# --------------------------------------------------------------------------
+def edge_geometry(points: np.ndarray, edges: np.ndarray):
+    """Lengths (E,) mm and unit normals (E, 2) of edges (direction rotated clockwise).
+
+    The orientation of these normals depends on the edge's node order; use
+    :func:`outward_normals` for normals pointing out of a triangulated domain.
+    """
+    t = points[edges[:, 1]] - points[edges[:, 0]]
+    L = np.hypot(t[:, 0], t[:, 1])
+    n = np.stack([t[:, 1], -t[:, 0]], axis=1) / L[:, None]
+    return L, n
+
+
+def outward_normals(points: np.ndarray, edges: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lengths (E,) and outward unit normals (E, 2) of boundary edges of a triangulation."""
+    L, n = edge_geometry(points, edges)
+    # the triangle owning each edge: its third vertex lies inside
+    key = lambda a, b: np.minimum(a, b).astype(np.int64) * len(points) + np.maximum(a, b)
+    tk = np.concatenate([key(triangles[:, i], triangles[:, (i + 1) % 3]) for i in range(3)])
+    third = np.concatenate([triangles[:, (i + 2) % 3] for i in range(3)])
+    order = np.argsort(tk)
+    pos = np.searchsorted(tk[order], key(edges[:, 0], edges[:, 1]))
+    opp = points[third[order[pos]]]
+    mid = 0.5 * (points[edges[:, 0]] + points[edges[:, 1]])
+    flip = np.einsum("ei,ei->e", opp - mid, n) > 0
+    n[flip] *= -1
+    return L, n
+
+
+def edge_mass(points, edges, n_nodes: int) -> sp.csr_matrix:
+    """∫_Γ N_a N_b ds over the given edges (mm)."""
+    L, _ = edge_geometry(points, edges)
+    loc = np.array([[2.0, 1.0], [1.0, 2.0]]) / 6.0
+    rows = np.repeat(edges, 2, axis=1).ravel()
+    cols = np.tile(edges, (1, 2)).ravel()
+    data = (L[:, None, None] * loc).ravel()
+    return sp.csr_matrix((data, (rows, cols)), shape=(n_nodes, n_nodes))
+
+
+def edge_load(points, edges, n_nodes: int, g) -> np.ndarray:
+    """∫_Γ g N_a ds for a constant or per-edge ``g`` (units of g times mm)."""
+    L, _ = edge_geometry(points, edges)
+    g = np.broadcast_to(np.asarray(g, dtype=float), L.shape)
+    return np.bincount(edges.ravel(), weights=np.repeat(0.5 * L * g, 2), minlength=n_nodes)
+
+
+# --------------------------------------------------------------------------
+# point-wise forms -> element residuals and exact Jacobians
+# --------------------------------------------------------------------------
+def qp_inputs(U_elem: np.ndarray, geom: Geometry, quad: Quadrature) -> np.ndarray:
+    """Point-wise inputs (M, nq, nf, 3): value and 2 gradient components of every field.
+
+    ``U_elem`` (M, 3, nf) are the element's nodal values.
+    """
+    vals = np.einsum("qa,maf->mqf", quad.bary, U_elem)
+    grads = np.einsum("mai,maf->mfi", geom.grads, U_elem)
+    nq = len(quad.weights)
+    out = np.empty(vals.shape + (3,))
+    out[..., 0] = vals
+    out[..., 1:] = grads[:, None, :, :].repeat(nq, axis=1)
+    return out
+
+
+def basis(geom: Geometry, quad: Quadrature) -> np.ndarray:
+    """Test/trial basis (M, nq, 3 nodes, 3): value N_a(q) and ∇N_a."""
+    M, nq = len(geom.areas), len(quad.weights)
+    B = np.empty((M, nq, 3, 3))
+    B[..., 0] = quad.bary[None]
+    B[..., 1:] = geom.grads[:, None]
+    return B
+
+
+def assemble_forms(F: Dual, geom: Geometry, quad: Quadrature, need_jacobian: bool = True):
+    """Element residuals and Jacobians of the weak form Σ_q w |e| F_ik(q) B_ak(q).
+
+    ``F`` is a Dual of value shape (M, nq, neq, 3): for equation i, component
+    0 multiplies the test function value and components 1–2 its gradient
+    (the f0 / f1 split of a weak form).  Its derivative slots are the inputs of
+    :func:`qp_inputs` flattened as ``3 * field + k``.  Returns ``Fe`` (M, 3, neq)
+    and ``Ke`` (M, 3, neq, 3, nf) (local node, equation; local node, field).
+    """
+    B = basis(geom, quad)
+    wq = quad.weights[None, :] * geom.areas[:, None]  # (M, nq)
+    Fe = np.einsum("mq,mqik,mqak->mai", wq, F.v, B)
+    if not need_jacobian:
+        return Fe, None
+    M, nq, neq, _ = F.v.shape
+    nf = F.d.shape[-1] // 3
+    dF = F.d.reshape(M, nq, neq, 3, nf, 3)
+    # contract trial side first: (M,nq,neq,3,nf,3) x (M,nq,3b,3l) -> (M,nq,neq,3k,nf,3b)
+    T = np.einsum("mqikjl,mqbl->mqikjb", dF, B, optimize=True)
+    Ke = np.einsum("mq,mqak,mqikjb->maibj", wq, B, T, optimize=True)
+    return Fe, Ke

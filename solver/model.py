@@ -1,0 +1,294 @@
+"""The poromechanics block of the model: weak form, residual and exact Jacobian.
+
+Unknowns on P1 nodes (node-major): u_x, u_y (mm), p (kPa), S (-), μ (kPa),
+and, when the Korteweg terms are on, the L2-projected saturation gradient
+G = Π∇S (1/mm).  Damage d (nodal, -) is frozen here (staggered scheme,
+Sec. 3.1) and solved in :mod:`solver.damage`.
+
+Weak form, test functions v (vector), q, r, ϱ, ϑ (Eq. summary_equations and
+summary_equations_secondary, backward Euler with step Δt, second-order terms
+scaled by the ``volumetric_coupling`` strength c_v):
+
+  momentum      ∫ σ : ∇v  + ∫_Γi p n·v  [+ ∫_Γo u·v / c_o]           = 0
+  total mass    ∫ q [(φ − φ_n)/Δt + c_v φ ε̇_v] − ∫ ∇q·w − ∫_Γi q w_i  = 0
+  invading      ∫ r [(φS − φ_n S_n)/Δt + c_v φ S ε̇_v] − ∫ ∇r·(w_1 − M∇μ) = 0
+  chem. pot.    ∫ ϱ [μ − (12γ/l_S) f'(S)] − (3γ l_S/2) ∫ ∇ϱ·∇S       = 0
+  projection    ∫_h ϑ (G − ∇S) = 0   (vertex quadrature: a diagonal mass)
+
+with σ = g(d) ∂ψ_A/∂ε + ∂ψ_I/∂ε − κ ∇S⊗∇S − b p I (Miehe split, plane strain),
+φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p/K_s, w_α = −λ_α (∇p + φ⁻¹ κ ∇·(G⊗G)),
+λ_α = k(φ) k_rα / η_α, M = k/η̄.  n is the outward normal of the domain: on
+the inner circle the total traction is σn = −p n (the injection pressure
+loads the skeleton), and the invading fluid enters with Darcy velocity w_i.
+
+The Korteweg force ∇·(κ∇S⊗∇S) contains second derivatives of S, which are
+zero inside P1 elements; evaluated element-wise it would silently vanish.
+We therefore carry G = Π∇S, the lumped L2 projection of ∇S, as two extra
+nodal unknowns (a local equation per node, so the stencil does not widen),
+and evaluate ∇·(G⊗G) = (∇·G) G + (∇G) G from its P1 interpolant.  In the
+effective stress, which enters the weak form without derivatives, ∇S itself
+is used.  κ = 3γl_S/2 follows from the free energy (Eq. fluid_free_energy);
+the paper's dimensionless section writes 3γl_S/4, which is inconsistent with it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import ad, fem, physics
+from .ad import Dual
+
+UX, UY, P, S, MU, GX, GY = range(7)
+FIELD_NAMES = ("ux", "uy", "p", "S", "mu", "Gx", "Gy")
+
+
+@dataclass(frozen=True)
+class Discretization:
+    """Everything that depends on the mesh and parameters but not on the state."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    geom: fem.Geometry
+    asm: fem.BlockAssembler
+    n_fields: int
+    inner_nodes: np.ndarray
+    outer_nodes: np.ndarray
+    inner_edges: np.ndarray
+    outer_edges: np.ndarray
+    phi0: np.ndarray  # (M,)
+    boundary_slots: np.ndarray  # CSR slots of the constant boundary couplings
+    boundary_vals: np.ndarray
+    boundary_op: sp.csr_matrix  # the same couplings as a matrix (for the residual)
+    inject: np.ndarray  # constant residual part (ndof,)
+    dirichlet: fem.DirichletRows
+    dirichlet_values: np.ndarray
+    lumped_mass: np.ndarray  # (N,) mm²
+    inner_length: float  # mm
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.points)
+
+
+def build_discretization(mesh, params, phi0: np.ndarray) -> Discretization:
+    """Assemble the mesh-dependent operators for ``params`` (units mm, s, kPa)."""
+    pts, tri = np.asarray(mesh.points, float), np.asarray(mesh.triangles)
+    n = len(pts)
+    nf = 7 if params.korteweg_factor > 0 else 5
+    geom = fem.geometry(pts, tri)
+    asm = fem.BlockAssembler(tri, n, nf)
+    inner_e = np.asarray(mesh.boundary_edges["inner"])
+    outer_e = np.asarray(mesh.boundary_edges["outer"])
+    inner_n = np.unique(inner_e)
+    outer_n = np.unique(outer_e)
+
+    # constant boundary couplings: ∫_Γi p n·v and the outer spring ∫_Γo u·v / c_o
+    L, nrm = fem.outward_normals(pts, inner_e, tri)
+    loc = np.array([[2.0, 1.0], [1.0, 2.0]]) / 6.0  # ∫ N_a N_b ds / L
+    rows, cols, vals = [], [], []
+    for a in range(2):
+        for b in range(2):
+            w = L * loc[a, b]
+            for c in range(2):  # velocity component of the test function
+                rows.append(nf * inner_e[:, a] + c)
+                cols.append(nf * inner_e[:, b] + P)
+                vals.append(w * nrm[:, c])
+    if params.outer_compliance > 0:
+        Lo, _ = fem.edge_geometry(pts, outer_e)
+        for a in range(2):
+            for b in range(2):
+                for c in range(2):
+                    rows.append(nf * outer_e[:, a] + c)
+                    cols.append(nf * outer_e[:, b] + c)
+                    vals.append(Lo * loc[a, b] / params.outer_compliance)
+    rows, cols, vals = (np.concatenate(x) for x in (rows, cols, vals))
+    op = sp.csr_matrix((vals, (rows, cols)), shape=(asm.ndof, asm.ndof))
+    slots = asm.slots(rows, cols)
+
+    inject = np.zeros(asm.ndof)
+    inject[P::nf] = -fem.edge_load(pts, inner_e, n, params.w_i)
+
+    # Dirichlet conditions (Sec. 3.4)
+    dofs, values = [], []
+
+    def fix(nodes, field, value):
+        dofs.append(nf * nodes + field)
+        values.append(np.full(len(nodes), float(value)))
+
+    fix(inner_n, S, 1.0)
+    fix(inner_n, MU, params.mu_i)
+    fix(outer_n, P, 0.0)
+    fix(outer_n, S, 0.0)
+    if params.mu_outer_bc == "dirichlet":
+        fix(outer_n, MU, params.mu_o)
+    if params.outer_compliance == 0:
+        fix(outer_n, UX, 0.0)
+        fix(outer_n, UY, 0.0)
+    dofs = np.concatenate(dofs)
+    values = np.concatenate(values)
+    order = np.argsort(dofs)
+    dofs, values = dofs[order], values[order]
+    lumped = np.bincount(tri.ravel(), weights=np.repeat(geom.areas / 3, 3), minlength=n)
+    return Discretization(
+        points=pts, triangles=tri, geom=geom, asm=asm, n_fields=nf,
+        inner_nodes=inner_n, outer_nodes=outer_n, inner_edges=inner_e, outer_edges=outer_e,
+        phi0=np.asarray(phi0, float), boundary_slots=slots, boundary_vals=vals, boundary_op=op,
+        inject=inject, dirichlet=asm.dirichlet_rows(dofs), dirichlet_values=values,
+        lumped_mass=lumped, inner_length=float(L.sum()),
+    )
+
+
+@dataclass(frozen=True)
+class StepData:
+    """Data of the previous time step seen by the poromechanics residual."""
+
+    dt: float  # s
+    d_q: np.ndarray  # damage at quadrature points (M, nq), frozen
+    phi_n: np.ndarray  # porosity at quadrature points (M, nq)
+    S_n: np.ndarray  # saturation at quadrature points (M, nq)
+    ev_n: np.ndarray  # volumetric strain per element (M,)
+
+
+def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: float) -> StepData:
+    """Freeze the previous state ``U_n`` (N, nf) and the damage iterate ``d`` (N,)."""
+    tri = disc.triangles
+    q = fem.STRANG3
+    grads = np.einsum("mai,maf->mfi", disc.geom.grads, U_n[tri][:, :, :2])
+    ev_n = grads[:, UX, 0] + grads[:, UY, 1]
+    p_n = fem.at_quadrature(U_n[:, P], tri, q)
+    S_n = fem.at_quadrature(U_n[:, S], tri, q)
+    phi_n = physics.porosity(disc.phi0[:, None], ev_n[:, None], p_n, params.K_s)
+    return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n)
+
+
+def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields: int) -> Dual:
+    """f0/f1 of the five (or seven) equations at the Strang points, as a Dual (M, nq, nf, 3).
+
+    ``X[3 f + k]`` is field f's value (k = 0) or gradient component (k = 1, 2).
+    """
+    g = lambda f, k: X[3 * f + k]
+    lam, mu_s = params.lame_lambda, params.lame_mu
+    kap = params.kappa * params.korteweg_factor
+    cv = params.volumetric_coupling
+    dt = data.dt
+
+    exx, eyy = g(UX, 1), g(UY, 2)
+    exy = 0.5 * (g(UX, 2) + g(UY, 1))
+    ev = exx + eyy
+    p, Sat, mu = g(P, 0), g(S, 0), g(MU, 0)
+    Sx, Sy = g(S, 1), g(S, 2)
+
+    phi = physics.porosity(phi0[:, None], ev, p, params.K_s)
+
+    # effective stress σ' = g(d) σ_A + σ_I − κ ∇S⊗∇S, total σ = σ' − b p I
+    (ax, ay, axy), (ex, ey, exy_s), _ = physics.spectral_split(exx, eyy, exy, lam, mu_s)
+    gd = physics.degradation(data.d_q, params.m)
+    deg = gd - 1.0  # σ' = σ_elastic + (g − 1) σ_A
+    sxx = ex + ax * deg - params.biot * p
+    syy = ey + ay * deg - params.biot * p
+    sxy = exy_s + axy * deg
+    if kap > 0:
+        sxx = sxx - kap * Sx * Sx
+        syy = syy - kap * Sy * Sy
+        sxy = sxy - kap * Sx * Sy
+
+    # Darcy fluxes with the Korteweg force (Eq. fluid_equation)
+    k = physics.permeability(phi, phi0[:, None], params.kbar, params.k_max, params.crack_permeability)
+    kr1, kr2 = physics.relative_permeabilities(Sat, params.viscosity_ratio)
+    lam1 = k * kr1 / params.eta_w
+    lam2 = k * kr2 / params.eta_o
+    Yx, Yy = g(P, 1), g(P, 2)
+    if n_fields == 7:
+        Gx, Gy = g(GX, 0), g(GY, 0)
+        divG = g(GX, 1) + g(GY, 2)
+        fx = kap * (divG * Gx + g(GX, 1) * Gx + g(GX, 2) * Gy)
+        fy = kap * (divG * Gy + g(GY, 1) * Gx + g(GY, 2) * Gy)
+        Yx = Yx + fx / phi
+        Yy = Yy + fy / phi
+    w1x, w1y = -lam1 * Yx, -lam1 * Yy
+    wx, wy = -(lam1 + lam2) * Yx, -(lam1 + lam2) * Yy
+    Mch = k / params.eta_bar
+
+    dev = (ev - data.ev_n[:, None]) / dt
+    zero = 0.0 * ev
+    c_mu = 12.0 * params.gamma / params.l_S
+    c_grad = c_mu * params.l_S**2 / 8.0
+    rows = [
+        [zero, sxx, sxy],
+        [zero, sxy, syy],
+        [(phi - data.phi_n) / dt + cv * phi * dev, -wx, -wy],
+        [(phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev,
+         -w1x + Mch * g(MU, 1), -w1y + Mch * g(MU, 2)],
+        [mu - c_mu * physics.double_well_prime(Sat), -c_grad * Sx, -c_grad * Sy],
+    ]
+    return ad.stack([ad.stack(r, axis=-1) for r in rows], axis=-2)
+
+
+def projection_forms(X: list) -> Dual:
+    """f0 of the gradient projection G − ∇S at the vertex points, Dual (M, 3, 2, 3)."""
+    g = lambda f, k: X[3 * f + k]
+    zero = 0.0 * g(GX, 0)
+    return ad.stack([ad.stack([g(GX, 0) - g(S, 1), zero, zero], -1),
+                     ad.stack([g(GY, 0) - g(S, 2), zero, zero], -1)], -2)
+
+
+def _variables(disc: Discretization, U: np.ndarray, quad: fem.Quadrature) -> list:
+    inp = fem.qp_inputs(U[disc.triangles], disc.geom, quad)
+    M, nq = inp.shape[:2]
+    return Dual.variables(inp.reshape(M, nq, -1))
+
+
+def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: StepData, need_jacobian=True):
+    """Unconstrained residual (ndof,) and Jacobian (CSR) at nodal state U (N, nf)."""
+    nf = disc.n_fields
+    X = _variables(disc, U, fem.STRANG3)
+    F = pointwise_forms(X, params, disc.phi0, data, nf)
+    Fe, Ke = fem.assemble_forms(F, disc.geom, fem.STRANG3, need_jacobian)
+    M = len(disc.triangles)
+    if nf == 7:
+        Xv = _variables(disc, U, fem.VERTEX)
+        Fp, Kp = fem.assemble_forms(projection_forms(Xv), disc.geom, fem.VERTEX, need_jacobian)
+        Fe = np.concatenate([Fe, Fp], axis=2)
+        if need_jacobian:
+            Ke = np.concatenate([Ke, Kp], axis=2)
+    R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
+    if not need_jacobian:
+        return R, None
+    J = disc.asm.matrix(Ke.reshape(M, 3 * nf, 3 * nf))
+    J.data += np.bincount(disc.boundary_slots, weights=disc.boundary_vals, minlength=disc.asm.nnz)
+    return R, J
+
+
+# ---------------------------------------------------------------- element fields
+def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray) -> dict:
+    """Post-processed element fields at the centroid: φ, ε_v, hoop stress (σ'_θθ, kPa), k (mm²), |w_1| (mm/s), ψ_A (kPa)."""
+    tri = disc.triangles
+    gradU = np.einsum("mai,maf->mfi", disc.geom.grads, U[tri])
+    cen = U[tri].mean(axis=1)
+    exx, eyy = gradU[:, UX, 0], gradU[:, UY, 1]
+    exy = 0.5 * (gradU[:, UX, 1] + gradU[:, UY, 0])
+    ev = exx + eyy
+    phi = physics.porosity(disc.phi0, ev, cen[:, P], params.K_s)
+    (ax, ay, axy), (sx, sy, sxy), psi_a = physics.spectral_split(exx, eyy, exy, params.lame_lambda, params.lame_mu)
+    gd = physics.degradation(d[tri].mean(axis=1), params.m)
+    kap = params.kappa * params.korteweg_factor
+    Sx, Sy = gradU[:, S, 0], gradU[:, S, 1]
+    sxx = sx + (gd - 1) * ax - kap * Sx * Sx
+    syy = sy + (gd - 1) * ay - kap * Sy * Sy
+    sxy_e = sxy + (gd - 1) * axy - kap * Sx * Sy
+    xc = disc.points[tri].mean(axis=1)
+    th = np.arctan2(xc[:, 1], xc[:, 0])
+    c, s = np.cos(th), np.sin(th)
+    hoop = sxx * s * s + syy * c * c - 2 * sxy_e * s * c
+    k = physics.permeability(phi, disc.phi0, params.kbar, params.k_max, params.crack_permeability)
+    kr1, _ = physics.relative_permeabilities(cen[:, S], params.viscosity_ratio)
+    Y = gradU[:, P, :].copy()
+    if disc.n_fields == 7:
+        G = cen[:, GX:GY + 1]
+        divG = gradU[:, GX, 0] + gradU[:, GY, 1]
+        f = kap * (divG[:, None] * G + np.einsum("mij,mj->mi", gradU[:, GX:GY + 1, :], G))
+        Y += f / phi[:, None]
+    w1 = -(k * kr1 / params.eta_w)[:, None] * Y
+    return {"phi": phi, "eps_v": ev, "hoop_stress": hoop, "k": k, "w1_mag": np.hypot(w1[:, 0], w1[:, 1]), "psi_a": psi_a}

@@ -1,0 +1,151 @@
+"""Run options: discretization, time stepping, tolerances, outputs (mm, s)."""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+_LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How to solve: none of these change the model, only its discretization.
+
+    Attributes
+    ----------
+    h : mesh size, mm (the paper's reference mesh: 1.0).
+    mesh_seed : perturbation seed of the mesh generator (None = deterministic default).
+    t_end : final time, s.
+    dt0, dt_min, dt_max : initial, minimum and maximum time step, s.
+    dt_grow : factor on dt after an easy step (<= ``easy_newton_its`` Newton iterations).
+    dt_cut : factor on dt after a rejected step.
+    stop_front_radius : stop when the S = 0.5 front connected to the inlet reaches this radius, mm (None: never).
+    snapshot_times : times at which fields are written, s (the last state is always written).
+    newton_rtol : relative Newton tolerance on every field's update (dimensionless).
+    newton_max_its : Newton iterations before a step is rejected.
+    stagger_tol : stagger converged when max |Δd| between two stagger iterations is below this.
+    stagger_max_its : stagger iterations before a step is rejected.
+    damage_max_its : active-set Newton iterations of the damage problem.
+    linear_solver : "auto" (pypardiso when installed, else SuperLU), "superlu" or "pypardiso".
+    jacobian_reuse : keep a factorized Jacobian over Newton iterations while the residual drops
+        by at least this factor per iteration (0 disables reuse: every iteration factorizes).
+    max_wall_time : give up (status "failed") after this many seconds of wall time (None: no limit).
+    write_xdmf : also write the snapshots as XDMF for ParaView.
+    """
+
+    h: float = 1.0
+    mesh_seed: int | None = None
+    t_end: float = 2.0
+    dt0: float = 1e-3
+    dt_min: float = 1e-7
+    dt_max: float = 0.02
+    dt_grow: float = 1.5
+    dt_cut: float = 0.25
+    easy_newton_its: int = 4
+    stop_front_radius: float | None = None
+    snapshot_times: tuple = (0.5, 1.0, 1.5, 2.0)
+    newton_rtol: float = 1e-7
+    newton_max_its: int = 12
+    stagger_tol: float = 1e-4
+    stagger_max_its: int = 30
+    damage_max_its: int = 50
+    linear_solver: str = "auto"
+    jacobian_reuse: float = 0.0
+    max_wall_time: float | None = None
+    write_xdmf: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(self, "snapshot_times", tuple(float(t) for t in self.snapshot_times))
+        _check(self)
+
+    # -- serialization ------------------------------------------------------
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["snapshot_times"] = list(self.snapshot_times)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RunOptions":
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise ValueError(f"unknown run option(s) {unknown}; allowed: {sorted(names)}")
+        return cls(**d)
+
+    def replace(self, **changes) -> "RunOptions":
+        return replace(self, **changes)
+
+    def to_toml(self, path) -> None:
+        lines = []
+        for k, v in self.to_dict().items():
+            if v is None:
+                continue
+            lines.append(f"{k} = {_toml_value(v)}")
+        Path(path).write_text("\n".join(lines) + "\n")
+
+    @classmethod
+    def from_toml(cls, path) -> "RunOptions":
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            import tomli as tomllib
+        return cls.from_dict(tomllib.loads(Path(path).read_text()))
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(float(v)) if isinstance(v, float) else str(v)
+
+
+def _fail(name, value, allowed):
+    raise ValueError(f"run option {name}={value!r} is out of range: allowed {allowed}")
+
+
+def _check(o: RunOptions) -> None:
+    def num(name, lo=None, hi=None, lo_open=True, integer=False):
+        v = getattr(o, name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not isinstance(v, int)):
+            _fail(name, v, "an integer" if integer else "a number")
+        if not math.isfinite(v):
+            _fail(name, v, "a finite number")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            _fail(name, v, f"{'>' if lo_open else '>='} {lo}")
+        if hi is not None and v > hi:
+            _fail(name, v, f"<= {hi}")
+
+    num("h", 0.0, 24.0)
+    num("t_end", 0.0)
+    num("dt0", 0.0)
+    num("dt_min", 0.0)
+    num("dt_max", 0.0)
+    if not (o.dt_min <= o.dt0 <= o.dt_max):
+        _fail("dt0", o.dt0, f"[dt_min={o.dt_min}, dt_max={o.dt_max}]")
+    num("dt_grow", 1.0, lo_open=False)
+    num("dt_cut", 0.0, 1.0)
+    num("easy_newton_its", 1, lo_open=False, integer=True)
+    num("newton_rtol", 0.0, 1e-2)
+    num("newton_max_its", 1, lo_open=False, integer=True)
+    num("stagger_tol", 0.0, 1.0)
+    num("stagger_max_its", 1, lo_open=False, integer=True)
+    num("damage_max_its", 1, lo_open=False, integer=True)
+    num("jacobian_reuse", 0.0, 1.0, lo_open=False)
+    if o.stop_front_radius is not None:
+        num("stop_front_radius", 0.0)
+    if o.max_wall_time is not None:
+        num("max_wall_time", 0.0)
+    if o.mesh_seed is not None and (not isinstance(o.mesh_seed, int) or o.mesh_seed < 0):
+        _fail("mesh_seed", o.mesh_seed, "None or an integer >= 0")
+    if o.linear_solver not in _LINEAR_SOLVERS:
+        _fail("linear_solver", o.linear_solver, f"one of {_LINEAR_SOLVERS}")
+    if any((not math.isfinite(t)) or t < 0 for t in o.snapshot_times):
+        _fail("snapshot_times", list(o.snapshot_times), "finite times >= 0")

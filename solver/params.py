@@ -1,0 +1,390 @@
+"""Model parameters of the Darcy–Cahn–Hilliard fracture model (units mm, s, kPa).
+
+One frozen dataclass, :class:`Parameters`, holds every *model* parameter (how
+the mesh and time stepping are chosen lives in :mod:`solver.options`).  The
+defaults are the paper's reference experiment (Sec. 3.5, Appendix A, Table
+``tab:table_summary``): cement ratio C = 1.2 %, oil viscosity 0.29 kPa·s,
+water viscosity 1e-6 kPa·s, permeability coefficient 0.0015 mm².
+
+Units: lengths mm, time s, pressures / moduli / chemical potentials kPa,
+viscosities kPa·s, permeabilities mm², toughness kPa·mm, surface tension
+kPa·mm (= N/m), energies per volume kPa.
+
+The three fracture parameters follow the paper's laws of the cement ratio C
+(in percent) unless given explicitly:
+
+* G_c = (0.26 C + 1)² kPa·mm        (Eq. Gc with K1c = 0.15 C + 0.59 kPa·m^½)
+* ψ_c = 0.0015 C² kPa                (Eq. psic, p_c = α C, α = 1 kPa)
+* β   = 65.7 √C kPa·s                (calibrated, Sec. 3.6)
+
+The fields ``Gc``, ``psi_c``, ``beta`` stay ``None`` when they follow the laws
+(so ``p.replace(cement=2.0)`` moves them); the resolved values are the
+properties :attr:`Parameters.fracture_toughness`,
+:attr:`Parameters.nucleation_energy` and :attr:`Parameters.damage_viscosity`.
+
+Effect strengths (``volumetric_coupling``, ``korteweg_factor``,
+``outer_compliance``, ``crack_permeability``) switch individual model
+ingredients on or off; at their "off" value each reproduces exactly the model
+without that ingredient, at the default the paper's model.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, fields, replace as _dc_replace
+from numbers import Integral, Real
+from pathlib import Path
+
+import numpy as np
+
+POROSITY_FIELDS = ("random", "pockets", "constant")
+MU_OUTER_BCS = ("dirichlet", "zero_flux")
+
+_FIELD_DOCS = {
+    "eta_o": "defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 300 kcSt = 0.29 kPa·s)",
+    "eta_w": "invading (water) viscosity η_w = η_1, kPa·s (Table A: 1e-6)",
+    "kbar": "Kozeny–Carman coefficient k̄, mm² (Eq. permeability; Sec. 3.5: 0.0015)",
+    "cement": "cement volume ratio C, percent (Table A: [0, 3]; reference 1.2)",
+    "w_i": "inner-boundary Darcy velocity of the invading fluid w_i, mm/s (Table A: 50)",
+    "E": "Young's modulus of the granular pack, kPa (Table A: 331)",
+    "nu": "Poisson ratio of the granular pack, - (Table A: 0.2)",
+    "K_s": "bulk modulus of the solid grains, kPa (Table A: 1600; Biot b = 1 - K/K_s)",
+    "gamma": "surface tension γ between the fluids, kPa·mm (Table A: 0.03; Eq. fluid_free_energy)",
+    "l_S": "regularization length of the saturation phase field l_S, mm (Table A: 4)",
+    "l_d": "regularization length of the damage phase field l_d, mm (Table A: 4; Eq. crack_density_function)",
+    "mu_i": "Dirichlet chemical potential μ_i on the inner boundary, kPa (Table A: 0.006)",
+    "mu_o": "Dirichlet chemical potential μ_o on the outer boundary, kPa (Table A: 0.02)",
+    "Gc": "fracture toughness G_c, kPa·mm; None -> (0.26 C + 1)² (Eq. Gc)",
+    "psi_c": "nucleation energy ψ_c, kPa; None -> 0.0015 C² (Eq. psic)",
+    "beta": "damage viscosity β, kPa·s; None -> 65.7 √C (Sec. 3.6; Eq. fracture_equation)",
+    "cell_height": "Hele–Shaw gap h, mm (Table A: 1.96; k_max = h²/12)",
+    "r_inner": "inner radius of the annulus r_i, mm (Sec. 3.5: 5)",
+    "r_outer": "outer radius of the annulus r_o, mm (Table A: 53)",
+    "bead_diameter": "bead diameter δ, mm (Table A: 2; enters Ca*)",
+    "phi_mean": "mean initial porosity φ̄ = 1 - packing fraction, - (Table A: 0.40)",
+    "phi_range": "half-width of the uniform random initial porosity, - (Sec. 3.3: values in [0.2, 0.6])",
+    "seed": "seed of the random initial porosity (numpy default_rng), int >= 0",
+    "porosity_field": f"initial porosity field, one of {POROSITY_FIELDS} (Sec. 3.3)",
+    "mu_outer_bc": f"outer boundary condition on μ, one of {MU_OUTER_BCS} (Sec. 3.3: Dirichlet μ_o; Dong: zero flux)",
+    "volumetric_coupling": "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)",
+    "korteweg_factor": "factor on κ in the Korteweg terms of Eq. summary_equations_secondary (1 paper, 0 off)",
+    "outer_compliance": "compliance of a spring on the outer boundary, mm/kPa (0 = rigid u = 0, the paper)",
+    "crack_permeability": "blend s: k = k(φ0) + s (min(k(φ), k_max) - k(φ0)) (1 paper, 0 frozen at k(φ0))",
+}
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """All model parameters, units mm, s, kPa; defaults = the paper's reference experiment.
+
+    Attributes
+    ----------
+    eta_o : defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 0.29).
+    eta_w : invading (water) viscosity η_w = η_1, kPa·s (Table A: 1e-6).
+    kbar : Kozeny–Carman coefficient k̄, mm² (Eq. permeability; 0.0015).
+    cement : cement volume ratio C, percent (reference 1.2).
+    w_i : inner-boundary Darcy velocity of the invading fluid, mm/s (50), >= 0.
+    E : Young's modulus, kPa (331).
+    nu : Poisson ratio (0.2).
+    K_s : grain bulk modulus, kPa (1600); Biot coefficient b = 1 - K/K_s.
+    gamma : surface tension γ, kPa·mm (0.03; Eq. fluid_free_energy).
+    l_S : saturation regularization length, mm (4).
+    l_d : damage regularization length, mm (4; Eq. crack_density_function).
+    mu_i, mu_o : Dirichlet chemical potentials on the inner / outer circle, kPa (0.006, 0.02).
+    Gc : fracture toughness, kPa·mm, None -> (0.26 C + 1)² (Eq. Gc).
+    psi_c : nucleation energy, kPa, None -> 0.0015 C² (Eq. psic).
+    beta : damage viscosity, kPa·s, None -> 65.7 √C (Eq. fracture_equation, Sec. 3.6).
+    cell_height : Hele–Shaw gap, mm (1.96); k_max = cell_height²/12.
+    r_inner, r_outer : annulus radii, mm (5, 53).
+    bead_diameter : bead diameter δ, mm (2).
+    phi_mean, phi_range : initial porosity mean and half-width of its uniform range (0.4, 0.2).
+    seed : RNG seed of the random initial porosity (0).
+    porosity_field : "random" | "pockets" | "constant".
+    mu_outer_bc : "dirichlet" (paper) | "zero_flux" (Dong).
+    volumetric_coupling : factor on φ S ε̇_v and φ ε̇_v (1; off 0).
+    korteweg_factor : factor on κ in the Korteweg terms (1; off 0).
+    outer_compliance : outer spring compliance, mm/kPa (0 = rigid, the paper).
+    crack_permeability : permeability blend s (1 = paper; 0 = k frozen at k(φ0)).
+    """
+
+    eta_o: float = 0.29
+    eta_w: float = 1e-6
+    kbar: float = 0.0015
+    cement: float = 1.2
+    w_i: float = 50.0
+    E: float = 331.0
+    nu: float = 0.2
+    K_s: float = 1600.0
+    gamma: float = 0.03
+    l_S: float = 4.0
+    l_d: float = 4.0
+    mu_i: float = 0.006
+    mu_o: float = 0.02
+    Gc: float | None = None
+    psi_c: float | None = None
+    beta: float | None = None
+    cell_height: float = 1.96
+    r_inner: float = 5.0
+    r_outer: float = 53.0
+    bead_diameter: float = 2.0
+    phi_mean: float = 0.4
+    phi_range: float = 0.2
+    seed: int = 0
+    porosity_field: str = "random"
+    mu_outer_bc: str = "dirichlet"
+    volumetric_coupling: float = 1.0
+    korteweg_factor: float = 1.0
+    outer_compliance: float = 0.0
+    crack_permeability: float = 1.0
+
+    def __post_init__(self):
+        _coerce_and_check(self)
+
+    # ------------------------------------------------------------------ laws
+    @property
+    def fracture_toughness(self) -> float:
+        """G_c, kPa·mm: explicit ``Gc`` or (0.26 C + 1)² (Eq. Gc, K1c = 0.15 C + 0.59)."""
+        return float(self.Gc) if self.Gc is not None else (0.26 * self.cement + 1.0) ** 2
+
+    @property
+    def nucleation_energy(self) -> float:
+        """ψ_c, kPa: explicit ``psi_c`` or 0.0015 C² (Eq. psic: (αC)²/(2E), α = 1 kPa)."""
+        return float(self.psi_c) if self.psi_c is not None else 0.0015 * self.cement**2
+
+    @property
+    def damage_viscosity(self) -> float:
+        """β, kPa·s: explicit ``beta`` or 65.7 √C (Sec. 3.6 calibration)."""
+        return float(self.beta) if self.beta is not None else 65.7 * math.sqrt(self.cement)
+
+    # ------------------------------------------------------------- derived
+    @property
+    def lame_lambda(self) -> float:
+        """Plane-strain Lamé λ = E ν / ((1 + ν)(1 − 2ν)), kPa."""
+        return self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
+
+    @property
+    def lame_mu(self) -> float:
+        """Shear modulus μ = E / (2 (1 + ν)), kPa."""
+        return self.E / (2.0 * (1.0 + self.nu))
+
+    @property
+    def K(self) -> float:
+        """Drained bulk modulus K = E / (3 (1 − 2ν)), kPa (Table A: 184)."""
+        return _bulk(self.E, self.nu)
+
+    @property
+    def biot(self) -> float:
+        """Biot coefficient b = 1 − K/K_s, - (Eq. summary_equations_4)."""
+        return 1.0 - self.K / self.K_s
+
+    @property
+    def c0(self) -> float:
+        """Normalization c0 = 4 ∫0^1 √w(d) dd = 8/3 for w(d) = d (Eq. fracture_functions)."""
+        return 8.0 / 3.0
+
+    @property
+    def m(self) -> float:
+        """Cohesive parameter m = G_c / (c0 l_d ψ_c), - (Eq. fracture_functions); m >= 1 required."""
+        return self.fracture_toughness / (self.c0 * self.l_d * self.nucleation_energy)
+
+    @property
+    def k_max(self) -> float:
+        """Permeability cap k_max = h²/12, mm² (Poiseuille flow in the Hele–Shaw gap)."""
+        return self.cell_height**2 / 12.0
+
+    @property
+    def viscosity_ratio(self) -> float:
+        """M = η_o / η_w = η_2 / η_1, - (Eq. relative_permeabilities)."""
+        return self.eta_o / self.eta_w
+
+    @property
+    def eta_bar(self) -> float:
+        """Harmonic mean η̄ = 2 η_o η_w / (η_o + η_w), kPa·s (Cahn–Hilliard mobility M = k/η̄)."""
+        return 2.0 * self.eta_o * self.eta_w / (self.eta_o + self.eta_w)
+
+    @property
+    def kappa(self) -> float:
+        """Korteweg gradient coefficient κ = 3 γ l_S / 2, kPa·mm² (Eq. fluid_free_energy).
+
+        From ψ^f = 12γ/l_S (f(S) + l_S²/16 |∇S|²) one gets κ = 2·12γ/l_S·l_S²/16
+        = 3γl_S/2, as Sec. 2 states.  Note: the paper's dimensionless section
+        ("Recall that κ = 3γl_S/4") writes 3γl_S/4; we follow the free energy.
+        The Korteweg effect strength ``korteweg_factor`` is NOT included here.
+        """
+        return 1.5 * self.gamma * self.l_S
+
+    def k_of_phi(self, phi):
+        """Kozeny–Carman permeability φ³/(1 − φ)² k̄ capped at k_max, mm² (Eq. permeability).
+
+        Vectorized over ``phi`` (any shape, dimensionless).  φ >= 1 gives k_max;
+        φ <= 0 gives 0 (the law is only meaningful for φ in (0, 1)).
+        Returns a float for scalar input, an ndarray otherwise.
+        """
+        a = np.asarray(phi, dtype=float)
+        below = a < 1.0
+        safe = np.where(below, np.clip(a, 0.0, None), 0.0)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            law = safe**3 / (1.0 - safe) ** 2 * self.kbar
+        k = np.where(below, np.minimum(law, self.k_max), self.k_max)
+        return float(k) if k.ndim == 0 else k
+
+    # ------------------------------------------------------- serialization
+    def to_dict(self) -> dict:
+        """All fields as a plain dict (None kept as None: parameter following its law of C)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Parameters":
+        """Build from a dict; unknown keys raise ValueError naming them; missing keys take defaults."""
+        if not isinstance(d, dict):
+            raise ValueError(f"parameters must be given as a dict, got {type(d).__name__}")
+        names = [f.name for f in fields(cls)]
+        unknown = sorted(set(d) - set(names))
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown}; allowed names: {names}")
+        return cls(**d)
+
+    def replace(self, **changes) -> "Parameters":
+        """Validated copy with ``changes`` (unknown names raise ValueError)."""
+        names = {f.name for f in fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown}; allowed names: {sorted(names)}")
+        return _dc_replace(self, **changes)
+
+    def to_toml(self, path) -> None:
+        """Write a flat TOML file (None-valued fields are omitted: they mean 'follow the law')."""
+        lines = ["# dchfrac model parameters (units mm, s, kPa)"]
+        for k, v in self.to_dict().items():
+            if v is None:
+                continue
+            lines.append(f"{k} = {_toml_value(v)}")
+        Path(path).write_text("\n".join(lines) + "\n")
+
+    @classmethod
+    def from_toml(cls, path) -> "Parameters":
+        """Read a file written by :meth:`to_toml` (absent keys take their defaults)."""
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python 3.10
+            import tomli as tomllib
+        return cls.from_dict(tomllib.loads(Path(path).read_text()))
+
+    def to_json(self, path=None) -> str:
+        """JSON text of :meth:`to_dict` (None -> null); also written to ``path`` if given."""
+        s = json.dumps(self.to_dict(), indent=1)
+        if path is not None:
+            Path(path).write_text(s + "\n")
+        return s
+
+    @classmethod
+    def from_json(cls, text_or_path) -> "Parameters":
+        """Inverse of :meth:`to_json`: accepts the JSON text or a path to a JSON file."""
+        if isinstance(text_or_path, Path) or (
+            isinstance(text_or_path, str) and not text_or_path.lstrip().startswith("{")
+        ):
+            text_or_path = Path(text_or_path).read_text()
+        return cls.from_dict(json.loads(text_or_path))
+
+
+# ---------------------------------------------------------------------------
+# validation
+# ---------------------------------------------------------------------------
+_FLOAT_FIELDS = (
+    "eta_o", "eta_w", "kbar", "cement", "w_i", "E", "nu", "K_s", "gamma", "l_S", "l_d",
+    "mu_i", "mu_o", "cell_height", "r_inner", "r_outer", "bead_diameter", "phi_mean",
+    "phi_range", "volumetric_coupling", "korteweg_factor", "outer_compliance", "crack_permeability",
+)
+_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta")
+
+
+def _bulk(E: float, nu: float) -> float:
+    return E / (3.0 * (1.0 - 2.0 * nu))
+
+
+def _fail(name, value, allowed):
+    raise ValueError(f"parameter {name}={value!r} is out of range: allowed {allowed}")
+
+
+def _as_float(name, v) -> float:
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, Real):
+        _fail(name, v, "a real number")
+    v = float(v)
+    if not math.isfinite(v):
+        _fail(name, v, "a finite number")
+    return v
+
+
+def _coerce_and_check(p: Parameters) -> None:
+    # types first: numbers become plain floats (so the serialization round trip is exact)
+    for name in _FLOAT_FIELDS:
+        object.__setattr__(p, name, _as_float(name, getattr(p, name)))
+    for name in _OPTIONAL_FLOAT_FIELDS:
+        v = getattr(p, name)
+        if v is not None:
+            object.__setattr__(p, name, _as_float(name, v))
+    s = p.seed
+    if isinstance(s, (bool, np.bool_)) or not isinstance(s, Integral):
+        _fail("seed", s, "an integer >= 0")
+    object.__setattr__(p, "seed", int(s))
+    for name, allowed in (("porosity_field", POROSITY_FIELDS), ("mu_outer_bc", MU_OUTER_BCS)):
+        if getattr(p, name) not in allowed:
+            _fail(name, getattr(p, name), f"one of {allowed}")
+
+    def gt(name, lo):
+        if not getattr(p, name) > lo:
+            _fail(name, getattr(p, name), f"> {lo}")
+
+    def ge(name, lo):
+        if not getattr(p, name) >= lo:
+            _fail(name, getattr(p, name), f">= {lo}")
+
+    for name in ("eta_o", "eta_w", "kbar", "E", "l_S", "l_d", "cell_height", "bead_diameter", "r_inner"):
+        gt(name, 0.0)
+    for name in ("w_i", "gamma", "volumetric_coupling", "korteweg_factor", "outer_compliance",
+                 "crack_permeability", "phi_range", "mu_i", "mu_o"):
+        ge(name, 0.0)
+    ge("seed", 0)
+    if not (-1.0 < p.nu < 0.5):
+        _fail("nu", p.nu, "the open interval (-1, 0.5)")
+    K = _bulk(p.E, p.nu)
+    if not p.K_s > K:
+        _fail("K_s", p.K_s, f"> drained bulk modulus K = E/(3(1-2nu)) = {K:.6g} kPa (Biot b in (0, 1))")
+    if not p.r_outer > p.r_inner:
+        _fail("r_outer", p.r_outer, f"> r_inner = {p.r_inner}")
+    if not (0.0 < p.phi_mean < 1.0):
+        _fail("phi_mean", p.phi_mean, "the open interval (0, 1)")
+    if not (p.phi_mean - p.phi_range > 0.0 and p.phi_mean + p.phi_range < 1.0):
+        _fail("phi_range", p.phi_range,
+              f"< min(phi_mean, 1 - phi_mean) = {min(p.phi_mean, 1 - p.phi_mean):.6g} "
+              "(phi_mean ± phi_range inside (0, 1))")
+    # fracture parameters and their laws of C
+    if p.psi_c is None:
+        gt("cement", 0.0)  # psi_c = 0.0015 C^2 would vanish
+    else:
+        ge("cement", 0.0)
+    for name in ("Gc", "psi_c"):
+        if getattr(p, name) is not None:
+            gt(name, 0.0)
+    if p.beta is not None:
+        ge("beta", 0.0)
+    bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
+    if not p.l_d <= bound * (1.0 + 1e-12):
+        _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, int):
+        return str(v)
+    return repr(float(v))  # repr of a finite float is TOML-valid and round-trips exactly
+
+
+def field_doc(name: str) -> str:
+    """Documentation (meaning, units, paper reference) of the parameter ``name``."""
+    if name not in _FIELD_DOCS:
+        raise ValueError(f"unknown parameter {name!r}; allowed names: {list(_FIELD_DOCS)}")
+    return _FIELD_DOCS[name]

@@ -1,0 +1,167 @@
+"""Constitutive laws of the Darcy–Cahn–Hilliard–damage model, one function per term.
+
+Each function is point-wise and works on numpy arrays and on
+:class:`solver.ad.Dual` numbers alike (so the Newton Jacobian is exact).
+Units: mm, s, kPa.  Equation names refer to Guevel et al. (JMPS).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import ad
+from .ad import Dual
+
+
+# ---------------------------------------------------------------- porosity
+def porosity(phi0, eps_v, p, K_s: float):
+    """φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p / K_s  (Eq. summary_equations_3).
+
+    ``phi0`` per element (dimensionless), ``eps_v`` volumetric strain, ``p`` kPa, ``K_s`` kPa.
+    """
+    return phi0 + (1.0 - phi0) * eps_v + (1.0 - phi0) * p / K_s
+
+
+def kozeny_carman(phi, kbar: float, k_max: float):
+    """k(φ) = φ³/(1 − φ)² k̄ capped at k_max = h²/12 (Eq. permeability), mm².
+
+    The cap is reached at the porosity φ* where the Kozeny–Carman law equals
+    k_max; for φ >= φ* (including φ >= 1, where the law diverges) k = k_max,
+    the Poiseuille permeability of the open Hele-Shaw gap.
+    """
+    phi_star = cap_porosity(kbar, k_max)
+    v = ad.value(phi)
+    below = v < phi_star
+    safe = ad.where(below, phi, 0.5 * phi_star) if isinstance(phi, Dual) else np.where(below, phi, 0.5 * phi_star)
+    kc = safe**3 / (1.0 - safe) ** 2 * kbar
+    if isinstance(phi, Dual):
+        return ad.where(below, kc, k_max)
+    return np.where(below, kc, k_max)
+
+
+def cap_porosity(kbar: float, k_max: float) -> float:
+    """Porosity φ* in (0, 1) at which φ³/(1 − φ)² k̄ = k_max (monotone, bisection)."""
+    lo, hi = 0.0, 1.0
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        if mid**3 / (1 - mid) ** 2 * kbar < k_max:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def permeability(phi, phi0, kbar: float, k_max: float, crack_permeability: float = 1.0):
+    """Absolute permeability (mm²) with the ``crack_permeability`` effect strength s.
+
+    k = k(φ0) + s (k(φ) − k(φ0)): s = 1 is the paper's model, s = 0 freezes the
+    permeability at its initial value (no flow enhancement by opening cracks).
+    """
+    k = kozeny_carman(phi, kbar, k_max)
+    if crack_permeability == 1.0:
+        return k
+    k0 = kozeny_carman(phi0, kbar, k_max)
+    return k0 + crack_permeability * (k - k0)
+
+
+def relative_permeabilities(S, M: float):
+    """Fourar–Lenormand k_r1(S), k_r2(1 − S) (Eq. relative_permeabilities).
+
+    Phase 1 (S) is the invading water, M = η_o/η_w the viscosity ratio.  S is
+    clipped to [0, 1] inside these laws only: the Cahn–Hilliard saturation
+    overshoots its bounds by a few percent near the interface, and outside
+    [0, 1] the cubic laws turn negative, which would give negative mobility.
+    """
+    Sc = ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
+    S2 = 1.0 - Sc
+    kr1 = Sc**3 + (1.5 / M) * Sc * (1.0 - Sc) * (1.0 + Sc)
+    kr2 = 0.5 * S2 * S2 * (3.0 - S2)
+    return kr1, kr2
+
+
+# ---------------------------------------------------------------- Cahn–Hilliard
+def double_well_prime(S):
+    """f'(S) for f = S²(1 − S)²: 2S(1 − S)(1 − 2S)."""
+    return 2.0 * S * (1.0 - S) * (1.0 - 2.0 * S)
+
+
+def double_well(S):
+    return S * S * (1.0 - S) * (1.0 - S)
+
+
+# ---------------------------------------------------------------- elasticity
+def spectral_split(exx, eyy, exy, lam: float, mu: float):
+    """Miehe's spectral split in plane strain (Eq. spectral_decomposition).
+
+    Returns the active stress ∂ψ_A/∂ε as (sxx, syy, sxy), the total elastic
+    stress C:ε as (sxx, syy, sxy) (so the inactive part is their difference),
+    and ψ_A (kPa).  Principal strains e1,2 = m ± r, m = ε_v/2,
+    r = sqrt(((εxx − εyy)/2)² + εxy²); ε3 = 0 contributes nothing.
+    <ε>_+ = ½(<e1> + <e2>) I + c D with D = ε − m I and c = (<e1> − <e2>)/(2r),
+    whose limit for r -> 0 is the Heaviside H(m): no division by zero at
+    equal principal strains.
+    """
+    is_dual = isinstance(exx, Dual)
+    pp = ad.positive_part if is_dual else (lambda x: np.maximum(x, 0.0))
+    ev = exx + eyy
+    m = 0.5 * ev
+    dxx = 0.5 * (exx - eyy)
+    r2 = dxx * dxx + exy * exy
+    r2v = ad.value(r2)
+    tol = 1e-14
+    big = r2v > tol * tol
+    if is_dual:
+        rsafe = ad.sqrt(ad.where(big, r2, 1.0))
+    else:
+        rsafe = np.sqrt(np.where(big, r2, 1.0))
+    e1p = pp(m + rsafe)
+    e2p = pp(m - rsafe)
+    mv = ad.value(m)
+    heav = np.where(mv > 0, 1.0, 0.0)
+    if is_dual:
+        c = ad.where(big, (e1p - e2p) / (2.0 * rsafe), heav)
+        e1p = ad.where(big, e1p, pp(m))
+        e2p = ad.where(big, e2p, pp(m))
+    else:
+        c = np.where(big, (e1p - e2p) / (2.0 * rsafe), heav)
+        e1p = np.where(big, e1p, pp(m))
+        e2p = np.where(big, e2p, pp(m))
+    evp = pp(ev)
+    half = 0.5 * (e1p + e2p)
+    sa_xx = lam * evp + 2.0 * mu * (half + c * dxx)
+    sa_yy = lam * evp + 2.0 * mu * (half - c * dxx)
+    sa_xy = 2.0 * mu * c * exy
+    s_xx = lam * ev + 2.0 * mu * exx
+    s_yy = lam * ev + 2.0 * mu * eyy
+    s_xy = 2.0 * mu * exy
+    psi_a = 0.5 * lam * evp * evp + mu * (e1p * e1p + e2p * e2p)
+    return (sa_xx, sa_yy, sa_xy), (s_xx, s_yy, s_xy), psi_a
+
+
+# ---------------------------------------------------------------- damage
+def degradation(d, m: float):
+    """Cohesive degradation g(d) = (1 − d)² / ((1 − d)² + m d (1 + d)) (Eq. fracture_functions)."""
+    a = (1.0 - d) ** 2
+    return a / (a + m * d * (1.0 + d))
+
+
+def degradation_prime(d, m: float):
+    """g'(d) = −m (1 − d)(1 + 3d) / b², b = (1 − d)² + m d (1 + d); g'(0) = −m."""
+    b = (1.0 - d) ** 2 + m * d * (1.0 + d)
+    return -m * (1.0 - d) * (1.0 + 3.0 * d) / (b * b)
+
+
+def degradation_second(d, m: float):
+    """g''(d) (derivative of :func:`degradation_prime`)."""
+    b = (1.0 - d) ** 2 + m * d * (1.0 + d)
+    bp = -2.0 * (1.0 - d) + m * (1.0 + 2.0 * d)
+    num = -m * (1.0 - d) * (1.0 + 3.0 * d)
+    return -m * (2.0 - 6.0 * d) / (b * b) - 2.0 * num * bp / (b * b * b)
+
+
+def cohesive_strength_1d(E: float, psi_c: float) -> float:
+    """Peak uniaxial stress of the cohesive model in 1D: damage starts at ψ = ψ_c = σ²/(2E).
+
+    With g'(0) = −m the damage driving force first balances the threshold
+    3G_c/(8 l_d) = m ψ_c exactly when ψ reaches ψ_c, independently of l_d.
+    """
+    return float(np.sqrt(2.0 * E * psi_c))

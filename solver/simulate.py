@@ -1,0 +1,301 @@
+"""Time loop of the coupled model: staggered Newton / active-set damage, adaptive steps, outputs.
+
+Per time step (Sec. 3.1 of the paper):
+  (a) monolithic Newton on the poromechanics block (u, p, S, μ [, G]) with d frozen;
+  (b) the damage variational inequality d_n <= d <= 1 (primal-dual active set);
+  repeat (a)-(b) until max |Δd| between stagger iterations < ``stagger_tol``.
+A step whose Newton or stagger iterations fail is retried with a smaller dt
+(every rejection logged); past ``dt_min`` the run ends with status "failed",
+keeping everything written so far.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import damage, fem, linsolve, metrics, physics
+from .model import MU, P, S, UX, UY, build_discretization, element_fields, residual_and_jacobian, step_data
+from .options import RunOptions
+from .output import RunWriter
+
+# floors of the per-field update scales used by the Newton test (mm, kPa, -, kPa, 1/mm)
+_FLOORS = np.array([1e-2, 1e-2, 1.0, 1.0, 1e-2, 0.1, 0.1])
+
+
+class StepFailure(Exception):
+    """A time step could not be solved at the current dt."""
+
+
+@dataclass
+class SimulationResult:
+    """Outcome of :func:`simulate`: status "ok" or "failed" (then ``reason``), time series, snapshots."""
+
+    status: str
+    reason: str | None
+    timeseries: pd.DataFrame
+    snapshots: list
+    wall_time: float
+    out_dir: str | None = None
+    rejected_steps: list = field(default_factory=list)
+    factorizations: int = 0
+
+
+class Simulation:
+    """The discretized model on one mesh, and its Newton / damage / stagger solvers."""
+
+    def __init__(self, params, options: RunOptions, mesh, phi0: np.ndarray):
+        self.params, self.options, self.mesh = params, options, mesh
+        self.disc = build_discretization(mesh, params, phi0)
+        self.dmg = damage.damage_operators(self.disc.points, self.disc.triangles)
+        self.edges = metrics.mesh_edges(self.disc.triangles)
+        self.solver_kind = linsolve.resolve(options.linear_solver)
+        nf = self.disc.n_fields
+        U = np.zeros((self.disc.n_nodes, nf))
+        self.U = U
+        self.d = np.zeros(self.disc.n_nodes)
+        self.t = 0.0
+        self.floors = _FLOORS[:nf]
+
+    # ------------------------------------------------------------ poromechanics
+    def newton(self, U0: np.ndarray, d: np.ndarray, data) -> tuple[np.ndarray, int]:
+        """Solve the poromechanics block with d frozen; raises StepFailure."""
+        disc, nf = self.disc, self.disc.n_fields
+        x = U0.ravel().copy()
+        x[disc.dirichlet.dofs] = disc.dirichlet_values
+        for it in range(1, self.options.newton_max_its + 1):
+            R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data)
+            disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
+            disc.dirichlet.apply_matrix(J)
+            if not np.all(np.isfinite(R)):
+                raise StepFailure("non-finite residual")
+            dx = linsolve.factorize(J, self.solver_kind).solve(-R)
+            if not np.all(np.isfinite(dx)):
+                raise StepFailure("non-finite Newton update")
+            x += dx
+            X = x.reshape(-1, nf)
+            scale = np.maximum(np.abs(X).max(axis=0), self.floors)
+            upd = np.abs(dx.reshape(-1, nf)).max(axis=0) / scale
+            if np.all(upd <= self.options.newton_rtol):
+                return X.copy(), it
+        raise StepFailure(f"Newton did not converge in {self.options.newton_max_its} iterations (last relative update {upd.max():.2e})")
+
+    def active_energy(self, U: np.ndarray) -> np.ndarray:
+        """Nodal (lumped-projected) active strain energy ψ_A (kPa) of displacement U."""
+        tri = self.disc.triangles
+        g = np.einsum("mai,maf->mfi", self.disc.geom.grads, U[tri][:, :, :2])
+        exx, eyy, exy = g[:, UX, 0], g[:, UY, 1], 0.5 * (g[:, UX, 1] + g[:, UY, 0])
+        _, _, psi = physics.spectral_split(exx, eyy, exy, self.params.lame_lambda, self.params.lame_mu)
+        return fem.nodal_average(psi, tri, self.disc.geom.areas, self.disc.n_nodes)
+
+    # ------------------------------------------------------------ one step
+    def step(self, dt: float):
+        """Advance by dt; returns (U, d, info) without committing. Raises StepFailure."""
+        d_n = self.d
+        d_k = d_n.copy()
+        U = self.U
+        newton_total = 0
+        for s in range(1, self.options.stagger_max_its + 1):
+            data = step_data(self.disc, self.params, self.U, d_k, dt)
+            U, its = self.newton(U, d_k, data)
+            newton_total += its
+            psi = self.active_energy(U)
+            res = damage.solve(d_k, d_n, psi, self.params, dt, self.dmg, max_its=self.options.damage_max_its)
+            if not res.converged:
+                raise StepFailure(f"damage active-set did not converge (KKT residual {res.kkt_residual:.2e})")
+            change = float(np.max(np.abs(res.d - d_k)))
+            d_k = res.d
+            if change < self.options.stagger_tol:
+                return U, d_k, {"newton_its": newton_total, "stagger_its": s, "damage_kkt": res.kkt_residual,
+                                "data": step_data(self.disc, self.params, self.U, d_k, dt)}
+        raise StepFailure(f"stagger did not converge in {self.options.stagger_max_its} iterations (last max |Δd| {change:.2e})")
+
+
+def _validate_mesh(mesh):
+    for tag in ("inner", "outer"):
+        if tag not in mesh.boundary_edges:
+            raise ValueError(f"mesh has no boundary tag {tag!r}: the model needs 'inner' (injection) and 'outer' edges")
+
+
+def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None, phi0=None, progress: bool = False) -> SimulationResult:
+    """Run the coupled model from t = 0 to ``options.t_end`` (s).
+
+    Parameters
+    ----------
+    params : solver.Parameters (mm, s, kPa), validated at construction.
+    options : solver.RunOptions (mesh size h in mm, times in s, tolerances).
+    out_dir : run folder (parameters TOML, time series CSV, snapshots NPZ + XDMF,
+        summary.json), written atomically; None keeps everything in memory.
+    mesh : optional mesh with ``points`` (mm), ``triangles`` and ``boundary_edges``
+        tags "inner" and "outer" (default: the paper's annulus at size ``options.h``).
+    phi0 : optional initial porosity per element (default: ``params.porosity_field``).
+    progress : print a live progress line (simulated time, dt, iterations) to stderr.
+    """
+    from .params import Parameters
+
+    options = options or RunOptions()
+    if not isinstance(params, Parameters):
+        raise ValueError(f"params must be a solver.Parameters, got {type(params).__name__}")
+    if not isinstance(options, RunOptions):
+        raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
+    t_wall = time.perf_counter()
+    writer = RunWriter(out_dir) if out_dir is not None else None
+    if writer:
+        writer.start(params, options)
+    rows, snaps, rejected = [], [], []
+    status, reason = "ok", None
+    fact0 = linsolve.STATS["factorizations"]
+    try:
+        if mesh is None:
+            from .mesh import annulus_mesh
+
+            mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed)
+        _validate_mesh(mesh)
+        if phi0 is None:
+            from .porosity import initial_porosity
+
+            phi0 = initial_porosity(mesh, params)
+        sim = Simulation(params, options, mesh, phi0)
+        if writer:
+            writer.write_mesh(sim.disc.points, sim.disc.triangles)
+        status, reason = _time_loop(sim, options, rows, snaps, rejected, writer, progress, t_wall)
+    except Exception as exc:  # never a traceback as the only trace
+        status, reason = "failed", f"{type(exc).__name__}: {exc}"
+        if writer:
+            writer.log(traceback.format_exc())
+    ts = pd.DataFrame(rows)
+    wall = time.perf_counter() - t_wall
+    nfact = linsolve.STATS["factorizations"] - fact0
+    if writer:
+        writer.finish(ts, status, reason, wall, rows[-1]["t"] if rows else 0.0, rejected, nfact)
+    if progress:
+        print(file=sys.stderr)
+    return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact)
+
+
+def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, progress, t_wall):
+    p = sim.params
+    disc = sim.disc
+    pending = sorted(t for t in o.snapshot_times if 0 < t <= o.t_end + 1e-12)
+    dt = o.dt0
+    cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0}
+    V0 = _stored_volume(sim, sim.U)
+    warned_layer = False
+    if 0.0 in o.snapshot_times:
+        _snapshot(sim, snaps, writer)
+    while sim.t < o.t_end - 1e-12:
+        if o.max_wall_time is not None and time.perf_counter() - t_wall > o.max_wall_time:
+            return "failed", f"max_wall_time {o.max_wall_time} s exceeded at t = {sim.t:.4g} s"
+        target = min(o.t_end, pending[0]) if pending else o.t_end
+        dt_try = min(dt, o.dt_max, target - sim.t)
+        try:
+            U, d, info = sim.step(dt_try)
+        except (StepFailure, np.linalg.LinAlgError, RuntimeError, FloatingPointError, ValueError) as exc:
+            rejected.append({"t": sim.t, "dt": dt_try, "reason": str(exc)})
+            if writer:
+                writer.log(f"rejected step at t={sim.t:.6g} dt={dt_try:.3g}: {exc}")
+            dt = dt_try * o.dt_cut
+            if dt < o.dt_min:
+                return "failed", f"time step below dt_min={o.dt_min} at t = {sim.t:.6g} s (last: {exc})"
+            continue
+        # balances from the unconstrained residual at the converged state (reactions)
+        data = info["data"]
+        R, _ = residual_and_jacobian(disc, p, U, data, need_jacobian=False)
+        nf = disc.n_fields
+        Rp, Rs = R[P::nf], R[S::nf]
+        cum["inj"] += dt_try * p.w_i * disc.inner_length
+        cum["out"] += -dt_try * Rp[disc.outer_nodes].sum()
+        cum["src"] += dt_try * _source(sim, U, data)
+        cum["w_in"] += dt_try * Rs[disc.inner_nodes].sum()
+        cum["w_out"] += -dt_try * Rs[disc.outer_nodes].sum()
+        sim.U, sim.d, sim.t = U, d, sim.t + dt_try
+        row = _row(sim, dt_try, info, cum, V0)
+        rows.append(row)
+        if row["outer_layer_area"] > 0 and not warned_layer:
+            warned_layer = True
+            if writer:
+                writer.log(f"WARNING: invaded layer not connected to the inlet at the outer circle (area {row['outer_layer_area']:.3g} mm^2) at t={sim.t:.4g} s; see mu_outer_bc")
+        if progress:
+            print(f"\r t={sim.t:.4f} s  dt={dt_try:.2e}  newton={info['newton_its']}  stagger={info['stagger_its']}  p_inj={row['p_inj']:.1f} kPa  front={row['front_radius_mean']:.1f} mm   ", end="", file=sys.stderr, flush=True)
+        if pending and abs(sim.t - pending[0]) < 1e-9:
+            pending.pop(0)
+            _snapshot(sim, snaps, writer)
+        if writer and len(rows) % 25 == 0:
+            writer.write_timeseries(pd.DataFrame(rows))
+        if o.stop_front_radius is not None and np.isfinite(row["front_radius_max"]) and row["front_radius_max"] >= o.stop_front_radius:
+            break
+        if info["newton_its"] <= o.easy_newton_its * info["stagger_its"] and info["stagger_its"] <= 3:
+            dt = dt_try * o.dt_grow
+        else:
+            dt = dt_try
+    if not snaps or snaps[-1][0] != sim.t:
+        _snapshot(sim, snaps, writer)
+    return "ok", None
+
+
+def _stored_volume(sim, U) -> float:
+    """∫ φ dx at the Strang points (mm² per unit cell height)."""
+    disc = sim.disc
+    data = step_data(disc, sim.params, U, sim.d, 1.0)
+    return float(np.sum(disc.geom.areas * data.phi_n.mean(axis=1)))
+
+
+def _source(sim, U, data) -> float:
+    """c_v ∫ φ ε̇_v dx: the second-order volume source of the total mass balance (mm²/s)."""
+    disc, p = sim.disc, sim.params
+    nxt = step_data(disc, p, U, sim.d, data.dt)
+    dev = (nxt.ev_n - data.ev_n) / data.dt
+    return float(p.volumetric_coupling * np.sum(disc.geom.areas * nxt.phi_n.mean(axis=1) * dev))
+
+
+def _row(sim, dt, info, cum, V0) -> dict:
+    disc, p, U, d = sim.disc, sim.params, sim.U, sim.d
+    ef = element_fields(disc, p, U, d)
+    Sn = U[:, S]
+    fm, fx = metrics.front_radii(disc.points, Sn, sim.edges, disc.inner_nodes)
+    V = _stored_volume(sim, U)
+    err = abs(cum["inj"] - (V - V0 + cum["src"] + cum["out"])) / max(cum["inj"], 1e-300)
+    area = disc.geom.areas
+    d_el = d[disc.triangles].mean(axis=1)
+    inv = float(np.sum(area * ef["phi"] * Sn[disc.triangles].mean(axis=1)))
+    return {
+        "t": sim.t, "dt": dt,
+        "p_inj": float(np.mean(U[disc.inner_nodes, P])),
+        "injected_volume": cum["inj"],
+        "invading_volume": inv,
+        "water_inflow_volume": cum["w_in"],
+        "water_outflow_volume": cum["w_out"],
+        "outflow_volume": cum["out"],
+        "mass_error": err,
+        "mean_damage": float(np.sum(area * d_el) / area.sum()),
+        "max_damage": float(d.max()),
+        "max_hoop_stress": float(ef["hoop_stress"].max()),
+        "front_radius_mean": fm,
+        "front_radius_max": fx,
+        "open_tip_radius": metrics.open_tip_radius(disc.points, disc.triangles, ef["phi"], disc.inner_nodes),
+        "outer_layer_area": metrics.outer_layer_area(disc.points, disc.triangles, area, Sn, sim.edges, disc.inner_nodes, disc.outer_nodes),
+        "newton_its": info["newton_its"],
+        "stagger_its": info["stagger_its"],
+        "damage_kkt": info["damage_kkt"],
+        "factorizations": linsolve.STATS["factorizations"],
+    }
+
+
+def _snapshot(sim, snaps, writer):
+    disc = sim.disc
+    ef = element_fields(disc, sim.params, sim.U, sim.d)
+    fields = {
+        "S": sim.U[:, S].copy(), "mu": sim.U[:, MU].copy(), "p": sim.U[:, P].copy(), "d": sim.d.copy(),
+        "u": sim.U[:, :2].copy(),
+        "phi": ef["phi"], "eps_v": ef["eps_v"], "hoop_stress": ef["hoop_stress"], "k": ef["k"], "w1_mag": ef["w1_mag"],
+    }
+    snaps.append((sim.t, fields))
+    if writer:
+        writer.write_snapshot(len(snaps) - 1, sim.t, fields)

@@ -1,0 +1,185 @@
+"""Meshes: annulus quality/size/geometry, structured rectangles, meshio round trip."""
+import math
+import pickle
+import warnings
+
+import numpy as np
+import pytest
+
+from solver.mesh import Mesh, annulus_mesh, read_mesh, rectangle_mesh, write_mesh
+
+RI, RO = 5.0, 53.0
+
+
+@pytest.fixture(scope="module")
+def m1():
+    return annulus_mesh(RI, RO, h=1.0)
+
+
+def polygon_area_exact(r, n):
+    """Area of the regular n-gon inscribed in a circle of radius r."""
+    return 0.5 * n * r**2 * math.sin(2 * math.pi / n)
+
+
+def test_area(m1):
+    exact = math.pi * (RO**2 - RI**2)
+    assert m1.areas.sum() == pytest.approx(exact, rel=5e-3)
+    # sharper: the mesh is exactly the region between the two inscribed polygons
+    n_in, n_out = len(m1.inner_edges), len(m1.outer_edges)
+    poly = polygon_area_exact(RO, n_out) - polygon_area_exact(RI, n_in)
+    assert m1.areas.sum() == pytest.approx(poly, rel=1e-12)
+
+
+def test_boundary_nodes_on_circles(m1):
+    for name, r in (("inner", RI), ("outer", RO)):
+        ids = m1.boundary_nodes(name)
+        rr = np.hypot(*m1.points[ids].T)
+        assert np.abs(rr - r).max() < 1e-12
+    # all other nodes strictly inside
+    others = np.setdiff1d(np.arange(m1.n_nodes), np.concatenate([m1.boundary_nodes("inner"), m1.boundary_nodes("outer")]))
+    rr = np.hypot(*m1.points[others].T)
+    assert rr.min() > RI and rr.max() < RO
+
+
+def test_boundary_edges_closed_and_oriented(m1):
+    for name, sign in (("inner", -1), ("outer", 1)):
+        e = m1.boundary_edges[name]
+        # closed polygon: every node appears twice, as many edges as nodes
+        assert len(e) == len(m1.boundary_nodes(name))
+        assert np.all(np.bincount(e.ravel())[np.unique(e)] == 2)
+        # domain on the left: outer circle traversed CCW (positive cross), inner CW
+        p0, p1 = m1.points[e[:, 0]], m1.points[e[:, 1]]
+        cross = p0[:, 0] * p1[:, 1] - p0[:, 1] * p1[:, 0]
+        assert np.all(np.sign(cross) == sign)
+    # every boundary edge of the triangulation is tagged
+    tri = m1.triangles
+    e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    assert (counts == 1).sum() == len(m1.inner_edges) + len(m1.outer_edges)
+
+
+def test_quality_and_size(m1):
+    assert m1.min_angle_deg().min() >= 25.0
+    assert 18_000 <= m1.n_elements <= 23_000
+    assert np.all(m1.areas > 0)  # counter-clockwise
+    assert m1.h_mean == pytest.approx(1.0, rel=0.15)
+    for name in ("inner", "outer"):
+        assert m1.edge_lengths(name).mean() == pytest.approx(1.0, rel=0.15)
+    assert m1.points.dtype == np.float64 and m1.triangles.dtype == np.int64
+    # Euler characteristic of an annulus: V - E + F = 0
+    assert m1.n_nodes - len(m1.edges()) + m1.n_elements == 0
+
+
+@pytest.mark.parametrize("h", [4.0, 2.0, 0.7])
+def test_quality_other_sizes(h):
+    m = annulus_mesh(RI, RO, h=h)
+    assert m.min_angle_deg().min() >= 25.0
+    assert m.h_mean == pytest.approx(h, rel=0.15)
+    # triangle count ~ area / (sqrt(3)/4 h^2) for near-equilateral triangles
+    expected = math.pi * (RO**2 - RI**2) / (math.sqrt(3) / 4 * h**2)
+    assert m.n_elements == pytest.approx(expected, rel=0.1)
+
+
+def test_seeded_meshes_differ_but_are_valid_and_deterministic():
+    a = annulus_mesh(RI, RO, h=2.0, seed=1)
+    b = annulus_mesh(RI, RO, h=2.0, seed=1)
+    c = annulus_mesh(RI, RO, h=2.0, seed=2)
+    ref = annulus_mesh(RI, RO, h=2.0)
+    assert np.array_equal(a.points, b.points) and np.array_equal(a.triangles, b.triangles)
+    assert not np.array_equal(a.points, c.points)
+    assert not np.array_equal(a.points, ref.points)
+    for m in (a, c):
+        assert m.min_angle_deg().min() >= 25.0
+        assert np.all(m.areas > 0)
+        assert m.areas.sum() == pytest.approx(ref.areas.sum(), rel=1e-12)  # same boundary polygons
+
+
+def test_determinism_without_cache():
+    from solver import mesh as mod
+
+    a = annulus_mesh(RI, RO, h=2.0)
+    mod._annulus_cached.cache_clear()
+    b = annulus_mesh(RI, RO, h=2.0)
+    assert a is not b
+    assert np.array_equal(a.points, b.points) and np.array_equal(a.triangles, b.triangles)
+    for k in ("inner", "outer"):
+        assert np.array_equal(a.boundary_edges[k], b.boundary_edges[k])
+
+
+def test_frozen_read_only_and_picklable(m1):
+    assert m1.points.flags.writeable is False and m1.triangles.flags.writeable is False
+    with pytest.raises(ValueError):
+        m1.points[0, 0] = 1.0
+    with pytest.raises(TypeError):
+        m1.boundary_edges["x"] = np.zeros((0, 2))
+    m = pickle.loads(pickle.dumps(m1))
+    assert np.array_equal(m.points, m1.points) and np.array_equal(m.outer_edges, m1.outer_edges)
+
+
+@pytest.mark.parametrize("kw", [dict(h=0.0), dict(h=-1.0), dict(h=24.0), dict(h=float("nan")),
+                                dict(r_inner=0.0), dict(r_inner=-1.0), dict(r_outer=5.0), dict(r_outer=4.0),
+                                dict(seed=-1), dict(seed=1.5), dict(h="1")])
+def test_annulus_validation(kw):
+    name, value = next(iter(kw.items()))
+    with pytest.raises(ValueError, match=name):
+        annulus_mesh(**kw)
+
+
+def test_min_angle_known_triangles():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, math.sqrt(3) / 2], [0.0, 1.0]])
+    m = Mesh(pts, np.array([[0, 1, 2], [0, 1, 3]]), {})
+    assert m.min_angle_deg() == pytest.approx([60.0, 45.0])
+    assert m.areas == pytest.approx([math.sqrt(3) / 4, 0.5])
+
+
+@pytest.mark.parametrize("diagonal", ["alternate", "right", "left"])
+def test_rectangle_mesh(diagonal):
+    m = rectangle_mesh(3.0, 2.0, 6, 4, x0=-1.0, y0=0.5, diagonal=diagonal)
+    assert m.n_elements == 2 * 6 * 4 and m.n_nodes == 7 * 5
+    assert np.all(m.areas > 0) and m.areas.sum() == pytest.approx(6.0, rel=1e-14)
+    assert m.areas == pytest.approx(np.full(48, 6.0 / 48))
+    x, y = m.points.T
+    for name, coord, val, n in (("left", x, -1.0, 4), ("right", x, 2.0, 4), ("bottom", y, 0.5, 6), ("top", y, 2.5, 6)):
+        e = m.boundary_edges[name]
+        assert len(e) == n
+        assert np.all(coord[e] == val)
+        assert m.edge_lengths(name).sum() == pytest.approx(3.0 if name in ("bottom", "top") else 2.0)
+    # counter-clockwise boundary: sum of cross products = 2 * area
+    allb = np.concatenate([m.boundary_edges[k] for k in ("bottom", "right", "top", "left")])
+    p0, p1 = m.points[allb[:, 0]], m.points[allb[:, 1]]
+    assert 0.5 * np.sum(p0[:, 0] * p1[:, 1] - p0[:, 1] * p1[:, 0]) == pytest.approx(6.0)
+    assert m.min_angle_deg().min() == pytest.approx(math.degrees(math.atan(0.5 / 0.5)))  # square cells: 45°
+
+
+def test_rectangle_validation():
+    with pytest.raises(ValueError, match="nx"):
+        rectangle_mesh(1.0, 1.0, 0, 2)
+    with pytest.raises(ValueError, match="ly"):
+        rectangle_mesh(1.0, -1.0, 2, 2)
+    with pytest.raises(ValueError, match="diagonal"):
+        rectangle_mesh(1.0, 1.0, 2, 2, diagonal="cross")
+
+
+def test_unknown_tag(m1):
+    with pytest.raises(ValueError, match="left"):
+        m1.boundary_nodes("left")
+
+
+@pytest.mark.parametrize("suffix", [".xdmf", ".vtu"])
+def test_meshio_round_trip(tmp_path, suffix):
+    m = annulus_mesh(RI, RO, h=2.0, seed=3)
+    path = tmp_path / f"mesh{suffix}"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        write_mesh(m, path)
+        r = read_mesh(path)
+    assert np.array_equal(r.points, m.points) and r.points.dtype == np.float64
+    assert np.array_equal(r.triangles, m.triangles) and r.triangles.dtype == np.int64
+    assert sorted(r.boundary_edges) == ["inner", "outer"]
+    for k in ("inner", "outer"):
+        assert np.array_equal(r.boundary_edges[k], m.boundary_edges[k])
+    rect = rectangle_mesh(1.0, 1.0, 3, 2)
+    write_mesh(rect, tmp_path / f"rect{suffix}")
+    rr = read_mesh(tmp_path / f"rect{suffix}")
+    assert sorted(rr.boundary_edges) == ["bottom", "left", "right", "top"]
+    assert all(np.array_equal(rr.boundary_edges[k], rect.boundary_edges[k]) for k in rect.boundary_edges)
