@@ -143,9 +143,12 @@ def clip(x: Dual, lo: float, hi: float) -> Dual:
     return where(x.v < lo, lo, where(x.v > hi, hi, x))
 
 
-def stack(items: list, axis: int = -1) -> Dual:
-    """Stack Duals along a new value axis (``axis`` counts value axes)."""
-    ref = next(it for it in items if isinstance(it, Dual))
+def stack(items: list, axis: int = -1):
+    """Stack Duals along a new value axis (``axis`` counts value axes); plain arrays stack as numpy does."""
+    ref = next((it for it in items if isinstance(it, Dual)), None)
+    if ref is None:
+        shape = np.broadcast_shapes(*(np.shape(it) for it in items))
+        return np.stack([np.broadcast_to(it, shape) for it in items], axis=axis)
     items = [as_dual_like(it, ref) for it in items]
     nd = ref.v.ndim + 1
     ax = axis if axis >= 0 else nd + axis

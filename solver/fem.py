@@ -286,7 +286,7 @@ def basis(geom: Geometry, quad: Quadrature) -> np.ndarray:
     return B
 
 
-def assemble_forms(F: Dual, geom: Geometry, quad: Quadrature, need_jacobian: bool = True):
+def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = True):
     """Element residuals and Jacobians of the weak form Σ_q w |e| F_ik(q) B_ak(q).
 
     ``F`` is a Dual of value shape (M, nq, neq, 3): for equation i, component
@@ -297,7 +297,8 @@ def assemble_forms(F: Dual, geom: Geometry, quad: Quadrature, need_jacobian: boo
     """
     B = basis(geom, quad)
     wq = quad.weights[None, :] * geom.areas[:, None]  # (M, nq)
-    Fe = np.einsum("mq,mqik,mqak->mai", wq, F.v, B)
+    Fv = F.v if isinstance(F, Dual) else F
+    Fe = np.einsum("mq,mqik,mqak->mai", wq, Fv, B, optimize=True)
     if not need_jacobian:
         return Fe, None
     M, nq, neq, _ = F.v.shape

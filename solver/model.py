@@ -234,21 +234,23 @@ def projection_forms(X: list) -> Dual:
                      ad.stack([g(GY, 0) - g(S, 2), zero, zero], -1)], -2)
 
 
-def _variables(disc: Discretization, U: np.ndarray, quad: fem.Quadrature) -> list:
+def _variables(disc: Discretization, U: np.ndarray, quad: fem.Quadrature, dual: bool = True) -> list:
+    """Point-wise inputs as Duals (for the Jacobian) or plain arrays (residual only: no derivative cost)."""
     inp = fem.qp_inputs(U[disc.triangles], disc.geom, quad)
     M, nq = inp.shape[:2]
-    return Dual.variables(inp.reshape(M, nq, -1))
+    flat = inp.reshape(M, nq, -1)
+    return Dual.variables(flat) if dual else [flat[..., k] for k in range(flat.shape[-1])]
 
 
 def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: StepData, need_jacobian=True):
     """Unconstrained residual (ndof,) and Jacobian (CSR) at nodal state U (N, nf)."""
     nf = disc.n_fields
-    X = _variables(disc, U, fem.STRANG3)
+    X = _variables(disc, U, fem.STRANG3, need_jacobian)
     F = pointwise_forms(X, params, disc.phi0, data, nf)
     Fe, Ke = fem.assemble_forms(F, disc.geom, fem.STRANG3, need_jacobian)
     M = len(disc.triangles)
     if nf == 7:
-        Xv = _variables(disc, U, fem.VERTEX)
+        Xv = _variables(disc, U, fem.VERTEX, need_jacobian)
         Fp, Kp = fem.assemble_forms(projection_forms(Xv), disc.geom, fem.VERTEX, need_jacobian)
         Fe = np.concatenate([Fe, Fp], axis=2)
         if need_jacobian:

@@ -29,8 +29,9 @@ class RunOptions:
     stagger_max_its : stagger iterations before a step is rejected.
     damage_max_its : active-set Newton iterations of the damage problem.
     linear_solver : "auto" (pypardiso when installed, else SuperLU), "superlu" or "pypardiso".
-    jacobian_reuse : keep a factorized Jacobian over Newton iterations while the residual drops
-        by at least this factor per iteration (0 disables reuse: every iteration factorizes).
+    jacobian_reuse : keep a factorized Jacobian (over Newton iterations, stagger iterations and
+        time steps of equal dt) while the Newton updates contract by at least this factor per
+        iteration; 0 disables reuse (exact Newton: every iteration factorizes).
     max_wall_time : give up (status "failed") after this many seconds of wall time (None: no limit).
     write_xdmf : also write the snapshots as XDMF for ParaView.
     """
@@ -47,12 +48,12 @@ class RunOptions:
     stop_front_radius: float | None = None
     snapshot_times: tuple = (0.5, 1.0, 1.5, 2.0)
     newton_rtol: float = 1e-7
-    newton_max_its: int = 12
+    newton_max_its: int = 25
     stagger_tol: float = 1e-4
     stagger_max_its: int = 30
     damage_max_its: int = 50
     linear_solver: str = "auto"
-    jacobian_reuse: float = 0.0
+    jacobian_reuse: float = 0.3
     max_wall_time: float | None = None
     write_xdmf: bool = True
 

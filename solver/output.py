@@ -8,7 +8,7 @@ Layout of ``run_dir``::
     log.txt                          rejected steps, warnings, tracebacks
     snapshots/mesh.npz               points (N, 2) mm, triangles (M, 3)
     snapshots/snap_00000.npz ...     t; nodal S, mu, p, d, u; element phi, eps_v, hoop_stress, k, w1_mag
-    fields.xdmf (+ .h5)              the snapshots for ParaView (meshio)
+    fields.xdmf                      the snapshots for ParaView (meshio, inline XML data)
 
 While a run is in progress ``summary.json`` says ``"status": "running"`` and
 ``"complete": false``; a failed run keeps what it wrote and says why.
@@ -31,6 +31,7 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -140,16 +141,14 @@ def write_xdmf(run_dir) -> Path:
     pts, tri, snaps = load_run(run_dir)
     path = Path(run_dir) / "fields.xdmf"
     tmp = Path(run_dir) / ".fields_tmp.xdmf"
-    with meshio.xdmf.TimeSeriesWriter(str(tmp)) as w:
+    # XML (inline) data: meshio's HDF5 time-series writer puts the .h5 file in the
+    # current directory, not beside the .xdmf; inline data keeps the run folder self-contained
+    with meshio.xdmf.TimeSeriesWriter(str(tmp), data_format="XML") as w:
         w.write_points_cells(np.column_stack([pts, np.zeros(len(pts))]), [("triangle", tri)])
         for t, f in snaps:
             pdata = {k: f[k] for k in ("S", "mu", "p", "d")}
             pdata["u"] = np.column_stack([f["u"], np.zeros(len(pts))])
             cdata = {k: [f[k]] for k in ("phi", "eps_v", "hoop_stress", "k", "w1_mag")}
             w.write_data(t, point_data=pdata, cell_data=cdata)
-    h5_tmp = tmp.with_suffix(".h5")
-    text = tmp.read_text().replace(h5_tmp.name, "fields.h5")
-    os.replace(h5_tmp, Path(run_dir) / "fields.h5")
-    atomic_write_text(path, text)
-    tmp.unlink()
+    os.replace(tmp, path)
     return path

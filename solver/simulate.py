@@ -56,36 +56,70 @@ class Simulation:
         self.disc = build_discretization(mesh, params, phi0)
         self.dmg = damage.damage_operators(self.disc.points, self.disc.triangles)
         self.edges = metrics.mesh_edges(self.disc.triangles)
-        self.solver_kind = linsolve.resolve(options.linear_solver)
+        self.solver_kind = linsolve.resolve(options.linear_solver, self.disc.asm.ndof)
         nf = self.disc.n_fields
         U = np.zeros((self.disc.n_nodes, nf))
         self.U = U
         self.d = np.zeros(self.disc.n_nodes)
         self.t = 0.0
         self.floors = _FLOORS[:nf]
+        self.lu, self.lu_dt = None, None  # factorized Jacobian kept for reuse
+        self.fact0 = linsolve.STATS["factorizations"]  # counter at the start of this run
 
     # ------------------------------------------------------------ poromechanics
     def newton(self, U0: np.ndarray, d: np.ndarray, data) -> tuple[np.ndarray, int]:
-        """Solve the poromechanics block with d frozen; raises StepFailure."""
-        disc, nf = self.disc, self.disc.n_fields
+        """Solve the poromechanics block with d frozen; raises StepFailure.
+
+        Newton with Jacobian reuse: a factorized Jacobian is kept across
+        iterations, stagger iterations and time steps while the updates
+        contract by at least ``options.jacobian_reuse`` per iteration (the
+        factorization is the floor of this solver's cost); otherwise, and
+        always when ``jacobian_reuse`` is 0, a fresh exact Jacobian is
+        assembled and factorized, which gives Newton's quadratic convergence.
+        """
+        disc, nf, o = self.disc, self.disc.n_fields, self.options
         x = U0.ravel().copy()
         x[disc.dirichlet.dofs] = disc.dirichlet_values
-        for it in range(1, self.options.newton_max_its + 1):
-            R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data)
+        reuse = o.jacobian_reuse > 0
+        if self.lu is not None and not (0.5 <= self.lu_dt / data.dt <= 2.0):
+            self.lu = None  # the time terms scale with 1/dt: too different to reuse
+        prev = None
+        fresh = False
+        x_back = None  # state before an update made with a reused Jacobian (rolled back if it diverged)
+        for it in range(1, o.newton_max_its + 1):
+            need_j = self.lu is None or not reuse
+            with np.errstate(all="ignore"):  # a diverging trial iterate is detected below and handled
+                R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data, need_jacobian=need_j)
             disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
-            disc.dirichlet.apply_matrix(J)
             if not np.all(np.isfinite(R)):
-                raise StepFailure("non-finite residual")
-            dx = linsolve.factorize(J, self.solver_kind).solve(-R)
+                if x_back is None:
+                    raise StepFailure("non-finite residual")
+                x, x_back, self.lu, prev = x_back, None, None, None  # stale Jacobian diverged: back off, refresh
+                continue
+            if need_j:
+                disc.dirichlet.apply_matrix(J)
+                self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind), data.dt, True
+            dx = self.lu.solve(-R)
             if not np.all(np.isfinite(dx)):
                 raise StepFailure("non-finite Newton update")
+            x_back = None if fresh else x.copy()
             x += dx
             X = x.reshape(-1, nf)
             scale = np.maximum(np.abs(X).max(axis=0), self.floors)
-            upd = np.abs(dx.reshape(-1, nf)).max(axis=0) / scale
-            if np.all(upd <= self.options.newton_rtol):
+            upd = float((np.abs(dx.reshape(-1, nf)).max(axis=0) / scale).max())
+            ratio = upd / prev if prev else 0.0
+            # with a reused Jacobian convergence is linear: the error left is about upd * ratio / (1 - ratio)
+            if upd <= o.newton_rtol * (1.0 if fresh or ratio < 0.5 else 0.1):
                 return X.copy(), it
-        raise StepFailure(f"Newton did not converge in {self.options.newton_max_its} iterations (last relative update {upd.max():.2e})")
+            if reuse and not fresh and ratio > 1.0 and x_back is not None:
+                x, self.lu, prev = x_back, None, None  # diverging with a stale Jacobian: undo, refresh
+                continue
+            if reuse and not fresh and ratio > o.jacobian_reuse:
+                self.lu = None  # contraction too slow: refresh the Jacobian next iteration
+            fresh = False if reuse else fresh
+            prev = upd
+        self.lu = None
+        raise StepFailure(f"Newton did not converge in {o.newton_max_its} iterations (last relative update {upd:.2e})")
 
     def active_energy(self, U: np.ndarray) -> np.ndarray:
         """Nodal (lumped-projected) active strain energy ψ_A (kPa) of displacement U."""
@@ -231,7 +265,10 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
             writer.write_timeseries(pd.DataFrame(rows))
         if o.stop_front_radius is not None and np.isfinite(row["front_radius_max"]) and row["front_radius_max"] >= o.stop_front_radius:
             break
-        if info["newton_its"] <= o.easy_newton_its * info["stagger_its"] and info["stagger_its"] <= 3:
+        # an easy step: few Newton iterations per stagger iteration (a reused Jacobian converges
+        # linearly, so allow three times more) and few stagger iterations
+        easy = o.easy_newton_its * (3 if o.jacobian_reuse > 0 else 1)
+        if info["newton_its"] <= easy * info["stagger_its"] and info["stagger_its"] <= 3:
             dt = dt_try * o.dt_grow
         else:
             dt = dt_try
@@ -284,7 +321,7 @@ def _row(sim, dt, info, cum, V0) -> dict:
         "newton_its": info["newton_its"],
         "stagger_its": info["stagger_its"],
         "damage_kkt": info["damage_kkt"],
-        "factorizations": linsolve.STATS["factorizations"],
+        "factorizations": linsolve.STATS["factorizations"] - sim.fact0,
     }
 
 

@@ -1,0 +1,809 @@
+"""Campaigns: plan, run (resumably), tabulate, plot and report a campaign spec.
+
+Public API (paths default to ``results/``; every function takes ``root``)::
+
+    spec = load_spec("campaigns/demo.toml")
+    res = run_campaign(spec, root="results", jobs=2)           # CampaignResult
+    plan = plan_campaign(spec, root="results")                   # done / failed / pending
+    table = build_table(spec, root="results")                    # pandas DataFrame
+    estimate_cost(spec, root="results")                          # dry-run cost (s)
+    plot_campaign(spec, root="results"); write_report(spec, root="results")
+
+Run records live in ``<root>/<name>/runs/<key>/record.json`` (see :mod:`sweep.store`);
+a rerun skips every key with a record ("ok" or "failed"; ``retry_failed=True`` reruns the
+failures), so an interrupted campaign loses at most its runs in flight.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence, TextIO
+
+from sweep.sampler import SAMPLERS, Point
+from sweep.scheduler import DefaultRunner, ExecConfig, RunTask, classification_dict, iter_records, resolve_runner
+from sweep.spec import CampaignSpec, load_spec
+from sweep.store import ResultsStore, run_key, solver_version, write_text_atomic
+
+__all__ = [
+    "DEFAULT_ROOT",
+    "Plan",
+    "CampaignResult",
+    "as_spec",
+    "plan_campaign",
+    "run_campaign",
+    "build_table",
+    "write_table",
+    "estimate_cost",
+    "wall_per_sim_second",
+    "estimated_sim_time",
+    "plot_campaign",
+    "write_report",
+    "reclassify",
+    "DEFAULT_WALL_S_PER_SIM_S_H2",
+    "COST_MESH_EXPONENT",
+]
+
+DEFAULT_ROOT = "results"
+
+# Dry-run cost model: wall seconds per simulated second of one coupled run at mesh size h (mm):
+#   c(h) = c2 * (2 / h) ** COST_MESH_EXPONENT,
+# c2 from <root>/bench/bench.json key "coupled_run_h2_wall_s_per_sim_s" when present (an exact
+# "coupled_run_h{h:g}_wall_s_per_sim_s" key wins), else the placeholder default below. The
+# exponent: elements ~ h^-2, sparse direct solves ~ n^1.25 in 2-D -> 2.5.
+DEFAULT_WALL_S_PER_SIM_S_H2 = 60.0
+COST_MESH_EXPONENT = 2.5
+
+
+def as_spec(spec) -> CampaignSpec:
+    """A CampaignSpec from a spec object or a path to a TOML file."""
+    return spec if isinstance(spec, CampaignSpec) else load_spec(spec)
+
+
+# ---------------------------------------------------------------------------
+# planning
+# ---------------------------------------------------------------------------
+@dataclass
+class Plan:
+    """The grid of a campaign and what the store already holds for it."""
+
+    spec: CampaignSpec
+    store: ResultsStore
+    points: list[Point]
+    keys: list[str]
+    records: dict[str, dict]
+    version: str
+
+    def _with(self, pred) -> list[tuple[Point, str]]:
+        return [(p, k) for p, k in zip(self.points, self.keys) if pred(self.records.get(k))]
+
+    @property
+    def done(self):
+        return self._with(lambda r: r is not None and r.get("status") == "ok")
+
+    @property
+    def failed(self):
+        return self._with(lambda r: r is not None and r.get("status") != "ok")
+
+    @property
+    def pending(self):
+        return self._with(lambda r: r is None)
+
+
+def _keys(points: Sequence[Point], version: str) -> list[str]:
+    return [run_key(p.params, p.options, version) for p in points]
+
+
+def plan_campaign(spec, root=DEFAULT_ROOT, *, version: str | None = None, points: Sequence[Point] | None = None) -> Plan:
+    """Expand the spec's initial points and look their keys up in the store."""
+    spec = as_spec(spec)
+    version = solver_version() if version is None else version
+    pts = list(points) if points is not None else SAMPLERS[spec.sampler["kind"]]().initial(spec)
+    store = ResultsStore(root, spec.name)
+    keys = _keys(pts, version)
+    recs = {k: r for k in keys if (r := store.read_record(k)) is not None}
+    return Plan(spec, store, pts, keys, recs, version)
+
+
+# ---------------------------------------------------------------------------
+# the table
+# ---------------------------------------------------------------------------
+_numbers_cache: dict[str, dict] = {}
+
+
+def _numbers(params: Mapping[str, Any]) -> dict:
+    """Dimensionless numbers of a run from sweep.numbers (empty if that module is unavailable)."""
+    key = json.dumps(params, sort_keys=True, default=str)
+    if key in _numbers_cache:
+        return _numbers_cache[key]
+    out: dict = {}
+    try:
+        from solver.params import Parameters
+        from sweep.numbers import dimensionless_numbers
+
+        res = dimensionless_numbers(_numbers_input(Parameters.from_dict(dict(params)).to_dict()))
+        out = {k: v for k, v in dict(res).items() if _is_scalar(v)}
+    except Exception:  # noqa: BLE001 - the table must build without the numbers module
+        out = {}
+    _numbers_cache[key] = out
+    return out
+
+
+def _numbers_input(p: Mapping[str, Any]) -> dict:
+    """Parameters dict -> sweep.numbers input: Parameters.phi_range is the half-width of the random
+    initial porosity, sweep.numbers wants (lo, hi) (or None for a non-random field)."""
+    d = dict(p)
+    if d.get("porosity_field", "random") == "random" and isinstance(d.get("phi_range"), (int, float)):
+        d["phi_range"] = (d["phi_mean"] - d["phi_range"], d["phi_mean"] + d["phi_range"])
+    else:
+        d["phi_range"] = None
+    return d
+
+
+def _is_scalar(v) -> bool:
+    return v is None or isinstance(v, (bool, int, float, str))
+
+
+def _cell(v):
+    if _is_scalar(v):
+        return v
+    return json.dumps(v, sort_keys=True, default=str)
+
+
+def _row(point: Point, key: str, rec: Mapping[str, Any], with_numbers: bool) -> dict:
+    row: dict[str, Any] = {"index": point.index, "key": key, "status": rec.get("status"), "reason": rec.get("reason")}
+    cls = rec.get("classification") or {}
+    row["regime"] = cls.get("regime")
+    row["blocks"] = ";".join(point.blocks)
+
+    def put(name, value, prefix):
+        name = str(name)
+        if name in row:
+            name = f"{prefix}{name}"
+        if name not in row:
+            row[name] = _cell(value)
+
+    nums = rec.get("numbers") or (_numbers(rec.get("params", point.params)) if with_numbers else {})
+    for k, v in nums.items():
+        put(k, v, "num_")
+    for k, v in point.swept.items():
+        put(k, v, "swept_")
+    for k, v in cls.items():
+        if k != "regime":
+            put(k, v, "cls_")
+    for k, v in (rec.get("metrics") or {}).items():
+        put(k, v, "m_")
+    for k, v in (rec.get("params") or point.params).items():
+        put(k, v, "param_")
+    for k, v in (rec.get("options") or point.options).items():
+        put(k, v, "opt_")
+    for k in ("wall_time_s", "attempts", "solver_version", "host", "finished_at"):
+        put(k, rec.get(k), "rec_")
+    return row
+
+
+def build_table(spec, root=DEFAULT_ROOT, *, version: str | None = None, plan: Plan | None = None,
+                numbers: bool = True):
+    """One row per finished run of the campaign's grid, in grid order (pandas DataFrame).
+
+    Columns: index, key, status, reason, regime, blocks, dimensionless numbers, the swept
+    values, classification fields, metrics, every parameter and run option (model units),
+    wall_time_s, attempts, solver_version, host, finished_at. Pending runs have no row.
+    """
+    import pandas as pd
+
+    plan = plan or plan_campaign(spec, root, version=version)
+    extra = _extra_points(plan)
+    rows = [_row(p, k, plan.records[k], numbers) for p, k in zip(plan.points + extra[0], plan.keys + extra[1])
+            if k in plan.records]
+    df = pd.DataFrame(rows)
+    if not df.empty:
+        df.insert(df.columns.get_loc("blocks") + 1, "run_dir",
+                  [str(plan.store.run_dir(k).resolve()) for k in df["key"]])
+    return _add_fracturing_number(df, plan.spec)
+
+
+def _dp_cri_setting(spec: CampaignSpec):
+    for g in spec.diagrams:
+        if g.get("kind") == "nf_vs_nb" and "dp_cri" in g:
+            return g["dp_cri"]
+    return None
+
+
+def _add_fracturing_number(df, spec: CampaignSpec):
+    """N_f = dp_vis / dp_cri (kPa/kPa) when an nf_vs_nb diagram gives ``dp_cri``: a number (kPa) or
+    "estimate" (sweep.numbers.estimate_dp_cri on the campaign's ok runs: the dp_vis where a
+    logistic fit of the fracturing outcome crosses 1/2). Adds the column ``dp_cri``."""
+    setting = _dp_cri_setting(spec)
+    if setting is None or df.empty or "dp_vis" not in df.columns:
+        return df
+    if setting == "estimate":
+        if "fracturing" not in df.columns:
+            return df
+        ok = df[(df["status"] == "ok") & df["fracturing"].notna()]
+        try:
+            from sweep.numbers import estimate_dp_cri
+
+            dp_cri = estimate_dp_cri(ok["dp_vis"].to_numpy(float), ok["fracturing"].astype(bool).to_numpy()).dp_cri
+        except Exception:  # noqa: BLE001 - needs both outcomes; N_f stays NaN until then
+            return df
+    else:
+        dp_cri = float(setting)
+    df = df.copy()
+    df["dp_cri"] = dp_cri
+    df["N_f"] = df["dp_vis"].astype(float) / dp_cri
+    return df
+
+
+def _extra_points(plan: Plan):
+    """Points added by a refining sampler in earlier sessions (records not in the initial grid)."""
+    if plan.spec.sampler["kind"] == "grid":
+        return [], []
+    known = set(plan.keys)
+    pts, keys = [], []
+    for k, r in plan.store.records().items():
+        if k not in known and r.get("solver_version") == plan.version:
+            pts.append(Point(r["params"], r["options"], {}, ("refined",), len(plan.points) + len(pts)))
+            keys.append(k)
+    return pts, keys
+
+
+def write_table(spec, root=DEFAULT_ROOT, *, version: str | None = None, plan: Plan | None = None) -> list[Path]:
+    """Rebuild the campaign table from the run records and write it (CSV, Parquet with pyarrow)."""
+    spec = as_spec(spec)
+    df = build_table(spec, root, version=version, plan=plan)
+    return ResultsStore(root, spec.name).write_table(df)
+
+
+# ---------------------------------------------------------------------------
+# running
+# ---------------------------------------------------------------------------
+@dataclass
+class CampaignResult:
+    """Outcome of :func:`run_campaign`."""
+
+    name: str
+    n_points: int
+    n_executed: int
+    n_ok: int
+    n_failed: int
+    n_skipped: int
+    aborted: bool
+    table_paths: list[Path]
+    table: Any = None
+    failures: list[tuple[str, str]] = field(default_factory=list)
+
+
+class Progress:
+    """Progress line: runs done and failed, pending, elapsed, ETA (to ``stream``)."""
+
+    def __init__(self, name: str, total: int, already: int, stream: TextIO | None):
+        self.name, self.total, self.already, self.stream = name, total, already, stream
+        self.t0 = time.perf_counter()
+        self.ok = self.failed = 0
+
+    def update(self, rec: Mapping[str, Any]) -> None:
+        if rec.get("status") == "ok":
+            self.ok += 1
+        else:
+            self.failed += 1
+        if self.stream is None:
+            return
+        n = self.ok + self.failed
+        elapsed = time.perf_counter() - self.t0
+        remaining = self.total - self.already - n
+        eta = elapsed / n * remaining if n else float("nan")
+        line = (f"[{self.name}] {self.already + n}/{self.total} done ({self.failed} failed this session), "
+                f"{remaining} pending, elapsed {_hms(elapsed)}, ETA {_hms(eta)} | {rec.get('key')} "
+                f"{rec.get('status')} {rec.get('wall_time_s', 0):.1f}s")
+        if rec.get("status") != "ok":
+            line += f": {rec.get('reason')}"
+        print(line, file=self.stream, flush=True)
+
+
+def _hms(s: float) -> str:
+    if not math.isfinite(s):
+        return "?"
+    s = int(round(s))
+    h, r = divmod(s, 3600)
+    m, sec = divmod(r, 60)
+    return f"{h}h{m:02d}m{sec:02d}s" if h else f"{m}m{sec:02d}s"
+
+
+def _make_runner(spec: CampaignSpec, runner) -> Callable:
+    if runner is not None:
+        return resolve_runner(runner) if isinstance(runner, str) else runner
+    if spec.run.get("runner"):
+        return resolve_runner(spec.run["runner"])
+    return DefaultRunner(spec.classify)
+
+
+def run_campaign(
+    spec,
+    root=DEFAULT_ROOT,
+    *,
+    jobs: int | None = None,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    timeout: float | None | str = "spec",
+    retries: int | None = None,
+    fail_fast: bool = False,
+    retry_failed: bool = False,
+    runner: Callable | str | None = None,
+    isolate: str | None = None,
+    version: str | None = None,
+    progress: TextIO | None = sys.stderr,
+    table_interval: float = 2.0,
+) -> CampaignResult:
+    """Run every pending point of ``spec`` and keep the table up to date.
+
+    jobs : parallel runs (default spec ``[run] jobs`` or 1; -1 = all cores).
+    backend, scheduler : "loky" | "dask" | "ray" and the cluster address (see sweep.scheduler).
+    timeout : s per run attempt; "spec" = spec ``[run] timeout`` (None: unlimited).
+    retries : extra attempts after a failure (default spec ``[run] retries`` or 0).
+    fail_fast : stop at the first failed run (runs not yet started are cancelled).
+    retry_failed : rerun points whose record is "failed" (otherwise they are skipped).
+    runner : callable or "module:function" (default spec ``[run] runner`` or DefaultRunner).
+    isolate : "auto" | "process" | "none" (default spec ``[run] isolate`` or "auto").
+    version : solver version in the run keys (default :func:`sweep.store.solver_version`).
+    progress : stream for the progress line (None: quiet).
+    table_interval : s between table rewrites while running (always written at the end).
+    """
+    spec = as_spec(spec)
+    jobs = int(spec.run.get("jobs", 1) if jobs is None else jobs)
+    if jobs == -1:
+        jobs = os.cpu_count() or 1
+    if jobs < 1:
+        raise ValueError(f"jobs={jobs} must be >= 1 or -1 (all cores)")
+    timeout = spec.run.get("timeout") if timeout == "spec" else timeout
+    if timeout is not None and not timeout > 0:
+        raise ValueError(f"timeout={timeout!r} must be > 0 s or None")
+    retries = int(spec.run.get("retries", 0) if retries is None else retries)
+    if retries < 0:
+        raise ValueError(f"retries={retries} must be >= 0")
+    isolate = isolate or spec.run.get("isolate", "auto")
+    if isolate not in ("auto", "process", "none"):
+        raise ValueError(f"isolate={isolate!r} must be one of auto, process, none")
+    if isolate == "none" and timeout is not None:
+        raise ValueError("a per-run timeout needs the run in a child process: isolate='auto' or 'process'")
+    runner_fn = _make_runner(spec, runner)
+    version = solver_version() if version is None else version
+    sampler = SAMPLERS[spec.sampler["kind"]]()
+    store = ResultsStore(root, spec.name)
+    store.acquire_lock()
+    try:
+        store.clean_tmp()
+        _save_spec(spec, store)
+        cfg = ExecConfig(root=str(Path(root).resolve()), campaign=spec.name, runner=runner_fn, timeout=timeout,
+                         retries=retries, isolate=isolate, blas_threads=1 if jobs > 1 or backend != "loky" else None,
+                         solver_version=version)
+        points = sampler.initial(spec)
+        result = CampaignResult(spec.name, 0, 0, 0, 0, 0, False, [])
+        while points:
+            plan = plan_campaign(spec, root, version=version, points=points)
+            todo = plan.pending + (plan.failed if retry_failed else [])
+            todo.sort(key=lambda pk: pk[0].index)
+            result.n_points = len(points)
+            prog = Progress(spec.name, len(points), len(points) - len(todo), progress)
+            if progress is not None:
+                print(f"[{spec.name}] {len(points)} runs: {len(plan.done)} done, {len(plan.failed)} failed, "
+                      f"{len(plan.pending)} pending; executing {len(todo)} on {backend} with {jobs} job(s)",
+                      file=progress, flush=True)
+            tasks = [RunTask(k, p.params, p.options, p.index) for p, k in todo]
+            last_write = time.perf_counter()
+            gen = iter_records(tasks, cfg, jobs=jobs, backend=backend, scheduler=scheduler)
+            try:
+                for rec in gen:
+                    result.n_executed += 1
+                    prog.update(rec)
+                    plan.records[rec["key"]] = rec
+                    if rec.get("status") == "ok":
+                        result.n_ok += 1
+                    else:
+                        result.n_failed += 1
+                        result.failures.append((rec["key"], str(rec.get("reason"))))
+                        if fail_fast:
+                            result.aborted = True
+                            break
+                    if time.perf_counter() - last_write > table_interval:
+                        store.write_table(build_table(spec, root, version=version, plan=plan))
+                        last_write = time.perf_counter()
+            finally:
+                gen.close()
+                # whatever happened (Ctrl-C included), the table reflects every finished run
+                result.table_paths = write_table(spec, root, version=version,
+                                                 plan=plan_campaign(spec, root, version=version, points=points))
+            if result.aborted:
+                break
+            table = build_table(spec, root, version=version, plan=plan_campaign(spec, root, version=version, points=points))
+            known = set(plan.keys)
+            new = [p for p in sampler.refine(spec, table) if run_key(p.params, p.options, version) not in known]
+            points = points + new if new else []
+        result.n_skipped = result.n_points - result.n_executed
+        result.table = build_table(spec, root, version=version)
+        return result
+    finally:
+        store.clean_tmp()
+        store.release_lock()
+
+
+def _save_spec(spec: CampaignSpec, store: ResultsStore) -> None:
+    store.dir.mkdir(parents=True, exist_ok=True)
+    src = Path(spec.source)
+    if src.is_file():
+        write_text_atomic(store.dir / "spec.toml", src.read_text())
+
+
+# ---------------------------------------------------------------------------
+# dry run: cost estimate
+# ---------------------------------------------------------------------------
+def _load_bench(root) -> dict:
+    p = Path(root) / "bench" / "bench.json"
+    try:
+        return json.loads(p.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return {}
+
+
+def wall_per_sim_second(h: float, bench: Mapping[str, Any] | None = None) -> tuple[float, str]:
+    """Estimated wall seconds per simulated second of one coupled run at mesh size ``h`` (mm),
+    and where the figure comes from ("bench h=..", "bench h=2 scaled", "default")."""
+    bench = bench or {}
+    exact = bench.get(f"coupled_run_h{h:g}_wall_s_per_sim_s")
+    if isinstance(exact, (int, float)) and exact > 0:
+        return float(exact), f"bench h={h:g}"
+    c2 = bench.get("coupled_run_h2_wall_s_per_sim_s")
+    src = "bench h=2 scaled"
+    if not (isinstance(c2, (int, float)) and c2 > 0):
+        c2, src = DEFAULT_WALL_S_PER_SIM_S_H2, "default"
+    return float(c2) * (2.0 / float(h)) ** COST_MESH_EXPONENT, src
+
+
+def estimated_sim_time(params: Mapping[str, Any], options: Mapping[str, Any]) -> float:
+    """Simulated time of a run, s: t_end, or less when the front should reach stop_front_radius first.
+
+    The front estimate fills the porosity: φ π (r² − r_i²) = 2 π r_i w_i t (per unit gap height),
+    so t = φ (r_stop² − r_i²) / (2 r_i w_i).
+    """
+    t_end = float(options.get("t_end", 2.0))
+    r_stop = options.get("stop_front_radius")
+    w_i, r_i, phi = params.get("w_i"), params.get("r_inner", 5.0), params.get("phi_mean", 0.4)
+    if r_stop is None or not w_i or w_i <= 0 or r_stop <= r_i:
+        return t_end
+    return min(t_end, phi * (r_stop**2 - r_i**2) / (2.0 * r_i * w_i))
+
+
+def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, version: str | None = None,
+                  retry_failed: bool = False) -> dict:
+    """Grid size and estimated wall time (s) of the pending runs of a campaign on ``jobs`` workers.
+
+    Uses :func:`wall_per_sim_second` (bench figures or the documented default) times
+    :func:`estimated_sim_time` per run, divided by ``jobs`` (perfect packing: a lower bound
+    of the wall time when runs differ much in cost). Failed runs count only with ``retry_failed``.
+    """
+    spec = as_spec(spec)
+    plan = plan_campaign(spec, root, version=version)
+    bench = _load_bench(root)
+    per_h: dict[float, dict] = {}
+    total = 0.0
+    for p, k in plan.pending + (plan.failed if retry_failed else []):
+        h = float(p.options.get("h", 1.0))
+        c, src = wall_per_sim_second(h, bench)
+        t = estimated_sim_time(p.params, p.options)
+        d = per_h.setdefault(h, {"runs": 0, "sim_s": 0.0, "wall_s": 0.0, "wall_s_per_sim_s": c, "source": src})
+        d["runs"] += 1
+        d["sim_s"] += t
+        d["wall_s"] += c * t
+        total += c * t
+    return {
+        "name": spec.name,
+        "grid_size": len(plan.points),
+        "done": len(plan.done),
+        "failed": len(plan.failed),
+        "pending": len(plan.pending),
+        "by_mesh_size": per_h,
+        "cpu_s": total,
+        "wall_s": total / max(1, jobs),
+        "jobs": jobs,
+    }
+
+
+# ---------------------------------------------------------------------------
+# reclassification
+# ---------------------------------------------------------------------------
+def reclassify(spec, root=DEFAULT_ROOT, *, version: str | None = None) -> int:
+    """Rerun ``sweep.classify.classify_run`` on every finished ("ok") run and rewrite its record
+    (e.g. after a classifier change; no simulation is rerun). Returns the number of runs updated."""
+    from sweep.classify import classify_run
+    from sweep.store import write_json_atomic
+
+    spec = as_spec(spec)
+    plan = plan_campaign(spec, root, version=version)
+    n = 0
+    for p, k in plan.done:
+        rd = plan.store.run_dir(k)
+        rec = dict(plan.records[k])
+        try:
+            rec["classification"] = json.loads(json.dumps(classification_dict(classify_run(str(rd), **spec.classify)),
+                                                          default=_json_default))
+            rec.get("metrics", {}).pop("classify_error", None)
+        except Exception as e:  # noqa: BLE001
+            rec.setdefault("metrics", {})["classify_error"] = f"{type(e).__name__}: {e}"
+        write_json_atomic(rd / "record.json", rec)
+        n += 1
+    write_table(spec, root, version=version)
+    return n
+
+
+def _json_default(o):
+    if hasattr(o, "item"):
+        return o.item()
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    return str(o)
+
+
+# ---------------------------------------------------------------------------
+# diagrams
+# ---------------------------------------------------------------------------
+_REGIME_STYLE = {
+    "porous_invasion": ("o", "tab:blue"),
+    "uniform_invasion": ("o", "tab:blue"),
+    "viscous_fingering": ("*", "tab:blue"),
+    "fracturing": ("^", "tab:orange"),
+    "invasive_fracturing": ("^", "tab:orange"),
+    "non_invasive_fracturing": ("s", "tab:orange"),
+    "fracturing_fingering": ("X", "tab:orange"),
+}
+
+
+def _scatter(df, x, y, ax, *, by="regime", logx=False, logy=False):
+    import numpy as np
+
+    groups = df[by].fillna("failed" if by == "regime" else "?") if by in df.columns else None
+    if groups is None:
+        ax.plot(df[x], df[y], "o")
+    else:
+        for g, sub in df.groupby(groups):
+            m, c = _REGIME_STYLE.get(str(g), ("d", None))
+            ax.scatter(sub[x], sub[y], marker=m, color=c, label=str(g), s=45, edgecolor="k", linewidth=0.4)
+        ax.legend(fontsize=8)
+    if logx:
+        ax.set_xscale("log")
+    if logy:
+        ax.set_yscale("log")
+    ax.set_xlabel(x)
+    ax.set_ylabel(y)
+    ax.grid(True, which="both", alpha=0.3)
+    return np.asarray(df[x]).size
+
+
+def _timeseries_plot(spec, store, table, g, path):
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    by = g.get("by")
+    for _, row in table[table["status"] == "ok"].iterrows():
+        f = store.run_dir(row["key"]) / "timeseries.csv"
+        if not f.exists():
+            continue
+        ts = pd.read_csv(f)
+        if g["x"] in ts.columns and g["y"] in ts.columns:
+            label = f"{by}={row[by]}" if by and by in row else row["key"]
+            ax.plot(ts[g["x"]], ts[g["y"]], label=label)
+    ax.set_xlabel(g["x"])
+    ax.set_ylabel(g["y"])
+    ax.grid(True, alpha=0.3)
+    if ax.lines:
+        ax.legend(fontsize=8)
+    ax.set_title(g.get("title", spec.name))
+    fig.savefig(path, dpi=150, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def _snapshot(run_dir: Path, time_s=None):
+    import numpy as np
+
+    snaps = sorted((run_dir / "snapshots").glob("snap_*.npz"))
+    mesh = run_dir / "snapshots" / "mesh.npz"
+    if not snaps or not mesh.exists():
+        return None
+    if time_s is not None:
+        ts = [float(np.load(s)["t"]) for s in snaps]
+        snap = snaps[int(np.argmin([abs(t - time_s) for t in ts]))]
+    else:
+        snap = snaps[-1]
+    m, s = np.load(mesh), np.load(snap)
+    return m["points"], m["triangles"], s
+
+
+def _fields_plot(spec, store, table, g, path):
+    """Grid of field maps (last snapshot, or the one nearest ``time`` s) with the S = 0.5 front in white.
+
+    rows: "blocks" (default: one row per spec block, runs ordered by the block's first axis) or a
+    table column; cols: a table column giving the column order (default: run order in the row).
+    """
+    import matplotlib.pyplot as plt
+
+    ok = table[table["status"] == "ok"].sort_values("index")
+    rows_col, cols_col = g.get("rows", "blocks"), g.get("cols")
+    rows: list[tuple[str, Any]] = []
+    if rows_col == "blocks":
+        for b in spec.blocks:
+            sub = ok[ok["blocks"].str.split(";").apply(lambda ls, lab=b.label: lab in ls)]
+            if b.axes and b.axes[0].name in sub.columns:
+                sub = sub.sort_values(b.axes[0].name, kind="stable")
+            rows.append((b.label if len(spec.blocks) > 1 else "", sub))
+    elif rows_col in ok.columns:
+        rows = [(f"{rows_col}={v}", ok[ok[rows_col] == v]) for v in dict.fromkeys(ok[rows_col])]
+    else:
+        rows = [("", ok)]
+    cvals = sorted(dict.fromkeys(ok[cols_col])) if cols_col and cols_col in ok.columns else None
+    ncols = max(1, len(cvals) if cvals else max((len(sub) for _, sub in rows), default=1))
+    fig, axes = plt.subplots(len(rows), ncols, figsize=(3 * ncols, 3 * len(rows)), squeeze=False)
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    swept = list(spec.axis_names)
+    for i, (rlabel, sub) in enumerate(rows):
+        for j, (_, row) in enumerate(sub.iterrows()):
+            jj = cvals.index(row[cols_col]) if cvals else j
+            snap = _snapshot(store.run_dir(row["key"]), g.get("time"))
+            if snap is None or g["field"] not in snap[2]:
+                continue
+            pts, tri, s = snap
+            ax = axes[i, jj]
+            vals = s[g["field"]]
+            shading = "flat" if len(vals) == len(tri) else "gouraud"
+            ax.tripcolor(pts[:, 0], pts[:, 1], tri, vals, shading=shading, cmap="viridis")
+            if "S" in s and len(s["S"]) == len(pts):
+                ax.tricontour(pts[:, 0], pts[:, 1], tri, s["S"], levels=[0.5], colors="w", linewidths=0.8)
+            ax.set_aspect("equal")
+            lab = ", ".join(f"{a}={_fmt(row[a])}" for a in swept if a in row.index and pd_notna(row[a]))
+            ax.set_title(f"{rlabel + ': ' if rlabel else ''}{lab}\nt={float(s['t']):.2f} s", fontsize=7)
+    fig.suptitle(g.get("title", f"{spec.name}: {g['field']}"))
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def pd_notna(v) -> bool:
+    try:
+        return not (v is None or (isinstance(v, float) and math.isnan(v)))
+    except TypeError:
+        return True
+
+
+def _phase_diagram(spec, table, g, path) -> list[Path]:
+    """The paper's diagrams through sweep.diagrams (ok runs only); PNG (+ the diagram's formats)."""
+    from sweep import diagrams as dg
+
+    ok = table[table["status"] == "ok"]
+    kind = g["kind"]
+    kw: dict[str, Any] = {"title": g.get("title", f"{spec.name}")}
+    if "formats" in g:
+        kw["formats"] = tuple(g["formats"])
+    if kind == "ca_star_vs_cement":
+        need = ("cement", "Ca_star", "fracturing")
+        if "fit" in g:
+            kw["fit"] = bool(g["fit"])
+        fn = dg.plot_ca_star_vs_cement
+    else:
+        need = ("N_b", "N_f", "regime")
+        for k in ("experimental_range", "shade"):
+            if k in g:
+                kw[k] = g[k]
+        if "dp_cri" in ok.columns and len(ok):
+            kw["dp_cri"] = float(ok["dp_cri"].iloc[0])
+        fn = dg.plot_nf_vs_nb
+    if ok.empty or any(c not in ok.columns for c in need):
+        return []
+    res = fn(ok.reset_index(drop=True), path, **kw)
+    paths = res.get("paths") if isinstance(res, Mapping) else None
+    return [Path(p) for p in paths] if paths else [path]
+
+
+def plot_campaign(spec, root=DEFAULT_ROOT, *, version: str | None = None, table=None) -> list[Path]:
+    """Draw the spec's diagrams from the campaign table into ``<root>/<name>/figures/``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    spec = as_spec(spec)
+    store = ResultsStore(root, spec.name)
+    table = build_table(spec, root, version=version) if table is None else table
+    store.figures_dir.mkdir(parents=True, exist_ok=True)
+    out = []
+    if table.empty:
+        return out
+    for i, g in enumerate(spec.diagrams):
+        kind = g["kind"]
+        path = store.figures_dir / g.get("file", f"{kind}.png" if sum(d["kind"] == kind for d in spec.diagrams) == 1 else f"{kind}_{i}.png")
+        if kind in ("ca_star_vs_cement", "nf_vs_nb"):
+            out.extend(_phase_diagram(spec, table, g, path))
+        elif kind == "scatter":
+            if g["x"] not in table.columns or g["y"] not in table.columns:
+                continue
+            fig, ax = plt.subplots(figsize=(5, 4))
+            _scatter(table, g["x"], g["y"], ax, by=g.get("color", "regime"), logx=g.get("logx", False), logy=g.get("logy", False))
+            ax.set_title(g.get("title", spec.name))
+            fig.savefig(path, dpi=150, bbox_inches="tight")
+            plt.close(fig)
+            out.append(path)
+        elif kind == "timeseries":
+            out.append(_timeseries_plot(spec, store, table, g, path))
+        elif kind == "fields":
+            out.append(_fields_plot(spec, store, table, g, path))
+    return out
+
+
+# ---------------------------------------------------------------------------
+# report
+# ---------------------------------------------------------------------------
+def write_report(spec, root=DEFAULT_ROOT, *, version: str | None = None, plot: bool = True) -> Path:
+    """Markdown summary of a campaign (``<root>/<name>/report.md``): counts, regimes, failures with
+    their reasons, the run table's main columns, and the figures (drawn first when ``plot``)."""
+    spec = as_spec(spec)
+    store = ResultsStore(root, spec.name)
+    plan = plan_campaign(spec, root, version=version)
+    table = build_table(spec, root, plan=plan)
+    figs = plot_campaign(spec, root, version=version, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
+    if not table.empty:
+        store.write_table(table)
+    L = [f"# Campaign `{spec.name}`", ""]
+    if spec.description:
+        L += [spec.description.strip(), ""]
+    if spec.paper:
+        L += [f"Paper: {spec.paper}", ""]
+    L += [f"Spec: `{spec.source}`; solver version `{plan.version}`.", "",
+          f"- runs in the grid: {len(plan.points)}",
+          f"- done: {len(plan.done)}", f"- failed: {len(plan.failed)}", f"- pending: {len(plan.pending)}", ""]
+    if not table.empty and "wall_time_s" in table.columns:
+        L += [f"Total wall time of the runs: {table['wall_time_s'].sum():.1f} s "
+              f"(median {table['wall_time_s'].median():.1f} s per run).", ""]
+    if not table.empty and table["regime"].notna().any():
+        L += ["## Regimes", "", "| regime | runs |", "|---|---|"]
+        for reg, n in table["regime"].fillna("(none)").value_counts().items():
+            L.append(f"| {reg} | {n} |")
+        L.append("")
+    if plan.failed:
+        L += ["## Failures", "", "| key | reason |", "|---|---|"]
+        for p, k in plan.failed:
+            reason = str(plan.records[k].get("reason")).replace("|", "\\|").replace("\n", " ")
+            L.append(f"| `{k}` | {reason} |")
+        L.append("")
+    if figs:
+        L += ["## Figures", ""]
+        pngs = {Path(f).with_suffix("") for f in figs if Path(f).suffix == ".png"}
+        for f in figs:
+            rel = os.path.relpath(f, store.dir)
+            if Path(f).suffix == ".png":
+                L += [f"![{Path(f).stem}]({rel})", ""]
+            elif Path(f).with_suffix("") in pngs:
+                L[-2] += f" ([{Path(f).suffix[1:]}]({rel}))"
+            else:
+                L += [f"[{Path(f).name}]({rel})", ""]
+    if not table.empty:
+        cols = [c for c in ["key", "status", "regime", *spec.axis_names] if c in table.columns]
+        num_cols = [c for c in table.columns if c.lower().replace("*", "_star") in
+                    ("ca_star", "n_f", "n_b", "nf", "nb") and c not in cols]
+        cols += num_cols + [c for c in ("wall_time_s",) if c in table.columns]
+        L += ["## Runs", "", "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+        for _, r in table[cols].iterrows():
+            L.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+        L.append("")
+    L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}`.", ""]
+    write_text_atomic(store.report_md, "\n".join(L))
+    return store.report_md
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v).replace("|", "\\|")

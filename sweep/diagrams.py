@@ -1,0 +1,377 @@
+"""Phase diagrams of the paper: Ca* vs cement ratio (Sec. 3.6) and N_f vs N_b (Sec. 3.8).
+
+Matplotlib is used through the object API with the Agg canvas (no pyplot, no global
+backend change). Each plot is written as PNG plus the vector formats requested
+(default SVG). Inputs are pandas DataFrames with one row per run, so that the campaign
+framework and the discrepancy workflow can reuse these functions.
+
+Required columns
+----------------
+``plot_ca_star_vs_cement``: ``cement`` (C, %), ``Ca_star`` (-), ``fracturing`` (bool).
+    Optional: ``source`` (e.g. "simulation" / "experiment"; one colour per source).
+``plot_nf_vs_nb``: ``N_b`` (-), ``N_f`` (-), ``regime`` (one of sweep.classify.REGIMES).
+    Optional: ``run_dir`` (run folder, for thumbnails).
+Rows with missing / non-positive numbers or an unknown regime are dropped with a
+count reported in the returned dict (``n_dropped``).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Iterable, Mapping, NamedTuple, Sequence
+
+import numpy as np
+
+from .classify import REGIMES
+from .numbers import logistic_fit
+
+__all__ = [
+    "REGIME_STYLE",
+    "ExponentialSeparatrix",
+    "fit_exponential_separatrix",
+    "regime_map",
+    "plot_ca_star_vs_cement",
+    "plot_nf_vs_nb",
+]
+
+BLUE = "#1f77b4"
+ORANGE = "#ff7f0e"
+# marker, colour, label, shading colour (paper's symbols, Sec. 3.8)
+REGIME_STYLE: dict[str, dict[str, Any]] = {
+    "uniform_invasion": dict(marker="o", color=BLUE, label="uniform invasion", shade="#c6dbef"),
+    "viscous_fingering": dict(marker="*", color=BLUE, label="viscous fingering", shade="#9ecae1"),
+    "invasive_fracturing": dict(marker="^", color=ORANGE, label="invasive fracturing", shade="#fdd0a2"),
+    "non_invasive_fracturing": dict(marker="s", color=ORANGE, label="non-invasive fracturing",
+                                    shade="#fdae6b"),
+    "fracturing_fingering": dict(marker="x", color=ORANGE, label="fracturing/fingering",
+                                 shade="#e7cb94"),
+}
+
+
+# --------------------------------------------------------------------------- separatrix
+class ExponentialSeparatrix(NamedTuple):
+    """Ca*_c(C) = A exp(B C); cov: 2x2 covariance of (A, B) (delta method).
+
+    Also: ``sigma_A``, ``sigma_B``, ``cov_lnA_B`` (covariance of (ln A, B), in which the
+    fit is close to Gaussian), ``separable`` (labels perfectly separated: then cov
+    reflects the ridge penalty, not a sampling uncertainty).
+    """
+
+    A: float
+    B: float
+    cov: np.ndarray
+    cov_lnA_B: np.ndarray | None = None
+    separable: bool = False
+
+    @property
+    def sigma_A(self) -> float:
+        return float(math.sqrt(max(self.cov[0, 0], 0.0)))
+
+    @property
+    def sigma_B(self) -> float:
+        return float(math.sqrt(max(self.cov[1, 1], 0.0)))
+
+    def __call__(self, C: Any) -> Any:
+        """Ca*_c at cement ratio C (%)."""
+        return self.A * np.exp(self.B * np.asarray(C, dtype=float))
+
+
+def fit_exponential_separatrix(C: Any, ca_star: Any, fracturing: Any,
+                               ridge: float = 1e-3) -> ExponentialSeparatrix:
+    """Fit Ca*_c = A exp(B C) separating porous invasion from fracturing.
+
+    Logistic regression of ``fracturing`` on (C, ln Ca*) (scipy.optimize, no sklearn):
+    logit P = b0 + b1 C + b2 ln Ca*; the 50 % boundary is ln Ca* = -(b0 + b1 C)/b2, so
+    A = exp(-b0/b2), B = -b1/b2, with covariance by the delta method from the inverse
+    Hessian. C in %, Ca* dimensionless (> 0), fracturing bools. Needs both outcomes and
+    fracturing increasing with Ca* (b2 > 0).
+    """
+    Ca = np.asarray(C, dtype=float).ravel()
+    cs = np.asarray(ca_star, dtype=float).ravel()
+    fr = np.asarray(fracturing).astype(bool).ravel()
+    if not (Ca.size == cs.size == fr.size) or Ca.size < 3:
+        raise ValueError(f"C, ca_star, fracturing lengths=({Ca.size}, {cs.size}, {fr.size}): "
+                         "must be equal and >= 3")
+    if not np.all(np.isfinite(Ca)):
+        raise ValueError("C: contains non-finite values; all must be finite (%)")
+    if not np.all(np.isfinite(cs)) or np.any(cs <= 0):
+        raise ValueError("ca_star: must be finite and > 0")
+    fit = logistic_fit(np.c_[Ca, np.log(cs)], fr, ridge=ridge)
+    b0, b1, b2 = fit.beta
+    if b2 <= 0:
+        raise ValueError("fracturing: does not increase with Ca* (fitted coefficient <= 0); "
+                         "no separatrix Ca*_c(C)")
+    lnA, B = -b0 / b2, -b1 / b2
+    J = np.array([[-1.0 / b2, 0.0, b0 / b2**2],
+                  [0.0, -1.0 / b2, b1 / b2**2]])
+    cov_lnAB = J @ fit.cov @ J.T
+    A = float(np.exp(lnA))
+    D = np.diag([A, 1.0])
+    return ExponentialSeparatrix(A=A, B=float(B), cov=D @ cov_lnAB @ D, cov_lnA_B=cov_lnAB,
+                                 separable=fit.separable)
+
+
+# --------------------------------------------------------------------------- helpers
+def _require(df: Any, cols: Sequence[str], fn: str) -> None:
+    import pandas as pd
+
+    if not isinstance(df, pd.DataFrame):
+        raise ValueError(f"df={type(df).__name__}: {fn} needs a pandas DataFrame")
+    missing = [c for c in cols if c not in df.columns]
+    if missing:
+        raise ValueError(f"df: missing column(s) {missing} required by {fn} "
+                         f"(has {list(df.columns)})")
+
+
+def _new_figure(size: tuple[float, float]):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=size, dpi=150)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig, out_path: str | Path, formats: Iterable[str]) -> list[Path]:
+    out = Path(out_path)
+    stem = out.with_suffix("") if out.suffix.lower() in (".png", ".svg", ".pdf") else out
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    fmts = ["png"] + [f for f in formats if f != "png"]
+    written = []
+    for f in fmts:
+        if f not in ("png", "svg", "pdf"):
+            raise ValueError(f"formats: {f!r} not allowed; use 'png', 'svg' or 'pdf'")
+        p = stem.parent / f"{stem.name}.{f}"
+        fig.savefig(p, format=f, bbox_inches="tight")
+        written.append(p)
+    return written
+
+
+def _fmt_pm(v: float, s: float) -> str:
+    if not math.isfinite(s) or s == 0:
+        return f"{v:.3g}"
+    return f"{v:.3g} ± {s:.2g}"
+
+
+# --------------------------------------------------------------------------- Ca* vs C
+def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
+                           formats: Sequence[str] = ("svg",), title: str | None = None,
+                           ridge: float = 1e-3) -> dict[str, Any]:
+    """Ca* vs cement ratio C (%) with the two regimes and the exponential separatrix.
+
+    df columns: ``cement``, ``Ca_star``, ``fracturing`` (+ optional ``source``).
+    Porous invasion: open circles; fracturing: filled triangles; one colour per source.
+    With ``fit`` and both outcomes present, the separatrix Ca*_c = A exp(B C) is fitted
+    (``fit_exponential_separatrix``) and drawn with A, B and their 1-sigma in the legend.
+    Writes ``out_path`` as PNG plus ``formats``; returns {"paths", "fit", "n_dropped"}.
+    """
+    _require(df, ("cement", "Ca_star", "fracturing"), "plot_ca_star_vs_cement")
+    C = df["cement"].to_numpy(dtype=float)
+    cs = df["Ca_star"].to_numpy(dtype=float)
+    fr = df["fracturing"].to_numpy()
+    ok = np.isfinite(C) & np.isfinite(cs) & (cs > 0) & np.array([v in (True, False, 0, 1) for v in fr])
+    n_drop = int((~ok).sum())
+    C, cs, fr = C[ok], cs[ok], fr[ok].astype(bool)
+    src = df["source"].astype(str).to_numpy()[ok] if "source" in df.columns else np.full(len(C), "simulation")
+
+    fig = _new_figure((5.5, 4.2))
+    ax = fig.add_subplot(1, 1, 1)
+    colours = [ORANGE, BLUE, "#2ca02c", "#d62728", "#9467bd"]
+    for k, s in enumerate(sorted(set(src))):
+        col = colours[k % len(colours)]
+        m = src == s
+        ax.scatter(C[m & ~fr], cs[m & ~fr], marker="o", facecolors="none", edgecolors=col,
+                   label=f"{s}: porous invasion")
+        ax.scatter(C[m & fr], cs[m & fr], marker="^", color=col, label=f"{s}: fracturing")
+    sep = None
+    if fit and fr.any() and (~fr).any() and len(C) >= 3:
+        try:
+            sep = fit_exponential_separatrix(C, cs, fr, ridge=ridge)
+        except ValueError:
+            sep = None
+    if sep is not None:
+        cc = np.linspace(C.min(), C.max(), 200) if np.ptp(C) > 0 else np.array([C[0] - 0.5, C[0] + 0.5])
+        note = " (separable)" if sep.separable else ""
+        ax.plot(cc, sep(cc), "k-", lw=1.5,
+                label=f"Ca*$_c$ = A exp(B C){note}\nA = {_fmt_pm(sep.A, sep.sigma_A)}, "
+                      f"B = {_fmt_pm(sep.B, sep.sigma_B)}")
+    ax.set_yscale("log")
+    ax.set_xlabel("cement volume ratio C (%)")
+    ax.set_ylabel("modified capillary number Ca*")
+    if title:
+        ax.set_title(title)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
+              frameon=False)
+    paths = _save(fig, out_path, formats)
+    return {"paths": paths, "fit": sep, "n_dropped": n_drop}
+
+
+# --------------------------------------------------------------------------- N_f vs N_b
+def regime_map(log_nb: Any, log_nf: Any, regimes: Sequence[str], grid_x: Any, grid_y: Any,
+               k: int = 1) -> np.ndarray:
+    """Regime of each grid point by k-nearest-neighbour vote in the (log10 N_b, log10 N_f) plane.
+
+    log_nb, log_nf (n,) run coordinates (log10); regimes (n,) labels; grid_x, grid_y
+    arrays of query coordinates (log10; same shape). Both axes are scaled by the spread
+    of the runs so that one decade counts the same on each axis when their spans
+    differ. Ties go to the nearest neighbour. Returns an array of labels, grid shape.
+    """
+    from scipy.spatial import cKDTree
+
+    x = np.asarray(log_nb, float)
+    y = np.asarray(log_nf, float)
+    lab = np.asarray(regimes, dtype=object)
+    if not (x.size == y.size == lab.size) or x.size == 0:
+        raise ValueError(f"log_nb, log_nf, regimes lengths=({x.size}, {y.size}, {lab.size}): "
+                         "must be equal and >= 1")
+    if not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"k={k!r}: must be an integer >= 1")
+    gx = np.asarray(grid_x, float)
+    gy = np.asarray(grid_y, float)
+    sx = max(float(np.ptp(x)), 1e-9)
+    sy = max(float(np.ptp(y)), 1e-9)
+    s = max(sx, sy)
+    tree = cKDTree(np.c_[x / s, y / s])
+    kk = min(k, x.size)
+    _, idx = tree.query(np.c_[gx.ravel() / s, gy.ravel() / s], k=kk)
+    if kk == 1:
+        out = lab[idx]
+    else:
+        names, codes = np.unique(lab, return_inverse=True)
+        votes = np.zeros((idx.shape[0], len(names)))
+        w = 1.0 + 1e-6 * (kk - np.arange(kk))  # nearest wins ties
+        np.add.at(votes, (np.arange(idx.shape[0])[:, None], codes[idx]), w[None, :])
+        out = names[np.argmax(votes, axis=1)]
+    return out.reshape(gx.shape)
+
+
+def _thumbnail(fig, ax, run_dir: str | Path, xy: tuple[float, float], pos: tuple[float, float],
+               size: float, at: Any) -> None:
+    """Circular inset of a run: porosity and the S = 0.5 contour in white.
+
+    The fields are drawn from the classifier's raster (one image, light in SVG)."""
+    from .classify import _load_mesh, build_raster, select_snapshot
+
+    run_dir = Path(run_dir)
+    points, tris = _load_mesh(run_dir)
+    _, snap = select_snapshot(run_dir, at)
+    with np.load(snap) as z:
+        S = np.asarray(z["S"], float)
+        phi = np.asarray(z["phi"], float)
+    ras = build_raster(points, tris)
+    phi_img = ras.elemental(phi) if phi.size == len(tris) and phi.size != len(points) else ras.nodal(phi)
+    S_img = ras.nodal(S, fill=np.nan)
+    ext = (ras.x[0] - ras.pixel / 2, ras.x[-1] + ras.pixel / 2,
+           ras.y[0] - ras.pixel / 2, ras.y[-1] + ras.pixel / 2)
+    ins = ax.inset_axes([pos[0] - size / 2, pos[1] - size / 2, size, size])
+    ins.imshow(np.ma.masked_invalid(phi_img), origin="lower", extent=ext, cmap="viridis",
+               vmin=0.2, vmax=1.0, interpolation="nearest")
+    if np.nanmax(S_img) >= 0.5 > np.nanmin(S_img):
+        ins.contour(ras.x, ras.y, np.ma.masked_invalid(S_img), levels=[0.5], colors="white",
+                    linewidths=0.8)
+    ins.set_aspect("equal")
+    ins.axis("off")
+    ax.annotate("", xy=xy, xycoords="data", xytext=pos, textcoords="axes fraction",
+                arrowprops=dict(arrowstyle="-", color="0.3", lw=0.6))
+
+
+def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int = 1,
+                  experimental_range: Mapping[str, float] | Sequence[float] | None = None,
+                  thumbnails: Sequence[Mapping[str, Any]] | None = None,
+                  dp_cri: float | None = None, formats: Sequence[str] = ("svg",),
+                  title: str | None = None, grid: int = 300) -> dict[str, Any]:
+    """Log-log phase diagram N_f vs N_b with the five regimes (Sec. 3.8, Fig. phase_diagram).
+
+    df columns: ``N_b``, ``N_f``, ``regime`` (+ ``run_dir`` for thumbnails).
+    Symbols: blue circle uniform invasion, blue star viscous fingering, orange triangle
+    invasive fracturing, orange square non-invasive fracturing, orange cross
+    fracturing/fingering. ``shade``: colour the plane by ``regime_map`` (k nearest runs
+    in the log plane). Dashed lines N_f = 1 and N_b = 1. ``experimental_range``:
+    (nb_min, nb_max, nf_min, nf_max) or a mapping with those keys, drawn as a red
+    rectangle. ``thumbnails``: list of {"row": index label of df (or "run_dir": path
+    and "xy": (N_b, N_f)), "pos": (x, y) axes fraction of the inset centre,
+    "size": axes fraction (0.18), "at": snapshot selector (default "last")}.
+    ``dp_cri`` (kPa) is written in the title when given. Writes PNG plus ``formats``;
+    returns {"paths", "n_dropped", "counts"}.
+    """
+    _require(df, ("N_b", "N_f", "regime"), "plot_nf_vs_nb")
+    nb = df["N_b"].to_numpy(dtype=float)
+    nf = df["N_f"].to_numpy(dtype=float)
+    rg = df["regime"].astype(str).to_numpy()
+    ok = np.isfinite(nb) & np.isfinite(nf) & (nb > 0) & (nf > 0) & np.isin(rg, REGIMES)
+    n_drop = int((~ok).sum())
+    nb, nf, rg = nb[ok], nf[ok], rg[ok]
+    if not isinstance(grid, (int, np.integer)) or grid < 10:
+        raise ValueError(f"grid={grid!r}: must be an integer >= 10")
+
+    fig = _new_figure((6.0, 5.0))
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    if nb.size:
+        lx, ly = np.log10(nb), np.log10(nf)
+        x0, x1 = min(lx.min(), 0.0) - 0.5, max(lx.max(), 0.0) + 0.5
+        y0, y1 = min(ly.min(), 0.0) - 0.5, max(ly.max(), 0.0) + 0.5
+    else:
+        lx = ly = np.empty(0)
+        x0, x1, y0, y1 = -2.0, 2.0, -2.0, 2.0
+    if shade and nb.size:
+        from matplotlib.colors import ListedColormap
+
+        gx, gy = np.meshgrid(np.linspace(x0, x1, grid), np.linspace(y0, y1, grid))
+        lab = regime_map(lx, ly, rg, gx, gy, k=k)
+        code = np.vectorize(REGIMES.index)(lab)
+        cmap = ListedColormap([REGIME_STYLE[r]["shade"] for r in REGIMES])
+        ax.pcolormesh(10**gx, 10**gy, code, cmap=cmap, vmin=-0.5, vmax=len(REGIMES) - 0.5,
+                      shading="auto", alpha=0.6, zorder=0, rasterized=True)
+    counts = {}
+    for r in REGIMES:
+        m = rg == r
+        counts[r] = int(m.sum())
+        st = REGIME_STYLE[r]
+        if m.any():
+            ax.scatter(nb[m], nf[m], marker=st["marker"], color=st["color"],
+                       s=60 if st["marker"] == "*" else 30, label=st["label"], zorder=3)
+    ax.axhline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    ax.axvline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    if experimental_range is not None:
+        from matplotlib.patches import Rectangle
+
+        if isinstance(experimental_range, Mapping):
+            try:
+                e = [float(experimental_range[k_]) for k_ in ("nb_min", "nb_max", "nf_min", "nf_max")]
+            except KeyError as exc:
+                raise ValueError(f"experimental_range: missing key {exc}; needs nb_min, nb_max, "
+                                 "nf_min, nf_max") from None
+        else:
+            e = [float(v) for v in experimental_range]
+        if len(e) != 4 or min(e) <= 0 or e[1] <= e[0] or e[3] <= e[2]:
+            raise ValueError(f"experimental_range={experimental_range!r}: needs 0 < nb_min < "
+                             "nb_max and 0 < nf_min < nf_max")
+        ax.add_patch(Rectangle((e[0], e[2]), e[1] - e[0], e[3] - e[2], fill=False, ec="red",
+                               lw=1.5, zorder=4, label="experiments"))
+        x0, x1 = min(x0, math.log10(e[0]) - 0.2), max(x1, math.log10(e[1]) + 0.2)
+        y0, y1 = min(y0, math.log10(e[2]) - 0.2), max(y1, math.log10(e[3]) + 0.2)
+    ax.set_xlim(10**x0, 10**x1)
+    ax.set_ylim(10**y0, 10**y1)
+    ax.set_xlabel("branching number $N_b$")
+    ax.set_ylabel("fracturing number $N_f$")
+    t = title or ""
+    if dp_cri is not None:
+        t = (t + "\n" if t else "") + f"$\\delta p_{{cri}}$ = {dp_cri:.3g} kPa"
+    if t:
+        ax.set_title(t, fontsize=9)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
+              frameon=False)
+    for th in thumbnails or ():
+        if not isinstance(th, Mapping) or "pos" not in th:
+            raise ValueError(f"thumbnails: entry {th!r} must be a mapping with 'pos'")
+        if "row" in th:
+            row = df.loc[th["row"]]
+            run_dir, xy = row["run_dir"], (float(row["N_b"]), float(row["N_f"]))
+        else:
+            run_dir, xy = th["run_dir"], tuple(th["xy"])
+        _thumbnail(fig, ax, run_dir, xy, tuple(th["pos"]), float(th.get("size", 0.18)),
+                   th.get("at", "last"))
+    paths = _save(fig, out_path, formats)
+    return {"paths": paths, "n_dropped": n_drop, "counts": counts}

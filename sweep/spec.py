@@ -1,0 +1,570 @@
+"""Campaign specifications: parse and validate the TOML files of ``campaigns/``.
+
+A campaign spec names a study, its base model parameters (units mm, s, kPa as in
+``solver.params.Parameters``), the axes swept (each over a model parameter or a run
+option), the run options (``solver.options.RunOptions``: h in mm, times in s), the
+classification options passed to ``sweep.classify.classify_run``, the diagrams to draw
+and scheduler defaults. Everything is checked before any run starts: an unknown key, an
+out-of-range value or an empty grid raises :class:`SpecError` (a ``ValueError``) naming
+the key.
+
+Format (all tables optional except ``name``)::
+
+    name = "ca_star_vs_cement"          # [A-Za-z0-9_.-]+, the results folder name
+    description = "..."
+    paper = "Sec. 3.6"
+
+    [base]                              # Parameters fields (kPa, kPa*s, mm, mm^2, ...)
+    eta_w = 1e-6
+
+    [derived]                           # parameters computed from the others, per run
+    psi_c = "0.0015*cement**2"          # + - * / ** sqrt exp log log10 abs min max
+
+    [options]                           # RunOptions fields (h mm, t_end s, ...)
+    h = 4.0
+
+    [axes]                              # swept parameters or run options
+    cement = {linear = [0.5, 3.0, 6]}   # start, stop, count (stop included)
+    eta_o = {log = [1e-4, 1.0, 5]}      # start, stop, count, geometric spacing
+    seed = [1, 2, 3]                    # explicit list ({values = [...]} alike)
+    w_i = {range = [25, 100, 25]}       # start, stop (included), step
+    options.h = [4.0, 2.0]              # explicit namespace when needed
+    mode = "cross"                      # or "zip" (all axes zipped), default cross
+    zip = [["eta_o", "w_i"]]            # groups zipped together, crossed with the rest
+
+    [[blocks]]                          # optional: the grid is the union of blocks,
+    label = "psi_c"                     # each with its own base/options/axes/mode/zip
+    axes = {psi_c = [2.16e-4, 2.16e-3, 2.16e-2]}
+
+    [sampler]
+    kind = "grid"                       # see sweep.sampler.SAMPLERS
+
+    [classify]                          # keyword arguments of classify_run
+
+    [[diagrams]]
+    kind = "ca_star_vs_cement"          # or nf_vs_nb, timeseries, scatter, fields
+
+    [run]                               # scheduler defaults, overridden by the CLI
+    timeout = 3600.0                    # s per run (None: no limit)
+    retries = 0
+    runner = "module:function"          # default: solver.simulate + classify_run
+"""
+from __future__ import annotations
+
+import ast
+import dataclasses
+import itertools
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+__all__ = [
+    "SpecError",
+    "Axis",
+    "Block",
+    "CampaignSpec",
+    "load_spec",
+    "spec_from_dict",
+    "parameter_fields",
+    "option_fields",
+    "evaluate_expression",
+    "round_sig",
+]
+
+SIG_DIGITS = 12  # significant digits kept for generated values and in run keys
+
+
+class SpecError(ValueError):
+    """An invalid campaign spec; the message names the offending key."""
+
+
+# ---------------------------------------------------------------------------
+# model field names (lazy: solver.params / solver.options are imported on use)
+# ---------------------------------------------------------------------------
+def _parameters_class():
+    from solver.params import Parameters
+
+    return Parameters
+
+
+def _options_class():
+    from solver.options import RunOptions
+
+    return RunOptions
+
+
+def parameter_fields() -> tuple[str, ...]:
+    """Names of the fields of ``solver.params.Parameters``."""
+    return tuple(f.name for f in dataclasses.fields(_parameters_class()))
+
+
+def option_fields() -> tuple[str, ...]:
+    """Names of the fields of ``solver.options.RunOptions``."""
+    return tuple(f.name for f in dataclasses.fields(_options_class()))
+
+
+# ---------------------------------------------------------------------------
+# data
+# ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Axis:
+    """One swept quantity: ``target`` is "params" or "options"; ``values`` in the field's units."""
+
+    name: str
+    target: str
+    values: tuple
+
+
+@dataclass(frozen=True)
+class Block:
+    """A grid block: overrides of the campaign's base, its axes and how they combine."""
+
+    label: str
+    params: Mapping[str, Any]
+    options: Mapping[str, Any]
+    axes: tuple[Axis, ...]
+    mode: str = "cross"
+    zip_groups: tuple[tuple[str, ...], ...] = ()
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """A validated campaign. ``params``/``options`` are the campaign-wide bases."""
+
+    name: str
+    description: str = ""
+    paper: str = ""
+    params: Mapping[str, Any] = field(default_factory=dict)
+    options: Mapping[str, Any] = field(default_factory=dict)
+    derived: Mapping[str, str] = field(default_factory=dict)
+    blocks: tuple[Block, ...] = ()
+    sampler: Mapping[str, Any] = field(default_factory=lambda: {"kind": "grid"})
+    classify: Mapping[str, Any] = field(default_factory=dict)
+    diagrams: tuple[Mapping[str, Any], ...] = ()
+    run: Mapping[str, Any] = field(default_factory=dict)
+    source: str = "<dict>"
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        """Swept names in order of first appearance (options prefixed ``options.`` only if ambiguous)."""
+        seen: dict[str, None] = {}
+        for b in self.blocks:
+            for a in b.axes:
+                seen.setdefault(a.name, None)
+        return tuple(seen)
+
+
+# ---------------------------------------------------------------------------
+# small helpers
+# ---------------------------------------------------------------------------
+def round_sig(x, digits: int = SIG_DIGITS):
+    """Round a float to ``digits`` significant digits (ints, bools, strings unchanged)."""
+    if isinstance(x, float) and math.isfinite(x) and x != 0.0:
+        return float(f"{x:.{digits}g}")
+    return x
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _fail(where: str, msg: str):
+    raise SpecError(f"{where}: {msg}")
+
+
+_TOP_KEYS = {
+    "name", "description", "paper", "base", "derived", "options", "axes", "mode", "zip",
+    "blocks", "sampler", "classify", "diagrams", "run",
+}
+_BLOCK_KEYS = {"label", "base", "options", "axes", "mode", "zip"}
+_RUN_KEYS = {"timeout", "retries", "runner", "jobs", "isolate"}
+_MODES = ("cross", "zip")
+
+
+def _axis_values(where: str, spec) -> tuple:
+    """Expand one axis spec (list or {values|linear|log|range}) into a tuple of values."""
+    if isinstance(spec, list):
+        return tuple(round_sig(v) for v in spec)
+    if not isinstance(spec, dict):
+        _fail(where, f"expected a list of values or a table with one of values/linear/log/range, got {spec!r}")
+    if len(spec) != 1:
+        _fail(where, f"expected exactly one of values/linear/log/range, got keys {sorted(spec)}")
+    (kind, arg), = spec.items()
+    if kind == "values":
+        if not isinstance(arg, list):
+            _fail(f"{where}.values", f"expected a list, got {arg!r}")
+        return tuple(round_sig(v) for v in arg)
+    if kind not in ("linear", "log", "range"):
+        _fail(where, f"unknown range kind {kind!r}; allowed: values, linear, log, range")
+    if not (isinstance(arg, list) and len(arg) == 3 and all(_is_number(v) for v in arg)):
+        _fail(f"{where}.{kind}", f"expected 3 numbers [start, stop, {'step' if kind == 'range' else 'count'}], got {arg!r}")
+    a, b, n = arg
+    ints = isinstance(a, int) and isinstance(b, int)
+    if kind in ("linear", "log"):
+        if not isinstance(n, int) or n < 0:
+            _fail(f"{where}.{kind}", f"count={n!r} must be an integer >= 0")
+        if kind == "log" and (a <= 0 or b <= 0):
+            _fail(f"{where}.log", f"start={a!r} and stop={b!r} must be > 0 for a log range")
+        if n == 1:
+            vals = [float(a)]
+        elif kind == "linear":
+            vals = [a + (b - a) * i / (n - 1) for i in range(n)]
+        else:
+            la, lb = math.log10(a), math.log10(b)
+            vals = [10.0 ** (la + (lb - la) * i / (n - 1)) for i in range(n)]
+            ints = False
+    else:
+        if n == 0 or (b - a) * n < 0:
+            _fail(f"{where}.range", f"step={n!r} must be non-zero and point from start={a!r} to stop={b!r}")
+        count = int(math.floor((b - a) / n * (1 + 1e-12) + 1e-9)) + 1
+        vals = [a + i * n for i in range(count)]
+        ints = ints and isinstance(n, int)
+    vals = [round_sig(float(v)) for v in vals]
+    if ints and all(float(v).is_integer() for v in vals):
+        vals = [int(v) for v in vals]
+    return tuple(vals)
+
+
+def _resolve_name(where: str, name: str, pfields, ofields) -> tuple[str, str]:
+    """Return (target, field) for an axis/base name."""
+    if name in pfields and name in ofields:
+        _fail(where, f"{name!r} is both a parameter and a run option: write params.{name} or options.{name}")
+    if name in pfields:
+        return "params", name
+    if name in ofields:
+        return "options", name
+    _fail(where, f"unknown key {name!r}: not a field of Parameters {sorted(pfields)} nor of RunOptions {sorted(ofields)}")
+
+
+def _parse_axes(where: str, axes_tbl, pfields, ofields) -> list[Axis]:
+    if not isinstance(axes_tbl, dict):
+        _fail(where, f"expected a table, got {axes_tbl!r}")
+    out: list[Axis] = []
+    for name, spec in axes_tbl.items():
+        if name in ("params", "options") and isinstance(spec, dict) and not (
+            len(spec) == 1 and next(iter(spec)) in ("values", "linear", "log", "range")
+        ):
+            allowed = pfields if name == "params" else ofields
+            for sub, sspec in spec.items():
+                if sub not in allowed:
+                    _fail(f"{where}.{name}.{sub}", f"unknown key {sub!r}: allowed {sorted(allowed)}")
+                out.append(Axis(sub, name, _axis_values(f"{where}.{name}.{sub}", sspec)))
+            continue
+        target, fname = _resolve_name(f"{where}.{name}", name, pfields, ofields)
+        out.append(Axis(fname, target, _axis_values(f"{where}.{name}", spec)))
+    names = [a.name for a in out]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        _fail(where, f"axis {dup[0]!r} given twice")
+    return out
+
+
+def _parse_block(where: str, tbl: dict, pfields, ofields, label: str) -> Block:
+    unknown = sorted(set(tbl) - _BLOCK_KEYS - ({"name", "description", "paper", "derived", "blocks", "sampler",
+                                                "classify", "diagrams", "run"} if where == "<top>" else set()))
+    if unknown:
+        _fail(f"{where}.{unknown[0]}", f"unknown key {unknown[0]!r}; allowed: {sorted(_BLOCK_KEYS)}")
+    w = "" if where == "<top>" else f"{where}."
+    base = tbl.get("base", {})
+    if not isinstance(base, dict):
+        _fail(f"{w}base", f"expected a table, got {base!r}")
+    params, options = {}, {}
+    for k, v in base.items():
+        if k not in pfields:
+            _fail(f"{w}base.{k}", f"unknown parameter {k!r}; allowed: {sorted(pfields)}")
+        params[k] = v
+    opts = tbl.get("options", {})
+    if not isinstance(opts, dict):
+        _fail(f"{w}options", f"expected a table, got {opts!r}")
+    for k, v in opts.items():
+        if k not in ofields:
+            _fail(f"{w}options.{k}", f"unknown run option {k!r}; allowed: {sorted(ofields)}")
+        options[k] = v
+    axes_tbl = dict(tbl.get("axes", {}))
+    mode = tbl.get("mode", axes_tbl.pop("mode", "cross"))
+    zips = tbl.get("zip", axes_tbl.pop("zip", []))
+    axes = _parse_axes(f"{w}axes", axes_tbl, pfields, ofields)
+    if mode not in _MODES:
+        _fail(f"{w}mode", f"mode={mode!r} not allowed: one of {_MODES}")
+    if not isinstance(zips, list) or not all(isinstance(g, list) and all(isinstance(n, str) for n in g) for g in zips):
+        _fail(f"{w}zip", f"expected a list of lists of axis names, got {zips!r}")
+    names = {a.name: a for a in axes}
+    grouped: set[str] = set()
+    for g in zips:
+        for n in g:
+            bare = n.split(".", 1)[1] if n.startswith(("params.", "options.")) else n
+            if bare not in names:
+                _fail(f"{w}zip", f"{n!r} is not an axis of this block; axes: {sorted(names)}")
+            if bare in grouped:
+                _fail(f"{w}zip", f"axis {n!r} is in two zip groups")
+            grouped.add(bare)
+    zip_groups = tuple(tuple(n.split(".", 1)[1] if n.startswith(("params.", "options.")) else n for n in g) for g in zips)
+    groups = [tuple(a.name for a in axes)] if mode == "zip" else list(zip_groups)
+    for g in groups:
+        lens = {n: len(names[n].values) for n in g}
+        if len(set(lens.values())) > 1:
+            _fail(f"{w}zip", f"zipped axes must have equal lengths, got {lens}")
+    for a in axes:
+        if len(a.values) == 0:
+            _fail(f"{w}axes.{a.name}", "the grid is empty: this axis has no values")
+    for a in axes:
+        if a.target == "params" and a.name in params:
+            _fail(f"{w}axes.{a.name}", f"{a.name!r} is both swept and set in base")
+        if a.target == "options" and a.name in options:
+            _fail(f"{w}axes.{a.name}", f"{a.name!r} is both swept and set in options")
+    return Block(label=str(tbl.get("label", label)), params=params, options=options, axes=tuple(axes),
+                 mode=mode, zip_groups=zip_groups)
+
+
+# ---------------------------------------------------------------------------
+# safe arithmetic for [derived]
+# ---------------------------------------------------------------------------
+_FUNCS = {"sqrt": math.sqrt, "exp": math.exp, "log": math.log, "log10": math.log10, "abs": abs, "min": min, "max": max}
+_BINOPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
+           ast.Div: lambda a, b: a / b, ast.Pow: lambda a, b: a ** b}
+
+
+def _expr_names(expr: str) -> set[str]:
+    tree = ast.parse(expr, mode="eval")
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id not in _FUNCS}
+
+
+def evaluate_expression(expr: str, env: Mapping[str, float]) -> float:
+    """Evaluate an arithmetic expression over ``env`` (numbers only; no attribute access, no calls
+    except sqrt, exp, log, log10, abs, min, max). Raises ValueError naming the unknown name."""
+    def ev(node):
+        if isinstance(node, ast.Expression):
+            return ev(node.body)
+        if isinstance(node, ast.Constant) and _is_number(node.value):
+            return node.value
+        if isinstance(node, ast.Name):
+            if node.id not in env:
+                raise ValueError(f"unknown name {node.id!r} in expression {expr!r}")
+            return env[node.id]
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+            return _BINOPS[type(node.op)](ev(node.left), ev(node.right))
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            v = ev(node.operand)
+            return -v if isinstance(node.op, ast.USub) else v
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCS and not node.keywords:
+            return _FUNCS[node.func.id](*[ev(a) for a in node.args])
+        raise ValueError(f"unsupported syntax {ast.dump(node)[:60]} in expression {expr!r}")
+
+    return float(ev(ast.parse(expr, mode="eval")))
+
+
+# ---------------------------------------------------------------------------
+# parsing
+# ---------------------------------------------------------------------------
+_NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+def spec_from_dict(d: Mapping[str, Any], source: str = "<dict>") -> CampaignSpec:
+    """Build and validate a :class:`CampaignSpec` from a parsed TOML dict.
+
+    Checks: known keys everywhere, axis syntax, zip lengths, non-empty axes, and that every
+    grid point builds a valid ``Parameters``/``RunOptions`` (done by ``sweep.sampler``'s
+    expansion in :func:`validate_points`). Raises :class:`SpecError` naming the key.
+    """
+    try:
+        return _spec_from_dict(d, source)
+    except SpecError as e:
+        if str(e).startswith(source):
+            raise
+        raise SpecError(f"{source}: {e}") from None
+
+
+def _spec_from_dict(d, source) -> CampaignSpec:
+    if not isinstance(d, Mapping):
+        _fail("<top>", f"expected a table, got {d!r}")
+    unknown = sorted(set(d) - _TOP_KEYS)
+    if unknown:
+        _fail(unknown[0], f"unknown key {unknown[0]!r}; allowed: {sorted(_TOP_KEYS)}")
+    name = d.get("name")
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        _fail("name", f"name={name!r} must be a non-empty string of letters, digits, '_', '.', '-'")
+    pfields, ofields = parameter_fields(), option_fields()
+    top = _parse_block("<top>", {k: d[k] for k in ("base", "options", "axes", "mode", "zip") if k in d},
+                       pfields, ofields, label="")
+    blocks_raw = d.get("blocks")
+    if blocks_raw is None:
+        blocks = (top,)
+    else:
+        if not isinstance(blocks_raw, list) or not blocks_raw:
+            _fail("blocks", f"expected a non-empty array of tables, got {blocks_raw!r}")
+        if top.axes:
+            _fail("axes", "top-level axes and [[blocks]] cannot be combined: put the axes in the blocks")
+        blocks = tuple(_parse_block(f"blocks[{i}]", b if isinstance(b, dict) else _fail(f"blocks[{i}]", "expected a table"),
+                                    pfields, ofields, label=str(i)) for i, b in enumerate(blocks_raw))
+        labels = [b.label for b in blocks]
+        if len(set(labels)) != len(labels):
+            _fail("blocks", f"block labels must be distinct, got {labels}")
+    derived = d.get("derived", {})
+    if not isinstance(derived, dict):
+        _fail("derived", f"expected a table, got {derived!r}")
+    for k, expr in derived.items():
+        if k not in pfields:
+            _fail(f"derived.{k}", f"unknown parameter {k!r}; allowed: {sorted(pfields)}")
+        if not isinstance(expr, str):
+            _fail(f"derived.{k}", f"expected an expression string, got {expr!r}")
+        try:
+            names = _expr_names(expr)
+        except SyntaxError as e:
+            _fail(f"derived.{k}", f"invalid expression {expr!r}: {e.msg}")
+        bad = sorted(names - set(pfields))
+        if bad:
+            _fail(f"derived.{k}", f"unknown name {bad[0]!r} in {expr!r}; names must be parameters")
+        if names & set(derived):
+            _fail(f"derived.{k}", f"{expr!r} uses another derived parameter {sorted(names & set(derived))}")
+        if k in top.params or any(k == a.name for b in blocks for a in b.axes) or any(k in b.params for b in blocks):
+            _fail(f"derived.{k}", f"{k!r} is derived and also set or swept")
+    sampler = d.get("sampler", {"kind": "grid"})
+    if not isinstance(sampler, dict):
+        _fail("sampler", f"expected a table, got {sampler!r}")
+    sampler = {"kind": "grid", **sampler}
+    from sweep.sampler import SAMPLERS
+
+    if sampler["kind"] not in SAMPLERS:
+        _fail("sampler.kind", f"kind={sampler['kind']!r} not allowed: one of {sorted(SAMPLERS)}")
+    SAMPLERS[sampler["kind"]].check_settings({k: v for k, v in sampler.items() if k != "kind"})
+    classify = d.get("classify", {})
+    if not isinstance(classify, dict):
+        _fail("classify", f"expected a table, got {classify!r}")
+    _check_classify(classify)
+    diagrams = d.get("diagrams", [])
+    if not isinstance(diagrams, list) or not all(isinstance(g, dict) for g in diagrams):
+        _fail("diagrams", f"expected an array of tables, got {diagrams!r}")
+    for i, g in enumerate(diagrams):
+        _check_diagram(f"diagrams[{i}]", g, pfields, ofields)
+    run = d.get("run", {})
+    if not isinstance(run, dict):
+        _fail("run", f"expected a table, got {run!r}")
+    _check_run(run)
+    spec = CampaignSpec(
+        name=name, description=str(d.get("description", "")), paper=str(d.get("paper", "")),
+        params=dict(top.params), options=dict(top.options), derived=dict(derived), blocks=blocks,
+        sampler=sampler, classify=dict(classify), diagrams=tuple(diagrams), run=dict(run), source=source,
+    )
+    from sweep.sampler import validate_points
+
+    validate_points(spec)
+    return spec
+
+
+def _check_classify(classify: dict) -> None:
+    """Unknown classify options are errors (checked against classify_run's signature once it exists)."""
+    try:
+        import inspect
+
+        from sweep.classify import classify_run
+    except ImportError:
+        return
+    sig = inspect.signature(classify_run)
+    allowed = [n for n, p in sig.parameters.items() if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)][1:]
+    thresholds = {k: v for k, v in classify.items() if k not in allowed}
+    if any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values()):
+        try:
+            from sweep.classify import ClassifierOptions
+        except ImportError:
+            return
+        names = [f.name for f in dataclasses.fields(ClassifierOptions)]
+        allowed = allowed + names
+        for k in thresholds:
+            if k not in names:
+                _fail(f"classify.{k}", f"unknown classification option {k!r}; allowed: {allowed}")
+        try:
+            ClassifierOptions(**thresholds)
+        except (TypeError, ValueError) as e:
+            _fail("classify", str(e))
+        return
+    for k in classify:
+        if k not in allowed:
+            _fail(f"classify.{k}", f"unknown classification option {k!r}; allowed: {allowed}")
+
+
+DIAGRAM_KINDS = ("ca_star_vs_cement", "nf_vs_nb", "timeseries", "scatter", "fields")
+_DIAGRAM_KEYS = {"kind", "title", "file", "x", "y", "by", "color", "logx", "logy", "field", "time", "rows", "cols",
+                 "dp_cri", "experimental_range", "shade", "fit", "formats"}
+
+
+def _check_diagram(where, g, pfields, ofields) -> None:
+    kind = g.get("kind")
+    if kind not in DIAGRAM_KINDS:
+        _fail(f"{where}.kind", f"kind={kind!r} not allowed: one of {DIAGRAM_KINDS}")
+    unknown = sorted(set(g) - _DIAGRAM_KEYS)
+    if unknown:
+        _fail(f"{where}.{unknown[0]}", f"unknown key {unknown[0]!r}; allowed: {sorted(_DIAGRAM_KEYS)}")
+    if kind in ("timeseries", "scatter") and ("x" not in g or "y" not in g):
+        _fail(where, f"a {kind} diagram needs x and y")
+    dp = g.get("dp_cri")
+    if dp is not None and dp != "estimate" and not (_is_number(dp) and dp > 0):
+        _fail(f"{where}.dp_cri", f"dp_cri={dp!r} must be a pressure > 0 (kPa) or \"estimate\"")
+    if kind == "fields" and "field" not in g:
+        _fail(f"{where}.field", "a fields diagram needs the field to draw (e.g. 'phi', 'd', 'S')")
+
+
+def _check_run(run: dict) -> None:
+    unknown = sorted(set(run) - _RUN_KEYS)
+    if unknown:
+        _fail(f"run.{unknown[0]}", f"unknown key {unknown[0]!r}; allowed: {sorted(_RUN_KEYS)}")
+    t = run.get("timeout")
+    if t is not None and (not _is_number(t) or t <= 0):
+        _fail("run.timeout", f"timeout={t!r} must be a number of seconds > 0")
+    r = run.get("retries", 0)
+    if not isinstance(r, int) or isinstance(r, bool) or r < 0:
+        _fail("run.retries", f"retries={r!r} must be an integer >= 0")
+    j = run.get("jobs", 1)
+    if not isinstance(j, int) or isinstance(j, bool) or j == 0 or j < -1:
+        _fail("run.jobs", f"jobs={j!r} must be an integer >= 1 or -1 (all cores)")
+    iso = run.get("isolate", "auto")
+    if iso not in ("auto", "process", "none"):
+        _fail("run.isolate", f"isolate={iso!r} must be one of auto, process, none")
+    rn = run.get("runner")
+    if rn is not None and (not isinstance(rn, str) or ":" not in rn):
+        _fail("run.runner", f"runner={rn!r} must be 'module:function'")
+
+
+def load_spec(path) -> CampaignSpec:
+    """Read and validate a campaign TOML file (see the module docstring for the format)."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+    p = Path(path)
+    if not p.is_file():
+        raise SpecError(f"campaign spec {str(p)!r} not found")
+    try:
+        d = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise SpecError(f"{p}: invalid TOML: {e}") from None
+    return spec_from_dict(d, source=str(p))
+
+
+def block_groups(block: Block) -> list[tuple[Axis, ...]]:
+    """The axes of a block grouped for expansion: each group is zipped, groups are crossed."""
+    by = {a.name: a for a in block.axes}
+    if block.mode == "zip":
+        return [tuple(block.axes)] if block.axes else []
+    groups, used = [], set()
+    for a in block.axes:
+        if a.name in used:
+            continue
+        g = next((g for g in block.zip_groups if a.name in g), (a.name,))
+        groups.append(tuple(by[n] for n in g))
+        used.update(g)
+    return groups
+
+
+def expand_block(block: Block) -> list[dict[tuple[str, str], Any]]:
+    """All combinations of a block's axes, as dicts {(target, name): value}, first axis slowest."""
+    groups = block_groups(block)
+    per_group = [[{(a.target, a.name): a.values[i] for a in g} for i in range(len(g[0].values))] for g in groups]
+    out = []
+    for combo in itertools.product(*per_group):
+        pt: dict = {}
+        for c in combo:
+            pt.update(c)
+        out.append(pt)
+    return out

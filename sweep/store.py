@@ -1,0 +1,235 @@
+"""Results store of a campaign: one folder per run, written atomically, and the campaign table.
+
+Layout under a configurable root (default ``results/``)::
+
+    <root>/<campaign>/spec.toml            copy of the spec last run
+    <root>/<campaign>/runs/<key>/          one run: record.json + the solver's run folder
+    <root>/<campaign>/table.csv            one row per run (table.parquet too with pyarrow)
+    <root>/<campaign>/figures/*.png        diagrams
+    <root>/<campaign>/report.md            Markdown summary
+
+``key`` = first 16 hex digits of the SHA-256 of the canonical JSON of the resolved
+parameters, run options and solver version (floats at 12 significant digits, so 0.1 and
+0.1000000000001 give one key). A run is executed in ``runs/.tmp-<key>-<uuid>/`` and renamed
+to ``runs/<key>/`` once its ``record.json`` (status "ok" | "failed", reason, metrics, ...)
+is written: a folder named by its key is always complete.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import shutil
+import uuid
+from pathlib import Path
+from typing import Any, Mapping
+
+from sweep.sampler import canonical_json
+
+__all__ = ["run_key", "solver_version", "ResultsStore", "write_json_atomic", "write_text_atomic", "to_json"]
+
+_KEY_RE = re.compile(r"^[0-9a-f]{16}$")
+
+
+def solver_version() -> str:
+    """Version string of the solver that goes into run keys: ``solver.__version__`` if defined,
+    else the installed ``dchfrac`` distribution's version, else "unknown"."""
+    try:
+        import solver
+
+        v = getattr(solver, "__version__", None)
+        if v:
+            return str(v)
+    except Exception:  # noqa: BLE001 - a broken solver import must not break the store
+        pass
+    try:
+        from importlib.metadata import version
+
+        return version("dchfrac")
+    except Exception:  # noqa: BLE001
+        return "unknown"
+
+
+def run_key(params: Mapping[str, Any], options: Mapping[str, Any], version: str) -> str:
+    """Hash of canonical (params, options, solver version): 16 hex digits."""
+    text = canonical_json({"params": dict(params), "options": dict(options), "solver_version": str(version)})
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _default(o):
+    if hasattr(o, "item"):
+        try:
+            return o.item()
+        except (TypeError, ValueError):
+            pass
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    if isinstance(o, (set, tuple)):
+        return list(o)
+    if isinstance(o, Path):
+        return str(o)
+    return repr(o)
+
+
+def to_json(obj) -> str:
+    """JSON text (numpy scalars/arrays converted; NaN kept as NaN)."""
+    return json.dumps(obj, indent=1, sort_keys=True, default=_default)
+
+
+def write_text_atomic(path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file in the same folder, then rename."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def write_json_atomic(path, obj) -> None:
+    write_text_atomic(path, to_json(obj) + "\n")
+
+
+class ResultsStore:
+    """Folder of one campaign's results (``root/name``)."""
+
+    def __init__(self, root, name: str):
+        self.root = Path(root)
+        self.name = name
+        self.dir = self.root / name
+        self.runs_dir = self.dir / "runs"
+
+    # -- runs -----------------------------------------------------------------
+    def run_dir(self, key: str) -> Path:
+        return self.runs_dir / key
+
+    def new_tmp_dir(self, key: str) -> Path:
+        """A fresh private folder for executing run ``key``."""
+        self.runs_dir.mkdir(parents=True, exist_ok=True)
+        d = self.runs_dir / f".tmp-{key}-{uuid.uuid4().hex[:8]}"
+        d.mkdir()
+        return d
+
+    def finalize(self, tmp_dir: Path, key: str) -> Path:
+        """Move a finished run's folder (record.json written) to ``runs/<key>`` (replacing an old one)."""
+        final = self.run_dir(key)
+        trash = None
+        if final.exists():
+            trash = self.runs_dir / f".trash-{key}-{uuid.uuid4().hex[:8]}"
+            os.rename(final, trash)
+        os.rename(tmp_dir, final)
+        if trash is not None:
+            shutil.rmtree(trash, ignore_errors=True)
+        return final
+
+    def read_record(self, key: str) -> dict | None:
+        p = self.run_dir(key) / "record.json"
+        try:
+            return json.loads(p.read_text())
+        except (FileNotFoundError, NotADirectoryError, json.JSONDecodeError):
+            return None
+
+    def records(self) -> dict[str, dict]:
+        """All complete run records {key: record}."""
+        out = {}
+        if not self.runs_dir.is_dir():
+            return out
+        for d in sorted(self.runs_dir.iterdir()):
+            if _KEY_RE.match(d.name):
+                r = self.read_record(d.name)
+                if r is not None:
+                    out[d.name] = r
+        return out
+
+    def clean_tmp(self) -> int:
+        """Remove folders of runs that were in flight when a previous campaign process died."""
+        n = 0
+        if self.runs_dir.is_dir():
+            for d in self.runs_dir.iterdir():
+                if d.name.startswith((".tmp-", ".trash-")):
+                    shutil.rmtree(d, ignore_errors=True)
+                    n += 1
+        return n
+
+    # -- campaign files -------------------------------------------------------
+    @property
+    def table_csv(self) -> Path:
+        return self.dir / "table.csv"
+
+    @property
+    def table_parquet(self) -> Path:
+        return self.dir / "table.parquet"
+
+    @property
+    def figures_dir(self) -> Path:
+        return self.dir / "figures"
+
+    @property
+    def report_md(self) -> Path:
+        return self.dir / "report.md"
+
+    def write_table(self, df) -> list[Path]:
+        """Write the campaign table as CSV (atomically), and Parquet when pyarrow is installed."""
+        self.dir.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(self.table_csv, df.to_csv(index=False))
+        out = [self.table_csv]
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            return out
+        tmp = self.table_parquet.with_name(f".table.{uuid.uuid4().hex[:8]}.parquet")
+        try:
+            df.to_parquet(tmp, index=False)
+        except Exception:  # noqa: BLE001 - mixed-type object columns: store them as text
+            obj = df.select_dtypes(include="object").columns
+            df = df.astype({c: "string" for c in obj})
+            df.to_parquet(tmp, index=False)
+        os.replace(tmp, self.table_parquet)
+        out.append(self.table_parquet)
+        return out
+
+    def read_table(self):
+        import pandas as pd
+
+        return pd.read_csv(self.table_csv)
+
+    # -- single-writer lock ----------------------------------------------------
+    def acquire_lock(self) -> None:
+        """Refuse to run two campaign processes on one campaign folder (stale locks are taken over)."""
+        self.dir.mkdir(parents=True, exist_ok=True)
+        lock = self.dir / ".lock"
+        for _ in range(2):
+            try:
+                fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                try:
+                    pid = int(lock.read_text().strip() or "0")
+                except (ValueError, FileNotFoundError):
+                    pid = 0
+                if pid and pid != os.getpid() and _pid_alive(pid):
+                    raise RuntimeError(
+                        f"campaign folder {self.dir} is in use by process {pid} (remove {lock} if that is wrong)"
+                    ) from None
+                lock.unlink(missing_ok=True)
+                continue
+            with os.fdopen(fd, "w") as f:
+                f.write(str(os.getpid()))
+            return
+        raise RuntimeError(f"could not lock {lock}")
+
+    def release_lock(self) -> None:
+        lock = self.dir / ".lock"
+        try:
+            if int(lock.read_text().strip() or "0") == os.getpid():
+                lock.unlink()
+        except (FileNotFoundError, ValueError):
+            pass
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

@@ -1,0 +1,371 @@
+"""Campaign execution: isolation, timeout, retries, fail-fast, resume after Ctrl-C, dask = loky, CLI.
+
+The runners below are real run functions (module level, so that worker and child processes
+can import them): they compute known answers from their parameters and write files in
+their run folder, or fail, hang, or count their attempts.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from sweep.campaign import build_table, plan_campaign, run_campaign, write_report
+from sweep.campaign_cli import main as cli_main
+from sweep.spec import spec_from_dict
+
+VERSION = "test-1"
+HERE = Path(__file__).resolve().parent
+VOLATILE = ["wall_time_s", "host", "finished_at", "run_dir"]
+
+
+# ---------------------------------------------------------------------------
+# runners
+# ---------------------------------------------------------------------------
+def toy_runner(params, options, run_dir):
+    """Ca*-like product eta_o * w_i (kPa*mm/s... any consistent unit) and a threshold in C."""
+    x = params["eta_o"] * params["w_i"]
+    Path(run_dir, "out.json").write_text(json.dumps({"x": x}))
+    regime = "fracturing" if x > 2.0 * params["cement"] else "porous_invasion"
+    return {"status": "ok", "regime": regime, "metrics": {"x": x, "h_used": options["h"]}}
+
+
+def failing_runner(params, options, run_dir):
+    """Raises for cement == 2.0, reports a non-converged run for cement == 3.0."""
+    if params["cement"] == 2.0:
+        raise RuntimeError(f"boom at cement={params['cement']}")
+    if params["cement"] == 3.0:
+        return {"status": "failed", "reason": "Newton did not converge at t=0.3 s"}
+    return toy_runner(params, options, run_dir)
+
+
+def hanging_runner(params, options, run_dir):
+    """Hangs (60 s) for cement == 3.0 and eta_o == 0.5 after writing its pid."""
+    Path(run_dir, "pid").write_text(str(os.getpid()))
+    if params["cement"] == 3.0 and params["eta_o"] == 0.5:
+        time.sleep(60)
+    return toy_runner(params, options, run_dir)
+
+
+def slow_runner(params, options, run_dir):
+    time.sleep(0.3)
+    return toy_runner(params, options, run_dir)
+
+
+def flaky_runner(params, options, run_dir):
+    """Fails on the first attempt of each point, succeeds on the second (counter in $FLAKY_DIR)."""
+    counter = Path(os.environ["FLAKY_DIR"]) / f"c{params['cement']}"
+    n = int(counter.read_text()) + 1 if counter.exists() else 1
+    counter.write_text(str(n))
+    if n == 1:
+        raise OSError("transient")
+    return toy_runner(params, options, run_dir)
+
+
+def _spec(**extra):
+    d = {"name": "toy", "base": {"w_i": 10.0}, "options": {"h": 4.0},
+         "axes": {"cement": [1.0, 2.0, 3.0], "eta_o": [0.1, 0.5]}}
+    d.update(extra)
+    return spec_from_dict(d)
+
+
+def _stable(df):
+    return df.drop(columns=[c for c in VOLATILE if c in df.columns]).reset_index(drop=True)
+
+
+# ---------------------------------------------------------------------------
+# results and table
+# ---------------------------------------------------------------------------
+def test_table_rows_known_answers_and_store_layout(tmp_path):
+    res = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=2, version=VERSION, progress=None)
+    assert (res.n_points, res.n_executed, res.n_ok, res.n_failed) == (6, 6, 6, 0)
+    t = pd.read_csv(tmp_path / "toy" / "table.csv")
+    assert list(t["index"]) == list(range(6))
+    assert list(zip(t["cement"], t["eta_o"])) == [(1.0, 0.1), (1.0, 0.5), (2.0, 0.1), (2.0, 0.5), (3.0, 0.1), (3.0, 0.5)]
+    assert list(t["x"]) == pytest.approx(list(t["eta_o"] * 10.0), rel=1e-15)
+    # x = 10 eta_o (1 or 5) against 2 C (2, 4, 6): fracturing only for (C=1, 0.5) and (C=2, 0.5)
+    assert list(t["regime"]) == ["porous_invasion", "fracturing", "porous_invasion", "fracturing",
+                                 "porous_invasion", "porous_invasion"]
+    assert set(t["status"]) == {"ok"} and list(t["h_used"]) == [4.0] * 6
+    # dimensionless numbers of sweep.numbers: Ca = eta_o w_i / gamma (gamma = 0.03 kPa*mm by default)
+    assert list(t["Ca"]) == pytest.approx(list(t["eta_o"] * 10.0 / 0.03), rel=1e-12)
+    for key in t["key"]:
+        d = tmp_path / "toy" / "runs" / key
+        rec = json.loads((d / "record.json").read_text())
+        assert rec["status"] == "ok" and rec["solver_version"] == VERSION
+        assert json.loads((d / "out.json").read_text())["x"] == pytest.approx(rec["params"]["eta_o"] * 10.0)
+    assert not [p for p in (tmp_path / "toy" / "runs").iterdir() if p.name.startswith(".")]
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        assert res.table_paths == [tmp_path / "toy" / "table.csv"]
+    else:
+        pq = pd.read_parquet(tmp_path / "toy" / "table.parquet")
+        pd.testing.assert_frame_equal(_stable(pq), _stable(res.table), check_dtype=False)
+
+
+def test_failures_are_isolated_and_their_reasons_tabled(tmp_path):
+    res = run_campaign(_spec(), tmp_path, runner=failing_runner, jobs=2, version=VERSION, progress=None)
+    assert (res.n_ok, res.n_failed, res.aborted) == (2, 4, False)
+    t = res.table.set_index("cement")
+    assert set(t.loc[1.0, "status"]) == {"ok"}
+    assert all(r.startswith("RuntimeError: boom at cement=2.0") for r in t.loc[2.0, "reason"])
+    assert set(t.loc[3.0, "reason"]) == {"Newton did not converge at t=0.3 s"}
+    # rerun: failures are recorded, so nothing executes ...
+    again = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=1, version=VERSION, progress=None)
+    assert again.n_executed == 0
+    # ... unless asked to retry them, which reruns exactly the 4 failures
+    retried = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=1, version=VERSION, progress=None,
+                           retry_failed=True)
+    assert (retried.n_executed, retried.n_ok) == (4, 4)
+    assert set(retried.table["status"]) == {"ok"}
+
+
+def test_fail_fast_stops_at_the_first_failure(tmp_path):
+    res = run_campaign(_spec(), tmp_path, runner=failing_runner, jobs=1, version=VERSION, progress=None,
+                       fail_fast=True)
+    # grid order: (1, .1) ok, (1, .5) ok, (2, .1) raises -> stop
+    assert res.aborted and (res.n_executed, res.n_ok, res.n_failed) == (3, 2, 1)
+    plan = plan_campaign(_spec(), tmp_path, version=VERSION)
+    assert (len(plan.done), len(plan.failed), len(plan.pending)) == (2, 1, 3)
+
+
+def test_retries_rerun_a_failed_attempt(tmp_path, monkeypatch):
+    monkeypatch.setenv("FLAKY_DIR", str(tmp_path))
+    spec = _spec(axes={"cement": [1.0, 2.0]})
+    res = run_campaign(spec, tmp_path, runner=flaky_runner, jobs=1, retries=1, version=VERSION, progress=None)
+    assert (res.n_ok, res.n_failed) == (2, 0)
+    assert list(res.table["attempts"]) == [2, 2]
+    assert sorted(int(p.read_text()) for p in tmp_path.glob("c*")) == [2, 2]
+
+
+def test_timeout_kills_the_hung_run_only(tmp_path):
+    t0 = time.perf_counter()
+    # the limit leaves room for the child's start (python + this test module's imports: ~1-2 s on a
+    # loaded 2-core machine) and is far below the 60 s a hung run would take
+    res = run_campaign(_spec(), tmp_path, runner=hanging_runner, jobs=2, timeout=6.0, version=VERSION, progress=None)
+    elapsed = time.perf_counter() - t0
+    t = res.table
+    assert list(t.loc[t["status"] == "failed", "index"]) == [5], list(t["reason"])
+    assert (res.n_ok, res.n_failed) == (5, 1)
+    hung = t[t["status"] == "failed"]
+    assert all(r.startswith("timeout: the run exceeded 6 s") for r in hung["reason"])
+    assert all(6.0 <= w < 12.0 for w in hung["wall_time_s"])
+    assert elapsed < 40.0
+    for key in hung["key"]:
+        pid = int((tmp_path / "toy" / "runs" / key / "pid").read_text())
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+
+
+_INTERRUPTED = textwrap.dedent("""
+    import sys
+    sys.path[:0] = [{here!r}, {repo!r}]
+    from test_campaign_run import _spec, slow_runner, VERSION
+    from sweep.campaign import run_campaign
+    spec = _spec(axes={{"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]}})
+    run_campaign(spec, {root!r}, runner=slow_runner, jobs=2, version=VERSION, progress=None)
+""")
+
+
+def test_resume_after_ctrl_c_runs_only_the_rest_and_gives_the_same_table(tmp_path):
+    root = tmp_path / "interrupted"
+    spec = _spec(axes={"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]})
+    proc = subprocess.Popen([sys.executable, "-c", _INTERRUPTED.format(here=str(HERE), repo=str(HERE.parent), root=str(root))],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    runs = root / "toy" / "runs"
+    deadline = time.time() + 60
+    while time.time() < deadline:
+        if runs.is_dir() and len([p for p in runs.iterdir() if not p.name.startswith(".")]) >= 3:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode != 0 and b"KeyboardInterrupt" in err
+    before = {k: r for k, r in plan_campaign(spec, root, version=VERSION).records.items()}
+    k = len(before)
+    assert 3 <= k < 12
+    assert (root / "toy" / "table.csv").exists()  # written on the way out
+    assert len(pd.read_csv(root / "toy" / "table.csv")) == k
+    assert not [p for p in runs.iterdir() if p.name.startswith(".")]  # no half-written run left
+
+    res = run_campaign(spec, root, runner=toy_runner, jobs=2, version=VERSION, progress=None)
+    assert (res.n_executed, res.n_skipped) == (12 - k, k)
+    after = plan_campaign(spec, root, version=VERSION).records
+    assert all(after[key] == rec for key, rec in before.items())  # finished runs untouched
+
+    full = run_campaign(spec, tmp_path / "uninterrupted", runner=toy_runner, jobs=1, version=VERSION, progress=None)
+    assert full.n_executed == 12
+    pd.testing.assert_frame_equal(_stable(res.table), _stable(full.table))
+    pd.testing.assert_frame_equal(_stable(pd.read_csv(root / "toy" / "table.csv")),
+                                  _stable(pd.read_csv(tmp_path / "uninterrupted" / "toy" / "table.csv")))
+
+
+def test_dask_local_cluster_gives_the_loky_table(tmp_path):
+    pytest.importorskip("dask.distributed")
+    loky = run_campaign(_spec(), tmp_path / "loky", runner=failing_runner, jobs=2, version=VERSION, progress=None)
+    dask = run_campaign(_spec(), tmp_path / "dask", runner=failing_runner, jobs=2, backend="dask",
+                        version=VERSION, progress=None)
+    assert (dask.n_ok, dask.n_failed) == (2, 4)
+    pd.testing.assert_frame_equal(_stable(dask.table), _stable(loky.table))
+
+
+def test_bad_backend_and_arguments_are_rejected_before_running(tmp_path):
+    with pytest.raises(ValueError, match="backend='spark'"):
+        run_campaign(_spec(), tmp_path, runner=toy_runner, backend="spark", version=VERSION, progress=None)
+    with pytest.raises(ValueError, match="jobs=0"):
+        run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=0, version=VERSION, progress=None)
+    with pytest.raises(ValueError, match="timeout"):
+        run_campaign(_spec(), tmp_path, runner=toy_runner, timeout=-1.0, version=VERSION, progress=None)
+
+
+# ---------------------------------------------------------------------------
+# CLI
+# ---------------------------------------------------------------------------
+_CLI_SPEC = """
+name = "clitoy"
+[base]
+w_i = 10.0
+[options]
+h = 2.0
+t_end = 1.5
+[axes]
+cement = [1.0, 2.0, 3.0]
+eta_o = [0.1, 0.5]
+[[diagrams]]
+kind = "scatter"
+x = "eta_o"
+y = "cement"
+file = "regimes.png"
+[run]
+runner = "test_campaign_run:failing_runner"
+"""
+
+
+def test_cli_dry_run_run_status_plot_report(tmp_path, capsys):
+    spec = tmp_path / "clitoy.toml"
+    spec.write_text(_CLI_SPEC)
+    root = tmp_path / "res"
+    (root / "bench").mkdir(parents=True)
+    (root / "bench" / "bench.json").write_text(json.dumps({"coupled_run_h2_wall_s_per_sim_s": 10.0}))
+    assert cli_main(["run", str(spec), "--results", str(root), "--dry-run", "--jobs", "2"]) == 0
+    out = capsys.readouterr().out
+    # 6 runs x 1.5 simulated s x 10 wall s per simulated s = 90 s CPU, 45 s wall on 2 jobs
+    assert "6 runs in the grid" in out and "1m30s CPU" in out and "0m45s wall on 2 job(s)" in out
+
+    assert cli_main(["run", str(spec), "--results", str(root), "--jobs", "2", "--quiet"]) == 1  # failures
+    out = capsys.readouterr().out
+    assert "6 executed now (2 ok, 4 failed)" in out
+
+    assert cli_main(["status", str(spec), "--results", str(root)]) == 0
+    out = capsys.readouterr().out
+    assert "2 done, 4 failed, 0 pending" in out
+    assert out.count("RuntimeError: boom at cement=2.0") == 2 and out.count("Newton did not converge") == 2
+
+    assert cli_main(["plot", str(spec), "--results", str(root)]) == 0
+    assert (root / "clitoy" / "figures" / "regimes.png").stat().st_size > 1000
+    assert cli_main(["report", str(spec), "--results", str(root)]) == 0
+    rep = (root / "clitoy" / "report.md").read_text()
+    assert "- done: 2" in rep and "- failed: 4" in rep and "![regimes](figures/regimes.png)" in rep
+    assert "Newton did not converge at t=0.3 s" in rep
+
+
+def test_cli_rejects_a_bad_spec_naming_the_key(tmp_path, capsys):
+    spec = tmp_path / "bad.toml"
+    spec.write_text('name = "bad"\n[axes]\ncement = {linear = [0.5, 3.0]}\n')
+    assert cli_main(["run", str(spec), "--results", str(tmp_path)]) == 2
+    assert "axes.cement.linear" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()  # nothing ran, nothing written
+
+
+def test_report_of_an_unrun_campaign_lists_pending(tmp_path):
+    p = write_report(_spec(), tmp_path, version=VERSION)
+    text = p.read_text()
+    assert "- pending: 6" in text and "- done: 0" in text
+
+
+def test_add_campaign_commands_parses_every_option():
+    import argparse
+
+    from sweep.campaign_cli import add_campaign_commands, cmd_run, cmd_status
+
+    parser = argparse.ArgumentParser(prog="dchfrac")
+    add_campaign_commands(parser.add_subparsers(dest="command"))
+    a = parser.parse_args(["campaign", "run", "c.toml", "--jobs", "3", "--backend", "dask", "--scheduler", "tcp://h:8786",
+                           "--dry-run", "--retry-failed", "--fail-fast", "--timeout", "5", "--results", "out"])
+    assert (a.spec, a.jobs, a.backend, a.scheduler, a.timeout, a.results) == ("c.toml", 3, "dask", "tcp://h:8786", 5.0, "out")
+    assert a.dry_run and a.retry_failed and a.fail_fast and a.func is cmd_run
+    b = parser.parse_args(["campaign", "status", "c.toml"])
+    assert b.func is cmd_status and b.results == "results"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["campaign", "run", "c.toml", "--backend", "spark"])
+
+
+def test_ray_backend_without_ray_says_which_extra(tmp_path):
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        with pytest.raises(ValueError, match=r"dchfrac\[ray\]"):
+            run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", version=VERSION, progress=None)
+    else:
+        res = run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", jobs=2, version=VERSION, progress=None)
+        assert (res.n_ok, res.n_failed) == (6, 0)
+
+
+def contract_runner(params, options, run_dir):
+    """Writes a run folder in the solver's format (annulus r_i..r_o mesh, snapshots, time series):
+    invading fluid S = 1 inside R = 20 + 20 eta_o mm, no crack (phi = 0.4 everywhere)."""
+    import numpy as np
+
+    ri, ro = params["r_inner"], params["r_outer"]
+    r = np.linspace(ri, ro, 33)
+    th = np.linspace(0.0, 2 * np.pi, 129)[:-1]
+    R, T = np.meshgrid(r, th, indexing="ij")
+    pts = np.column_stack([(R * np.cos(T)).ravel(), (R * np.sin(T)).ravel()])
+    nr, nt = len(r), len(th)
+    i, j = np.meshgrid(np.arange(nr - 1), np.arange(nt), indexing="ij")
+    a, b = (i * nt + j).ravel(), (i * nt + (j + 1) % nt).ravel()
+    c, d = a + nt, b + nt
+    tri = np.vstack([np.column_stack([a, b, d]), np.column_stack([a, d, c])])
+    snaps = Path(run_dir, "snapshots")
+    snaps.mkdir()
+    np.savez(snaps / "mesh.npz", points=pts, triangles=tri)
+    rad = np.hypot(pts[:, 0], pts[:, 1])
+    front = 20.0 + 20.0 * params["eta_o"]
+    for k, t in enumerate((0.5, 1.0)):
+        S = np.clip((front * t - rad) / 2.0 + 0.5, 0.0, 1.0)
+        z = np.zeros(len(pts))
+        np.savez(snaps / f"snap_{k:05d}.npz", t=t, S=S, mu=z, p=z, d=z, u=np.zeros((len(pts), 2)),
+                 phi=np.full(len(tri), 0.4), eps_v=np.zeros(len(tri)), hoop_stress=np.zeros(len(tri)),
+                 k=np.zeros(len(tri)), w1_mag=np.zeros(len(tri)))
+    ts = pd.DataFrame({"t": [0.0, 0.5, 1.0], "p_inj": [0.0, 100.0 * params["eta_o"], 200.0 * params["eta_o"]]})
+    ts.to_csv(Path(run_dir, "timeseries.csv"), index=False)
+    return {"status": "ok"}
+
+
+def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
+    pytest.importorskip("sweep.classify")
+    from sweep.campaign import plot_campaign, reclassify
+
+    spec = spec_from_dict({"name": "fmt", "axes": {"eta_o": [0.25, 1.0]},
+                           "diagrams": [{"kind": "timeseries", "x": "t", "y": "p_inj", "by": "eta_o"},
+                                        {"kind": "fields", "field": "phi", "rows": "blocks", "cols": "eta_o"}]})
+    run_campaign(spec, tmp_path, runner=contract_runner, jobs=1, version=VERSION, progress=None)
+    assert reclassify(spec, tmp_path, version=VERSION) == 2
+    t = build_table(spec, tmp_path, version=VERSION).set_index("eta_o")
+    assert list(t["regime"]) == ["uniform_invasion", "uniform_invasion"]
+    assert not t["fracturing"].any() and list(t["n_cracks"]) == [0, 0]
+    # S = 0.5 at R = 20 + 20 eta_o mm at t = 1 s (25 and 40 mm); radial mesh spacing 1.5 mm
+    assert list(t["front_radius_mean"]) == pytest.approx([25.0, 40.0], abs=1.5)
+    assert list(t["t_classified"]) == [1.0, 1.0]
+    figs = plot_campaign(spec, tmp_path, version=VERSION)
+    assert [f.name for f in figs] == ["timeseries.png", "fields.png"]
+    assert all(f.stat().st_size > 5000 for f in figs)
