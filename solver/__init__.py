@@ -7,8 +7,10 @@ Public API::
 
 Units everywhere: mm, s, kPa (viscosity kPa·s, permeability mm², toughness kPa·mm).
 """
+__version__ = "0.1.0"
+
 from .options import RunOptions
 from .params import Parameters
 from .simulate import SimulationResult, simulate
 
-__all__ = ["Parameters", "RunOptions", "simulate", "SimulationResult"]
+__all__ = ["__version__", "Parameters", "RunOptions", "simulate", "SimulationResult"]

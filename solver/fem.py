@@ -286,25 +286,56 @@ def basis(geom: Geometry, quad: Quadrature) -> np.ndarray:
     return B
 
 
-def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = True):
-    """Element residuals and Jacobians of the weak form Σ_q w |e| F_ik(q) B_ak(q).
+def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = True, n_fields: int | None = None):
+    """Element residuals and Jacobians of the weak form Σ_q w |e| Σ_k F_ik(q) B_ak(q).
 
-    ``F`` is a Dual of value shape (M, nq, neq, 3): for equation i, component
-    0 multiplies the test function value and components 1–2 its gradient
-    (the f0 / f1 split of a weak form).  Its derivative slots are the inputs of
-    :func:`qp_inputs` flattened as ``3 * field + k``.  Returns ``Fe`` (M, 3, neq)
-    and ``Ke`` (M, 3, neq, 3, nf) (local node, equation; local node, field).
+    ``F[i][k]`` is the point-wise coefficient (M, nq) of equation i: k = 0
+    multiplies the test function value N_a, k = 1, 2 its gradient ∂N_a/∂x_k
+    (the f0 / f1 split of a weak form); ``None`` marks a structural zero.
+    Coefficients are :class:`Dual` numbers whose derivative slots are the
+    inputs of :func:`qp_inputs` flattened as ``3 * field + l``, or plain
+    arrays when ``need_jacobian`` is False.  Returns ``Fe`` (M, 3, neq) and
+    ``Ke`` (M, 3, neq, 3, nf) (local node, equation; local node, field).
+
+    Because ∇N_a is constant on a P1 element, the gradient part of the test
+    side is summed over quadrature points before it meets ∇N_a, and the
+    trial side is contracted per field: no (M, nq, neq, 3, nf, 3) tensor
+    is ever formed.
     """
-    B = basis(geom, quad)
+    M, nq = len(geom.areas), len(quad.weights)
     wq = quad.weights[None, :] * geom.areas[:, None]  # (M, nq)
-    Fv = F.v if isinstance(F, Dual) else F
-    Fe = np.einsum("mq,mqik,mqak->mai", wq, Fv, B, optimize=True)
-    if not need_jacobian:
-        return Fe, None
-    M, nq, neq, _ = F.v.shape
-    nf = F.d.shape[-1] // 3
-    dF = F.d.reshape(M, nq, neq, 3, nf, 3)
-    # contract trial side first: (M,nq,neq,3,nf,3) x (M,nq,3b,3l) -> (M,nq,neq,3k,nf,3b)
-    T = np.einsum("mqikjl,mqbl->mqikjb", dF, B, optimize=True)
-    Ke = np.einsum("mq,mqak,mqikjb->maibj", wq, B, T, optimize=True)
+    bary = quad.bary  # (nq, 3): N_a at the points
+    G = geom.grads  # (M, 3, 2)
+    neq = len(F)
+    Fe = np.zeros((M, 3, neq))
+    Ke = None
+    if need_jacobian:
+        nf = n_fields if n_fields is not None else next(c for row in F for c in row if c is not None).d.shape[-1] // 3
+        Ke = np.zeros((M, 3, neq, 3, nf))
+        # trial basis per point: (M, nq, 3 slots l, 3 nodes b)
+        Bt = np.empty((M, nq, 3, 3))
+        Bt[:, :, 0, :] = bary[None]
+        Bt[:, :, 1, :] = G[:, None, :, 0]
+        Bt[:, :, 2, :] = G[:, None, :, 1]
+        Wt = (wq[:, :, None] * bary[None]).transpose(0, 2, 1)  # (M, 3 a, nq)
+    for i, row in enumerate(F):
+        for k, c in enumerate(row):
+            if c is None:
+                continue
+            v = c.v if isinstance(c, Dual) else c
+            if k == 0:
+                Fe[:, :, i] += (wq * v) @ bary
+            else:
+                Fe[:, :, i] += (wq * v).sum(axis=1)[:, None] * G[:, :, k - 1]
+            if not need_jacobian:
+                continue
+            D = c.d.reshape(M, nq, nf, 3)
+            T = np.matmul(D, Bt)  # (M, nq, nf, 3 b): ∂F_ik/∂U_jb at each point
+            if k == 0:
+                # Σ_q w N_a(q) T(q): a batched (3 x nq) @ (nq x 3nf) product per element
+                Ta = np.matmul(Wt, T.reshape(M, nq, -1)).reshape(M, 3, nf, 3)
+                Ke[:, :, i] += Ta.transpose(0, 1, 3, 2)
+            else:
+                Tq = np.einsum("mq,mqjb->mbj", wq, T)
+                Ke[:, :, i] += G[:, :, None, None, k - 1] * Tq[:, None]
     return Fe, Ke

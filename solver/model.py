@@ -163,8 +163,8 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n)
 
 
-def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields: int) -> Dual:
-    """f0/f1 of the five (or seven) equations at the Strang points, as a Dual (M, nq, nf, 3).
+def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields: int) -> list:
+    """f0/f1 of the five equations at the Strang points: ``F[i][k]`` (M, nq), None = structural zero.
 
     ``X[3 f + k]`` is field f's value (k = 0) or gradient component (k = 1, 2).
     """
@@ -212,26 +212,22 @@ def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields:
     Mch = k / params.eta_bar
 
     dev = (ev - data.ev_n[:, None]) / dt
-    zero = 0.0 * ev
     c_mu = 12.0 * params.gamma / params.l_S
     c_grad = c_mu * params.l_S**2 / 8.0
-    rows = [
-        [zero, sxx, sxy],
-        [zero, sxy, syy],
+    return [
+        [None, sxx, sxy],
+        [None, sxy, syy],
         [(phi - data.phi_n) / dt + cv * phi * dev, -wx, -wy],
         [(phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev,
          -w1x + Mch * g(MU, 1), -w1y + Mch * g(MU, 2)],
         [mu - c_mu * physics.double_well_prime(Sat), -c_grad * Sx, -c_grad * Sy],
     ]
-    return ad.stack([ad.stack(r, axis=-1) for r in rows], axis=-2)
 
 
-def projection_forms(X: list) -> Dual:
-    """f0 of the gradient projection G − ∇S at the vertex points, Dual (M, 3, 2, 3)."""
+def projection_forms(X: list) -> list:
+    """f0 of the gradient projection G − ∇S at the vertex points (two equations)."""
     g = lambda f, k: X[3 * f + k]
-    zero = 0.0 * g(GX, 0)
-    return ad.stack([ad.stack([g(GX, 0) - g(S, 1), zero, zero], -1),
-                     ad.stack([g(GY, 0) - g(S, 2), zero, zero], -1)], -2)
+    return [[g(GX, 0) - g(S, 1), None, None], [g(GY, 0) - g(S, 2), None, None]]
 
 
 def _variables(disc: Discretization, U: np.ndarray, quad: fem.Quadrature, dual: bool = True) -> list:
@@ -247,11 +243,11 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
     nf = disc.n_fields
     X = _variables(disc, U, fem.STRANG3, need_jacobian)
     F = pointwise_forms(X, params, disc.phi0, data, nf)
-    Fe, Ke = fem.assemble_forms(F, disc.geom, fem.STRANG3, need_jacobian)
+    Fe, Ke = fem.assemble_forms(F, disc.geom, fem.STRANG3, need_jacobian, nf)
     M = len(disc.triangles)
     if nf == 7:
         Xv = _variables(disc, U, fem.VERTEX, need_jacobian)
-        Fp, Kp = fem.assemble_forms(projection_forms(Xv), disc.geom, fem.VERTEX, need_jacobian)
+        Fp, Kp = fem.assemble_forms(projection_forms(Xv), disc.geom, fem.VERTEX, need_jacobian, nf)
         Fe = np.concatenate([Fe, Fp], axis=2)
         if need_jacobian:
             Ke = np.concatenate([Ke, Kp], axis=2)

@@ -108,6 +108,12 @@ class Simulation:
             scale = np.maximum(np.abs(X).max(axis=0), self.floors)
             upd = float((np.abs(dx.reshape(-1, nf)).max(axis=0) / scale).max())
             ratio = upd / prev if prev else 0.0
+            if upd > 1e3 or not (-1.0 < X[:, S].min() and X[:, S].max() < 2.0):
+                if x_back is not None:  # the stale Jacobian's fault: undo and refresh
+                    x, x_back, self.lu, prev = x_back, None, None, None
+                    continue
+                self.lu = None
+                raise StepFailure(f"Newton diverged (relative update {upd:.2e}, S in [{X[:, S].min():.3g}, {X[:, S].max():.3g}])")
             # with a reused Jacobian convergence is linear: the error left is about upd * ratio / (1 - ratio)
             if upd <= o.newton_rtol * (1.0 if fresh or ratio < 0.5 else 0.1):
                 return X.copy(), it

@@ -1,0 +1,100 @@
+"""``dchfrac bench``: performance figures of the solver, written as JSON.
+
+Measured (wall-clock seconds, this machine):
+* one Newton iteration at h = 2, 1, 0.5 mm split into residual+Jacobian
+  assembly, factorization and solve, for the default backend and SuperLU;
+* a 0.2 s coupled run at h = 2 mm (wall time, accepted steps, factorizations
+  per accepted step, wall seconds per simulated second);
+* optionally the paper's reference run (h = 1 mm to 2 s).
+Speed is measured here, never by timed tests.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _newton_iteration(h: float, backends) -> dict:
+    from solver import Parameters, linsolve
+    from solver.mesh import annulus_mesh
+    from solver.model import build_discretization, residual_and_jacobian, step_data
+    from solver.porosity import random_porosity
+
+    p = Parameters()
+    t0 = time.perf_counter()
+    mesh = annulus_mesh(p.r_inner, p.r_outer, h)
+    t_mesh = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    disc = build_discretization(mesh, p, random_porosity(mesh, seed=0))
+    t_setup = time.perf_counter() - t0
+    N, nf = disc.n_nodes, disc.n_fields
+    rng = np.random.default_rng(0)
+    r = np.hypot(*disc.points.T)
+    U = np.zeros((N, nf))
+    U[:, 0:2] = 1e-3 * rng.standard_normal((N, 2))
+    U[:, 2] = 200 * (p.r_outer - r) / (p.r_outer - p.r_inner)
+    U[:, 3] = np.clip(1.5 - (r - p.r_inner) / 10, 0, 1)
+    data = step_data(disc, p, 0.99 * U, np.zeros(N), 1e-2)
+    t0 = time.perf_counter()
+    R, _ = residual_and_jacobian(disc, p, U, data, need_jacobian=False)
+    t_res = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    R, J = residual_and_jacobian(disc, p, U, data)
+    t_asm = time.perf_counter() - t0
+    disc.dirichlet.apply_matrix(J)
+    out = {"h_mm": h, "nodes": N, "elements": len(disc.triangles), "unknowns": N * nf, "jacobian_nnz": int(J.nnz),
+           "mesh_s": t_mesh, "setup_s": t_setup, "residual_s": t_res, "residual_and_jacobian_s": t_asm, "backends": {}}
+    for kind in backends:
+        t0 = time.perf_counter()
+        f = linsolve.factorize(J, kind)
+        t_fac = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        f.solve(R)
+        t_sol = time.perf_counter() - t0
+        total = t_asm + t_fac + t_sol
+        out["backends"][kind] = {"factorize_s": t_fac, "solve_s": t_sol, "newton_iteration_s": total,
+                                 "assembly_fraction": t_asm / total}
+    return out
+
+
+def _coupled_run(h: float, t_end: float) -> dict:
+    from solver import Parameters, RunOptions, simulate
+
+    res = simulate(Parameters(), RunOptions(h=h, t_end=t_end, snapshot_times=[]))
+    n = len(res.timeseries)
+    return {"h_mm": h, "t_end_s": t_end, "status": res.status, "wall_s": res.wall_time, "accepted_steps": n,
+            "rejected_steps": len(res.rejected_steps), "factorizations": res.factorizations,
+            "factorizations_per_step": res.factorizations / max(n, 1),
+            "wall_s_per_sim_s": res.wall_time / t_end,
+            "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None}
+
+
+def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> dict:
+    """Run the benchmarks and write them as JSON to ``out_path``; returns the dict."""
+    from solver import linsolve
+
+    backends = linsolve.available_backends()
+    sizes = [2.0, 1.0] if quick else [2.0, 1.0, 0.5]
+    result = {"machine": {"python": platform.python_version(), "cpu_count": __import__("os").cpu_count(),
+                          "platform": platform.platform()},
+              "backends_available": backends, "newton_iteration": []}
+    for h in sizes:
+        print(f"bench: one Newton iteration at h = {h} mm ...", flush=True)
+        result["newton_iteration"].append(_newton_iteration(h, backends))
+    t_end = 0.05 if quick else 0.2
+    print(f"bench: coupled run h = 2 mm to {t_end} s ...", flush=True)
+    run = _coupled_run(2.0, t_end)
+    result["coupled_run_h2"] = run
+    result["coupled_run_h2_wall_s_per_sim_s"] = run["wall_s_per_sim_s"]
+    if reference:
+        print("bench: reference run h = 1 mm to 2 s ...", flush=True)
+        result["reference_run_h1"] = _coupled_run(1.0, 2.0)
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=2))
+    print(json.dumps(result, indent=2))
+    return result
