@@ -31,11 +31,13 @@ def kozeny_carman(phi, kbar: float, k_max: float):
     phi_star = cap_porosity(kbar, k_max)
     v = ad.value(phi)
     below = v < phi_star
-    safe = ad.where(below, phi, 0.5 * phi_star) if isinstance(phi, Dual) else np.where(below, phi, 0.5 * phi_star)
+    closed = v <= 0.0  # linear poroelasticity can drive φ below 0 under strong compression: pores closed, k = 0
+    mid = below & ~closed
+    safe = ad.where(mid, phi, 0.5 * phi_star) if isinstance(phi, Dual) else np.where(mid, phi, 0.5 * phi_star)
     kc = safe**3 / (1.0 - safe) ** 2 * kbar
     if isinstance(phi, Dual):
-        return ad.where(below, kc, k_max)
-    return np.where(below, kc, k_max)
+        return ad.where(closed, 0.0, ad.where(below, kc, k_max))
+    return np.where(closed, 0.0, np.where(below, kc, k_max))
 
 
 def cap_porosity(kbar: float, k_max: float) -> float:

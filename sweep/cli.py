@@ -77,6 +77,20 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_report(args) -> int:
+    from .reference import convergence_report, reference_report
+
+    if args.kind == "reference":
+        if len(args.runs) != 1:
+            raise SystemExit("dchfrac report reference takes exactly one run folder")
+        res = reference_report(args.runs[0], args.out, args.paper)
+        print(res["table"].to_string(index=False))
+    else:
+        print(convergence_report(args.runs, args.out).to_string(index=False))
+    print(f"written to {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="dchfrac", description="Darcy–Cahn–Hilliard fluid-driven fracture: runs, benchmarks, campaigns (units mm, s, kPa)")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -93,6 +107,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="skip h = 0.5 mm and shorten the coupled run")
     b.add_argument("--reference", action="store_true", help="also time the full reference run (h = 1 mm to 2 s)")
     b.set_defaults(func=cmd_bench)
+    rp = sub.add_parser("report", help="figures and paper comparison of a reference run or a mesh-convergence set")
+    rp.add_argument("kind", choices=["reference", "convergence"])
+    rp.add_argument("runs", nargs="+", help="run folder(s)")
+    rp.add_argument("--out", required=True)
+    rp.add_argument("--paper", help="path to paper_reported.toml (default: ../shared/data/)")
+    rp.set_defaults(func=cmd_report)
     try:
         from .campaign_cli import add_campaign_commands
 

@@ -217,3 +217,14 @@ def test_cohesive_strength_1d():
     E, psic = 367.8, 0.00216
     s = physics.cohesive_strength_1d(E, psic)
     assert 0.5 * s * s / E == pytest.approx(psic, rel=1e-14)
+
+
+def test_permeability_is_zero_for_closed_pores_and_continuous_at_zero():
+    """Linear poroelasticity can push φ below 0 under strong compression: k must be 0 there, not negative."""
+    from solver import physics
+
+    kbar, kmax = 0.0015, 1.96**2 / 12
+    phi = np.array([-0.1, -1e-12, 0.0, 1e-4])
+    k = physics.kozeny_carman(phi, kbar, kmax)
+    assert np.all(k[:3] == 0.0)
+    assert 0.0 < k[3] < 1e-11  # φ³ kbar / (1 − φ)² ~ 1.5e-15 mm²
