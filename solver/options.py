@@ -4,7 +4,8 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
-from pathlib import Path
+
+from .tomlio import read_toml, write_flat_toml
 
 _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
 
@@ -79,33 +80,14 @@ class RunOptions:
         return replace(self, **changes)
 
     def to_toml(self, path) -> None:
-        lines = []
-        for k, v in self.to_dict().items():
-            if v is None:
-                continue
-            lines.append(f"{k} = {_toml_value(v)}")
-        Path(path).write_text("\n".join(lines) + "\n")
+        write_flat_toml(path, self.to_dict(), "dchfrac run options (units mm, s)")
 
     @classmethod
     def from_toml(cls, path) -> "RunOptions":
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib
-        return cls.from_dict(tomllib.loads(Path(path).read_text()))
+        return cls.from_dict(read_toml(path))
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True)
-
-
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return repr(float(v)) if isinstance(v, float) else str(v)
 
 
 def _fail(name, value, allowed):

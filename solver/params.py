@@ -35,6 +35,8 @@ from dataclasses import dataclass, fields, replace as _dc_replace
 from numbers import Integral, Real
 from pathlib import Path
 
+from .tomlio import read_toml, write_flat_toml
+
 import numpy as np
 
 POROSITY_FIELDS = ("random", "pockets", "constant")
@@ -254,21 +256,12 @@ class Parameters:
 
     def to_toml(self, path) -> None:
         """Write a flat TOML file (None-valued fields are omitted: they mean 'follow the law')."""
-        lines = ["# dchfrac model parameters (units mm, s, kPa)"]
-        for k, v in self.to_dict().items():
-            if v is None:
-                continue
-            lines.append(f"{k} = {_toml_value(v)}")
-        Path(path).write_text("\n".join(lines) + "\n")
+        write_flat_toml(path, self.to_dict(), "dchfrac model parameters (units mm, s, kPa)")
 
     @classmethod
     def from_toml(cls, path) -> "Parameters":
         """Read a file written by :meth:`to_toml` (absent keys take their defaults)."""
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib
-        return cls.from_dict(tomllib.loads(Path(path).read_text()))
+        return cls.from_dict(read_toml(path))
 
     def to_json(self, path=None) -> str:
         """JSON text of :meth:`to_dict` (None -> null); also written to ``path`` if given."""
@@ -371,16 +364,6 @@ def _coerce_and_check(p: Parameters) -> None:
     bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
     if not p.l_d <= bound * (1.0 + 1e-12):
         _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")
-
-
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, int):
-        return str(v)
-    return repr(float(v))  # repr of a finite float is TOML-valid and round-trips exactly
 
 
 def field_doc(name: str) -> str:

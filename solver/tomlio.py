@@ -1,0 +1,33 @@
+"""Flat TOML files for Parameters and RunOptions (stdlib tomllib to read, a tiny writer)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+
+def toml_value(v) -> str:
+    """TOML literal of a bool, string, int, float or list of those (floats round-trip exactly via repr)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, int):
+        return str(v)
+    return repr(float(v))
+
+
+def write_flat_toml(path, d: dict, header: str | None = None) -> None:
+    """Write ``d`` as a flat TOML table; None values are omitted (they mean 'default')."""
+    lines = [f"# {header}"] if header else []
+    lines += [f"{k} = {toml_value(v)}" for k, v in d.items() if v is not None]
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def read_toml(path) -> dict:
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+    return tomllib.loads(Path(path).read_text())
