@@ -260,6 +260,29 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
 
 
 # ---------------------------------------------------------------- element fields
+def korteweg_force(disc: Discretization, U: np.ndarray, kappa: float) -> np.ndarray:
+    """κ ∇·(G⊗G) per element (kPa/mm) from the nodal projected gradient G = U[:, GX:GY+1].
+
+    The same expression the residual uses, (∇·G) G + (∇G) G, here at the centroid.
+    """
+    tri = disc.triangles
+    gradG = np.einsum("mai,maf->mfi", disc.geom.grads, U[tri][:, :, GX:GY + 1])  # (M, 2 comps, 2 dirs)
+    G = U[tri][:, :, GX:GY + 1].mean(axis=1)
+    divG = gradG[:, 0, 0] + gradG[:, 1, 1]
+    return kappa * (divG[:, None] * G + np.einsum("mij,mj->mi", gradG, G))
+
+
+def project_gradient(disc: Discretization, S_nodal: np.ndarray) -> np.ndarray:
+    """Lumped L2 projection Π∇S (N, 2) of a nodal field: the solution of the G equations for given S."""
+    tri = disc.triangles
+    g = np.einsum("mai,ma->mi", disc.geom.grads, S_nodal[tri])
+    w = np.repeat(disc.geom.areas / 3.0, 3)
+    out = np.empty((disc.n_nodes, 2))
+    for c in range(2):
+        out[:, c] = np.bincount(tri.ravel(), weights=np.repeat(g[:, c], 3) * w, minlength=disc.n_nodes) / disc.lumped_mass
+    return out
+
+
 def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray) -> dict:
     """Post-processed element fields at the centroid: φ, ε_v, hoop stress (σ'_θθ, kPa), k (mm²), |w_1| (mm/s), ψ_A (kPa)."""
     tri = disc.triangles
@@ -284,9 +307,6 @@ def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray) -
     kr1, _ = physics.relative_permeabilities(cen[:, S], params.viscosity_ratio)
     Y = gradU[:, P, :].copy()
     if disc.n_fields == 7:
-        G = cen[:, GX:GY + 1]
-        divG = gradU[:, GX, 0] + gradU[:, GY, 1]
-        f = kap * (divG[:, None] * G + np.einsum("mij,mj->mi", gradU[:, GX:GY + 1, :], G))
-        Y += f / phi[:, None]
+        Y += korteweg_force(disc, U, kap) / phi[:, None]
     w1 = -(k * kr1 / params.eta_w)[:, None] * Y
     return {"phi": phi, "eps_v": ev, "hoop_stress": hoop, "k": k, "w1_mag": np.hypot(w1[:, 0], w1[:, 1]), "psi_a": psi_a}
