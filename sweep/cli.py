@@ -3,6 +3,8 @@
     dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
     dchfrac bench [--out results/bench/bench.json] [--quick]
     dchfrac campaign run|status|plot|report SPEC ...
+    dchfrac report reference|convergence RUN... --out DIR
+    dchfrac discrepancy run --measured DIR --model SPEC --out DIR
 """
 from __future__ import annotations
 
@@ -119,6 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
         add_campaign_commands(sub)
     except ImportError as exc:  # pragma: no cover - campaign module missing
         print(f"(campaign commands unavailable: {exc})", file=sys.stderr)
+    from .discrepancy.cli import add_discrepancy_commands
+
+    add_discrepancy_commands(sub)
     return ap
 
 

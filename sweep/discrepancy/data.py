@@ -1,0 +1,229 @@
+"""Measured data for the discrepancy workflow: a documented folder format, a validating loader, a writer.
+
+Format (a folder, units mm, s, kPa)::
+
+    conditions.csv    one row per experiment: ``id`` (text, unique) and any number of
+                      solver.Parameters fields (e.g. ``cement``, ``w_i``, ``eta_o``) that
+                      differ between experiments; empty cells take the model's value.
+    observations.csv  columns ``condition, observable, time, value, uncertainty``:
+                      condition  an ``id`` of conditions.csv
+                      observable one of OBSERVABLES
+                      time       s (finite, >= 0)
+                      value      p_inj in kPa, front_radius_mean and crack_length in mm;
+                                 for ``regime`` a label (e.g. "fracturing"), its time the
+                                 moment of classification
+                      uncertainty one standard deviation, same unit as value (> 0; ignored
+                                 and may be 0 for regime)
+
+Every problem (missing file or column, unknown observable or condition, NaN,
+negative or zero uncertainty, a condition without observations, duplicated ids)
+is a ValueError naming the file, the row (line number in the file, header = line 1)
+and the column.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["OBSERVABLES", "CURVE_OBSERVABLES", "UNITS", "MeasuredData", "load_measured", "write_measured"]
+
+CURVE_OBSERVABLES = ("p_inj", "front_radius_mean", "crack_length")
+OBSERVABLES = CURVE_OBSERVABLES + ("regime",)
+UNITS = {"p_inj": "kPa", "front_radius_mean": "mm", "crack_length": "mm", "regime": "label"}
+OBS_COLUMNS = ("condition", "observable", "time", "value", "uncertainty")
+
+
+@dataclass(frozen=True)
+class MeasuredData:
+    """Validated measured data.
+
+    conditions : DataFrame indexed by condition id (str); columns are Parameters fields.
+    curves : DataFrame with columns condition, observable, time (s), value, uncertainty
+        (numeric observables only, sorted by condition, observable, time).
+    regimes : dict condition id -> (time s, label) for conditions with a regime observation.
+    """
+
+    conditions: pd.DataFrame
+    curves: pd.DataFrame
+    regimes: dict
+
+    @property
+    def ids(self) -> list[str]:
+        """Condition ids in file order."""
+        return list(self.conditions.index)
+
+    def condition_params(self, cid: str) -> dict:
+        """Parameter overrides of condition ``cid`` (NaN cells dropped; integral floats kept as float)."""
+        row = self.conditions.loc[cid]
+        return {k: _py(v) for k, v in row.items() if not (isinstance(v, float) and math.isnan(v))}
+
+    def subset(self, ids) -> "MeasuredData":
+        """The data restricted to the conditions ``ids``."""
+        ids = list(ids)
+        return MeasuredData(self.conditions.loc[ids], self.curves[self.curves.condition.isin(ids)].reset_index(drop=True),
+                            {k: v for k, v in self.regimes.items() if k in ids})
+
+    def times(self, cid: str, observable: str) -> np.ndarray:
+        """Observation times (s) of ``observable`` in condition ``cid``."""
+        c = self.curves
+        return c.loc[(c.condition == cid) & (c.observable == observable), "time"].to_numpy(float)
+
+    def observation_times(self) -> dict:
+        """{condition: {observable: times}} for every numeric series, plus regime times."""
+        out: dict = {}
+        for (cid, obs), g in self.curves.groupby(["condition", "observable"], sort=False):
+            out.setdefault(cid, {})[obs] = g.time.to_numpy(float)
+        for cid, (t, _) in self.regimes.items():
+            out.setdefault(cid, {})["regime"] = np.array([t])
+        return out
+
+
+def _py(v):
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.floating,)):
+        return float(v)
+    return v
+
+
+def _err(path, line, column, msg):
+    where = f"{path}" + (f", row {line}" if line is not None else "") + (f", column {column!r}" if column else "")
+    raise ValueError(f"{where}: {msg}")
+
+
+def _read_csv(path: Path) -> pd.DataFrame:
+    if not path.is_file():
+        _err(path, None, None, "file not found (a measured-data folder needs conditions.csv and observations.csv)")
+    try:
+        return pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except Exception as exc:  # pandas parser errors
+        _err(path, None, None, f"cannot be read as CSV ({exc})")
+
+
+def _num(path, df, i, col, *, allow_empty=False):
+    s = str(df.at[i, col]).strip()
+    line = i + 2
+    if s == "":
+        if allow_empty:
+            return float("nan")
+        _err(path, line, col, "empty value (a number is required)")
+    try:
+        v = float(s)
+    except ValueError:
+        _err(path, line, col, f"{s!r} is not a number")
+    if math.isnan(v) or math.isinf(v):
+        _err(path, line, col, f"{s!r} is not a finite number")
+    return v
+
+
+def load_measured(folder) -> MeasuredData:
+    """Read and validate a measured-data folder (see the module docstring for the format)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"measured-data folder {folder} does not exist")
+    from solver import Parameters
+
+    cpath, opath = folder / "conditions.csv", folder / "observations.csv"
+    cdf = _read_csv(cpath)
+    if "id" not in cdf.columns:
+        _err(cpath, 1, "id", "missing column (conditions.csv needs an 'id' column)")
+    allowed = set(Parameters.__dataclass_fields__)
+    for col in cdf.columns:
+        if col != "id" and col not in allowed:
+            _err(cpath, 1, col, f"unknown column: not a solver.Parameters field (allowed: id and {sorted(allowed)})")
+    if len(cdf) == 0:
+        _err(cpath, None, None, "no conditions")
+    ids, rows = [], []
+    for i in range(len(cdf)):
+        cid = str(cdf.at[i, "id"]).strip()
+        if cid == "":
+            _err(cpath, i + 2, "id", "empty id")
+        if cid in ids:
+            _err(cpath, i + 2, "id", f"duplicated id {cid!r}")
+        ids.append(cid)
+        rec = {}
+        for col in cdf.columns:
+            if col == "id":
+                continue
+            s = str(cdf.at[i, col]).strip()
+            if s == "":
+                rec[col] = float("nan")
+                continue
+            if col in ("porosity_field", "mu_outer_bc"):
+                rec[col] = s
+            elif col == "seed":
+                rec[col] = int(_num(cpath, cdf, i, col))
+            else:
+                rec[col] = _num(cpath, cdf, i, col)
+        try:  # parameters must be valid before any work starts
+            Parameters(**{k: v for k, v in rec.items() if not (isinstance(v, float) and math.isnan(v))})
+        except (ValueError, TypeError) as exc:
+            _err(cpath, i + 2, None, f"invalid parameters: {exc}")
+        rows.append(rec)
+    conditions = pd.DataFrame(rows, index=pd.Index(ids, name="id"))
+
+    odf = _read_csv(opath)
+    for col in OBS_COLUMNS:
+        if col not in odf.columns:
+            _err(opath, 1, col, f"missing column (required: {list(OBS_COLUMNS)})")
+    recs, regimes = [], {}
+    for i in range(len(odf)):
+        line = i + 2
+        cid = str(odf.at[i, "condition"]).strip()
+        if cid not in ids:
+            _err(opath, line, "condition", f"unknown condition {cid!r} (not an id of conditions.csv)")
+        obs = str(odf.at[i, "observable"]).strip()
+        if obs not in OBSERVABLES:
+            _err(opath, line, "observable", f"unknown observable {obs!r} (allowed: {list(OBSERVABLES)})")
+        t = _num(opath, odf, i, "time")
+        if t < 0:
+            _err(opath, line, "time", f"negative time {t} s")
+        if obs == "regime":
+            label = str(odf.at[i, "value"]).strip()
+            if label == "" or label.lower() == "nan":
+                _err(opath, line, "value", "empty regime label")
+            if cid in regimes:
+                _err(opath, line, "observable", f"second regime observation for condition {cid!r}")
+            regimes[cid] = (t, label)
+            continue
+        v = _num(opath, odf, i, "value")
+        u = _num(opath, odf, i, "uncertainty")
+        if u < 0:
+            _err(opath, line, "uncertainty", f"negative uncertainty {u}")
+        if u == 0:
+            _err(opath, line, "uncertainty", "zero uncertainty (a standard deviation > 0 is required)")
+        recs.append((cid, obs, t, v, u))
+    curves = pd.DataFrame(recs, columns=list(OBS_COLUMNS))
+    for cid in ids:
+        if not (curves.condition == cid).any() and cid not in regimes:
+            line = ids.index(cid) + 2
+            _err(cpath, line, "id", f"condition {cid!r} has no observations in {opath.name}")
+    dup = curves.duplicated(["condition", "observable", "time"])
+    if dup.any():
+        i = int(np.flatnonzero(dup.to_numpy())[0])
+        _err(opath, None, "time", f"duplicated (condition, observable, time) {tuple(curves.iloc[i][:3])}")
+    curves = curves.sort_values(["condition", "observable", "time"], kind="stable").reset_index(drop=True)
+    return MeasuredData(conditions, curves, regimes)
+
+
+def write_measured(folder, conditions: dict, curves: pd.DataFrame, regimes: dict | None = None) -> Path:
+    """Write a measured-data folder.
+
+    conditions : {id: {parameter: value}}; curves : DataFrame with OBS_COLUMNS (numeric observables);
+    regimes : {id: (time s, label)}.  Returns the folder path.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    cols = sorted({k for d in conditions.values() for k in d})
+    crows = [{"id": cid, **{c: d.get(c, "") for c in cols}} for cid, d in conditions.items()]
+    pd.DataFrame(crows, columns=["id"] + cols).to_csv(folder / "conditions.csv", index=False)
+    out = curves[list(OBS_COLUMNS)].copy()
+    if regimes:
+        reg = pd.DataFrame([(cid, "regime", t, lab, 0.0) for cid, (t, lab) in regimes.items()], columns=list(OBS_COLUMNS))
+        out = pd.concat([out.astype({"value": object}), reg], ignore_index=True)
+    out.to_csv(folder / "observations.csv", index=False, float_format="%.10g")
+    return folder

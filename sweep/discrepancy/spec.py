@@ -1,0 +1,212 @@
+"""The model SPEC of the discrepancy workflow (TOML), validated before any work.
+
+Example (units mm, s, kPa)::
+
+    [baseline]                       # solver.Parameters fields common to every condition
+    kbar = 0.0015
+    effects_off = ["damage_viscosity", "outer_compliance"]   # effect names set to their off values
+
+    [[calibrate]]                    # baseline parameters fitted on the training conditions
+    name = "kbar"; lower = 5e-4; upper = 5e-3; scale = "log"     # initial = baseline value
+
+    [candidates]
+    effects = ["damage_viscosity", "compliant_boundary"]        # default: every effect off in the baseline
+    scaling = { damage_viscosity = "sqrt_cement" }              # optional: parameter = strength * sqrt(C)
+    upper = { damage_viscosity = 200.0 }                          # optional: strength bounds / probes
+    probe = { damage_viscosity = 40.0 }
+
+    [holdout]                        # whole conditions, never time points
+    ids = ["c3"]                     # or  every = 3  (every third condition, starting with the last)
+
+    [options]                        # solver.RunOptions fields for the workflow's runs
+    h = 8.0
+    t_end = 0.1
+
+    [discretization]                 # optional: RunOptions overrides of a finer check run; the difference
+    h = 6.0                          # fine − coarse of the initial baseline, per point, is subtracted from
+    dt_max = 0.01                    # the data and disc_error_fraction of it added in quadrature to σ
+
+    [workflow]                       # criteria (defaults shown)
+    delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5
+    min_ratio = 0.15; tie_cos = 0.95; max_rounds = 3; max_refits = 2; starts = 1
+    loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; n_jobs = 1; seed = 0
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from solver.effects import EFFECTS, get_effect
+
+__all__ = ["CalibParam", "DiscrepancySpec", "load_spec", "spec_from_dict", "SCALINGS"]
+
+SCALINGS = ("none", "sqrt_cement")
+_WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
+                    tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
+                    max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
+                    disc_error_fraction=0.5)
+
+
+@dataclass(frozen=True)
+class CalibParam:
+    """A fitted parameter: name (Parameters field), bounds, initial value, scale "log" | "linear", FD step
+    (in decades for log, in the parameter's unit for linear; None = 2 % of the range)."""
+
+    name: str
+    lower: float
+    upper: float
+    initial: float
+    scale: str = "log"
+    step: float | None = None
+
+    def to_x(self, v: float) -> float:
+        return math.log10(v) if self.scale == "log" else float(v)
+
+    def from_x(self, x: float) -> float:
+        return 10.0 ** x if self.scale == "log" else float(x)
+
+    @property
+    def x_bounds(self) -> tuple[float, float]:
+        return self.to_x(self.lower), self.to_x(self.upper)
+
+    @property
+    def x_step(self) -> float:
+        lo, hi = self.x_bounds
+        return self.step if self.step is not None else 0.02 * (hi - lo)
+
+
+@dataclass(frozen=True)
+class DiscrepancySpec:
+    baseline: dict
+    effects_off: tuple
+    calibrate: tuple
+    candidates: tuple
+    scaling: dict
+    upper: dict
+    probe: dict
+    holdout_ids: tuple | None
+    holdout_every: int | None
+    options: dict
+    workflow: dict = field(default_factory=dict)
+    discretization: dict | None = None
+
+    def wf(self, key):
+        return self.workflow.get(key, _WF_DEFAULTS[key])
+
+    def baseline_overrides(self) -> dict:
+        """Baseline parameter overrides with the off effects at their off values."""
+        d = dict(self.baseline)
+        for e in self.effects_off:
+            d[get_effect(e).parameter] = get_effect(e).off
+        return d
+
+    def holdout(self, ids: list) -> list:
+        """Held-out condition ids among ``ids`` (by explicit list or every n-th counting from the last)."""
+        if self.holdout_ids is not None:
+            missing = [i for i in self.holdout_ids if i not in ids]
+            if missing:
+                raise ValueError(f"holdout ids {missing} are not conditions of the measured data (ids: {ids})")
+            return [i for i in ids if i in self.holdout_ids]
+        n = self.holdout_every
+        return [cid for j, cid in enumerate(reversed(ids)) if j % n == 0][::-1]
+
+    def candidate_param(self, name: str) -> CalibParam:
+        """The strength of candidate ``name`` as a linear fitted parameter in [off, upper]."""
+        e = get_effect(name)
+        up = float(self.upper.get(name, e.upper))
+        return CalibParam(name="effect:" + name, lower=e.off, upper=up, initial=float(self.probe.get(name, e.probe)), scale="linear")
+
+    def probe_strength(self, name: str) -> float:
+        return float(self.probe.get(name, get_effect(name).probe))
+
+
+def _bad(key, value, allowed):
+    raise ValueError(f"discrepancy spec: {key}={value!r} is not allowed: {allowed}")
+
+
+def spec_from_dict(d: dict) -> DiscrepancySpec:
+    """Validate a parsed TOML spec (see the module docstring)."""
+    from solver import Parameters, RunOptions
+
+    known = {"baseline", "calibrate", "candidates", "holdout", "options", "workflow", "discretization"}
+    extra = sorted(set(d) - known)
+    if extra:
+        _bad("tables", extra, f"only {sorted(known)}")
+    base = dict(d.get("baseline", {}))
+    off = tuple(base.pop("effects_off", ()))
+    for e in off:
+        get_effect(e)
+    try:
+        Parameters.from_dict(base)
+    except ValueError as exc:
+        raise ValueError(f"discrepancy spec [baseline]: {exc}") from None
+    cal = []
+    for c in d.get("calibrate", []):
+        name = c.get("name")
+        if name not in Parameters.__dataclass_fields__ or name in ("porosity_field", "mu_outer_bc", "seed"):
+            _bad("calibrate.name", name, "a numeric solver.Parameters field")
+        if name in {get_effect(e).parameter for e in EFFECTS}:
+            _bad("calibrate.name", name, "not an effect strength (effects are candidates)")
+        lo, hi = float(c.get("lower", math.nan)), float(c.get("upper", math.nan))
+        scale = c.get("scale", "log")
+        if scale not in ("log", "linear"):
+            _bad(f"calibrate[{name}].scale", scale, "'log' or 'linear'")
+        if not (lo < hi) or (scale == "log" and lo <= 0):
+            _bad(f"calibrate[{name}].lower/upper", (lo, hi), "lower < upper (and > 0 for log scale)")
+        init = c.get("initial", base.get(name, getattr(Parameters(), name)))
+        if init is None or not (lo <= float(init) <= hi):
+            _bad(f"calibrate[{name}].initial", init, f"inside [{lo}, {hi}]")
+        cal.append(CalibParam(name, lo, hi, float(init), scale, c.get("step")))
+    cand = d.get("candidates", {})
+    names = tuple(cand.get("effects", off))
+    for e in names:
+        get_effect(e)
+        if e not in off:
+            _bad("candidates.effects", e, f"effects that are off in the baseline ({list(off)})")
+    scaling = dict(cand.get("scaling", {}))
+    for k, v in scaling.items():
+        get_effect(k)
+        if v not in SCALINGS:
+            _bad(f"candidates.scaling.{k}", v, list(SCALINGS))
+    upper = {k: float(v) for k, v in cand.get("upper", {}).items()}
+    probe = {k: float(v) for k, v in cand.get("probe", {}).items()}
+    for k in list(upper) + list(probe):
+        get_effect(k)
+    ho = d.get("holdout", {})
+    ids = ho.get("ids")
+    every = ho.get("every")
+    if ids is None and every is None:
+        _bad("holdout", ho, "ids = [...] or every = n (whole conditions are held out)")
+    if every is not None and (not isinstance(every, int) or every < 2):
+        _bad("holdout.every", every, "an integer >= 2")
+    opts = dict(d.get("options", {}))
+    try:
+        RunOptions.from_dict(opts)
+    except ValueError as exc:
+        raise ValueError(f"discrepancy spec [options]: {exc}") from None
+    disc = d.get("discretization")
+    if disc is not None:
+        try:
+            RunOptions.from_dict({**opts, **disc})
+        except ValueError as exc:
+            raise ValueError(f"discrepancy spec [discretization]: {exc}") from None
+    wf = dict(d.get("workflow", {}))
+    unknown = sorted(set(wf) - set(_WF_DEFAULTS))
+    if unknown:
+        _bad("workflow", unknown, f"keys among {sorted(_WF_DEFAULTS)}")
+    return DiscrepancySpec(base, off, tuple(cal), names, scaling, upper, probe,
+                           tuple(ids) if ids is not None else None, every, opts, wf,
+                           dict(disc) if disc is not None else None)
+
+
+def load_spec(path) -> DiscrepancySpec:
+    """Read and validate a SPEC TOML file."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"discrepancy spec {path} not found")
+    return spec_from_dict(tomllib.loads(path.read_text()))

@@ -1,0 +1,186 @@
+"""Statistics of the discrepancy workflow (pure functions on standardized residuals).
+
+Standardized residual r = (y − m)/σ (dimensionless).  Dense time curves give
+serially correlated residuals; every criterion uses per-series weights
+w = n_eff/n with n_eff = n (1 − ρ1)/(1 + ρ1) from the lag-1 autocorrelation ρ1
+(clipped to [1/n, 1]), so 200 points of one smooth misfit count as ~1 piece of
+evidence, not 200.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["lag1_autocorrelation", "series_weights", "effective_chi2", "bic", "systematic_test",
+           "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times"]
+
+PHASES = ("before_initiation", "peak", "propagation", "late")
+
+
+def lag1_autocorrelation(r) -> float:
+    """Lag-1 autocorrelation of a residual series (about zero, not about its mean: a constant offset
+    is systematic and must count as correlated).  0 for fewer than 3 points."""
+    r = np.asarray(r, float)
+    r = r[np.isfinite(r)]
+    if r.size < 3:
+        return 0.0
+    den = float(np.dot(r, r))
+    if den == 0.0:
+        return 0.0
+    return float(np.dot(r[1:], r[:-1]) / den)
+
+
+def series_weights(r, series) -> np.ndarray:
+    """Per-point weight w = n_eff/n of its series (``series``: integer label per point)."""
+    r = np.asarray(r, float)
+    series = np.asarray(series)
+    w = np.ones_like(r)
+    for s in np.unique(series):
+        m = series == s
+        n = int(m.sum())
+        rho = max(lag1_autocorrelation(r[m]), 0.0)
+        w[m] = min(1.0, max((1.0 - rho) / (1.0 + rho), 1.0 / n))
+    return w
+
+
+def effective_chi2(r, w) -> tuple[float, float]:
+    """(χ²_eff = Σ w r², n_eff = Σ w)."""
+    r = np.asarray(r, float)
+    return float(np.sum(w * r * r)), float(np.sum(w))
+
+
+def bic(r, w, k: int) -> float:
+    """Bayesian information criterion with Gaussian standardized residuals: χ²_eff + k ln n_eff."""
+    chi2, n = effective_chi2(r, w)
+    return chi2 + k * math.log(max(n, 1.0))
+
+
+def systematic_test(r, series, z_crit: float = 3.0, rho_crit: float = 0.3) -> dict:
+    """Are residuals above noise level?  Per series and overall.
+
+    A series is systematic when its lag-1 autocorrelation exceeds ``rho_crit`` and its χ²
+    excess z = (Σ r² − n)/√(2n) exceeds ``z_crit``, or when the mean residual is significant
+    (|mean| √n > z_crit, with n reduced to n_eff).  Returns {"systematic": bool, "series": {label: {...}}}.
+    """
+    r = np.asarray(r, float)
+    series = np.asarray(series)
+    out, any_sys = {}, False
+    for s in np.unique(series):
+        rs = r[series == s]
+        n = rs.size
+        rho = lag1_autocorrelation(rs)
+        z = (float(np.sum(rs**2)) - n) / math.sqrt(2.0 * n)
+        n_eff = max(1.0, n * (1 - max(rho, 0)) / (1 + max(rho, 0)))
+        zmean = abs(float(np.mean(rs))) * math.sqrt(n_eff)
+        sys_ = bool((rho > rho_crit and z > z_crit) or zmean > z_crit and z > 0)
+        any_sys |= sys_
+        out[str(s)] = {"n": n, "rho1": rho, "chi2_excess_z": z, "mean_z": zmean, "systematic": sys_}
+    return {"systematic": any_sys, "series": out}
+
+
+def project_out(J, s) -> np.ndarray:
+    """Component of the signature vector ``s`` orthogonal to the columns of ``J`` (least squares)."""
+    s = np.asarray(s, float)
+    J = np.asarray(J, float)
+    if J.size == 0:
+        return s.copy()
+    Q, R = np.linalg.qr(J)
+    keep = np.abs(np.diag(R)) > 1e-12 * max(1.0, np.abs(R).max())
+    Q = Q[:, keep]
+    return s - Q @ (Q.T @ s)
+
+
+def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_cos: float = 0.95) -> dict:
+    """Screen candidate effects from their signatures.
+
+    r : standardized residuals of the calibrated baseline; w : series weights; J : Jacobian of the
+    *model* (standardized, dm/σ) w.r.t. the calibrated parameters; signatures : {name: s} with
+    s = (m(probe) − m(off))/σ.  For each candidate: its projected signature s⊥ (off J), the ratio
+    ‖s⊥‖/‖s‖ (identifiable when >= ``min_ratio`` and s ≠ 0), the linearized best amplitude
+    a = (w r·s⊥)/(w s⊥·s⊥) in units of the probe strength, and the score = linearized χ²_eff drop
+    (0 when a <= 0: the data ask for the effect "below off").  ``tied_with`` lists identifiable
+    candidates whose projected signatures have |cos| >= ``tie_cos`` with this one.
+    """
+    r = np.asarray(r, float)
+    sw = np.sqrt(np.asarray(w, float))
+    Jw = np.asarray(J, float) * sw[:, None] if np.size(J) else np.zeros((r.size, 0))
+    out, perp = {}, {}
+    for name, s in signatures.items():
+        s = np.asarray(s, float)
+        ok = np.all(np.isfinite(s))
+        sw_s = np.where(np.isfinite(s), s, 0.0) * sw
+        ns = float(np.linalg.norm(sw_s))
+        sp = project_out(Jw, sw_s) if ns > 0 else sw_s
+        nsp = float(np.linalg.norm(sp))
+        ratio = nsp / ns if ns > 0 else 0.0
+        ident = bool(ok and ns > 1e-9 and ratio >= min_ratio)
+        rw = r * sw
+        a = float(rw @ sp / nsp**2) if nsp > 0 else 0.0
+        score = float((rw @ sp) ** 2 / nsp**2) if (nsp > 0 and a > 0) else 0.0
+        out[name] = {"norm": ns, "projected_norm": nsp, "ratio": ratio, "identifiable": ident,
+                     "amplitude": a, "score": score if ident else 0.0, "tied_with": [], "finite": bool(ok)}
+        perp[name] = sp
+    names = [n for n in out if out[n]["identifiable"]]
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            c = abs(float(perp[a] @ perp[b])) / (out[a]["projected_norm"] * out[b]["projected_norm"])
+            if c >= tie_cos:
+                out[a]["tied_with"].append(b)
+                out[b]["tied_with"].append(a)
+    return out
+
+
+def wald_interval(J, r, w, index: int, x_hat: float, level_z: float = 1.96,
+                  min_ratio: float = 0.02) -> tuple[float, float, float]:
+    """(lower, upper, sd) of parameter ``index`` from the Gauss–Newton covariance.
+
+    When the parameter's column of J is (up to ``min_ratio`` of its norm) a combination of the others
+    the fit sits on a ridge: the interval is (−inf, inf) rather than a falsely narrow one.
+    cov = (Jᵀ W J)⁻¹ · max(1, χ²_eff/(n_eff − k)) with J = ∂r/∂x (standardized), W = diag(w):
+    the weights widen the interval for correlated residuals, the factor for misfit beyond noise.
+    """
+    J = np.asarray(J, float)
+    w = np.asarray(w, float)
+    k = J.shape[1]
+    sw = np.sqrt(w)[:, None]
+    col = J[:, index] * sw[:, 0]
+    others = np.delete(J * sw, index, axis=1)
+    nc = float(np.linalg.norm(col))
+    if nc == 0.0 or float(np.linalg.norm(project_out(others, col))) < min_ratio * nc:
+        return -math.inf, math.inf, math.inf     # on a ridge: not separately determined
+    A = J.T @ (J * w[:, None])
+    chi2, n = effective_chi2(r, w)
+    scale = max(1.0, chi2 / max(n - k, 1.0))
+    try:
+        cov = np.linalg.pinv(A) * scale
+    except np.linalg.LinAlgError:
+        return -math.inf, math.inf, math.inf
+    sd = float(math.sqrt(max(cov[index, index], 0.0)))
+    return x_hat - level_z * sd, x_hat + level_z * sd, sd
+
+
+def phase_of_times(t, p_meas, crack_meas=None, crack_tol: float = 0.5) -> np.ndarray:
+    """Phase label index (into PHASES) of each time (s) of one condition.
+
+    t_init = first time the measured crack length exceeds ``crack_tol`` mm, else the time the measured
+    pressure reaches 90 % of its maximum; t_peak = time of the pressure maximum (>= t_init);
+    before_initiation: t < t_init; peak: t_init <= t <= t_peak + 0.1 T; propagation: up to
+    t_peak + 0.5 (T − t_peak); late: after.  T = last time.
+    """
+    t = np.asarray(t, float)
+    tp, pp = p_meas
+    tp, pp = np.asarray(tp, float), np.asarray(pp, float)
+    T = float(max(t.max(), tp.max()))
+    t_peak = float(tp[int(np.argmax(pp))])
+    t_init = float(tp[int(np.argmax(pp >= 0.9 * pp.max()))])
+    if crack_meas is not None:
+        tc, cc = (np.asarray(a, float) for a in crack_meas)
+        if np.any(cc > crack_tol):
+            t_init = float(tc[int(np.argmax(cc > crack_tol))])
+    t_peak = max(t_peak, t_init)
+    ph = np.full(t.shape, 3, int)
+    ph[t <= t_peak + 0.5 * (T - t_peak)] = 2
+    ph[t <= t_peak + 0.1 * T] = 1
+    ph[t < t_init] = 0
+    return ph

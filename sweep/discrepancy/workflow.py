@@ -1,0 +1,453 @@
+"""The discrepancy workflow: calibrate a baseline, localize the misfit, screen and refit candidate
+effects, accept an effect only on penalized, interval and held-out evidence, iterate, report.
+
+Entry point: :func:`run_workflow(data, spec, forward, out_dir)` -> report dict (also written as
+``report.json`` and ``report.md`` with figures in ``out_dir``).  Units: mm, s, kPa; residuals are
+standardized (dimensionless) by the measured uncertainties.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from solver.effects import get_effect
+
+from . import stats
+from .data import CURVE_OBSERVABLES, MeasuredData
+from .spec import CalibParam, DiscrepancySpec
+
+__all__ = ["Problem", "Fit", "run_workflow", "VERDICTS"]
+
+VERDICTS = ("named", "tie", "no_missing_effect", "unexplained_discrepancy")
+
+
+@dataclass
+class Fit:
+    """A fitted model: its free parameters, values, residuals on the training conditions."""
+
+    params: tuple          # CalibParam (effects as "effect:<name>")
+    x: np.ndarray          # internal coordinates
+    r: np.ndarray          # standardized residuals (training)
+    J: np.ndarray          # ∂r/∂x at x (training)
+    cost: float
+    nfev: int
+
+    def values(self) -> dict:
+        return {p.name: p.from_x(xi) for p, xi in zip(self.params, self.x)}
+
+
+class Problem:
+    """Residual assembly for a set of conditions, with an in-memory cache over x."""
+
+    def __init__(self, data: MeasuredData, spec: DiscrepancySpec, forward):
+        self.data, self.spec, self.forward = data, spec, forward
+        self.base = spec.baseline_overrides()
+        c = data.curves
+        self.y = c.value.to_numpy(float)
+        self.sig = c.uncertainty.to_numpy(float)
+        self.cond = c.condition.to_numpy(str)
+        self.obs = c.observable.to_numpy(str)
+        self.t = c.time.to_numpy(float)
+        keys = list(zip(self.cond, self.obs))
+        uniq = {k: i for i, k in enumerate(dict.fromkeys(keys))}
+        self.series = np.array([uniq[k] for k in keys], int)
+        self.series_names = [f"{a}/{b}" for a, b in uniq]
+        self.times = data.observation_times()
+        self.phase = np.zeros(len(c), int)
+        for cid in data.ids:
+            m = self.cond == cid
+            pm = m & (self.obs == "p_inj")
+            if pm.any():
+                cm = m & (self.obs == "crack_length")
+                self.phase[m] = stats.phase_of_times(self.t[m], (self.t[pm], self.y[pm]),
+                                                     (self.t[cm], self.y[cm]) if cm.any() else None)
+        for cid in data.ids:
+            overlap = set(data.condition_params(cid)) & ({p.name for p in spec.calibrate})
+            if overlap:
+                raise ValueError(f"condition {cid!r} sets calibrated parameter(s) {sorted(overlap)}")
+        self._cache = {}
+
+    # ----------------------------------------------------------------- overrides
+    def overrides(self, cid: str, values: dict) -> dict:
+        """Full parameter overrides of condition ``cid`` for fitted ``values`` (effects as 'effect:<name>')."""
+        o = dict(self.base)
+        cp = self.data.condition_params(cid)
+        for k, v in values.items():
+            if k.startswith("effect:"):
+                name = k[7:]
+                e = get_effect(name)
+                sc = self.spec.scaling.get(name, "none")
+                cem = cp.get("cement", self.base.get("cement", 1.2))
+                o[e.parameter] = v * math.sqrt(cem) if sc == "sqrt_cement" else v
+            else:
+                o[k] = v
+        o.update(cp)
+        return o
+
+    def predict(self, values_list: list, ids: list) -> list:
+        """Predictions [{cid: {obs: array, 'regime': label}}] for each values dict (one batch)."""
+        jobs, index = [], []
+        for j, values in enumerate(values_list):
+            for cid in ids:
+                jobs.append((self.overrides(cid, values), self.times[cid]))
+                index.append((j, cid))
+        preds = self.forward.predict_many(jobs)
+        out = [dict() for _ in values_list]
+        for (j, cid), pr in zip(index, preds):
+            out[j][cid] = pr
+        return out
+
+    def model_vector(self, pred: dict, mask: np.ndarray) -> np.ndarray:
+        """Predicted values aligned with the curve rows selected by ``mask``."""
+        m = np.full(int(mask.sum()), np.nan)
+        rows = np.flatnonzero(mask)
+        pos = {r: i for i, r in enumerate(rows)}
+        for cid in np.unique(self.cond[mask]):
+            for obs in CURVE_OBSERVABLES:
+                sel = np.flatnonzero((self.cond == cid) & (self.obs == obs) & mask)
+                if sel.size == 0:
+                    continue
+                v = np.asarray(pred[cid][obs], float)
+                allrows = np.flatnonzero((self.cond == cid) & (self.obs == obs))
+                vv = dict(zip(allrows, v))
+                m[[pos[r] for r in sel]] = [vv[r] for r in sel]
+        return m
+
+    def residuals_for(self, preds: list, mask: np.ndarray) -> list:
+        nanr = self.spec.wf("nan_residual")
+        out = []
+        for pred in preds:
+            m = self.model_vector(pred, mask)
+            r = (self.y[mask] - m) / self.sig[mask]
+            out.append(np.where(np.isfinite(r), r, nanr))
+        return out
+
+    # ----------------------------------------------------------------- fitting
+    def mask(self, ids) -> np.ndarray:
+        return np.isin(self.cond, list(ids))
+
+    def _values(self, params, x) -> dict:
+        return {p.name: p.from_x(xi) for p, xi in zip(params, x)}
+
+    def residual_batch(self, params, xs: list, ids) -> list:
+        keys = [(tuple(p.name for p in params), tuple(np.round(x, 12)), tuple(ids)) for x in xs]
+        need = [i for i, k in enumerate(keys) if k not in self._cache]
+        if need:
+            preds = self.predict([self._values(params, xs[i]) for i in need], ids)
+            rs = self.residuals_for(preds, self.mask(ids))
+            for i, r, pr in zip(need, rs, preds):
+                self._cache[keys[i]] = (r, pr)
+        return [self._cache[k][0] for k in keys]
+
+    def prediction(self, params, x, ids) -> dict:
+        self.residual_batch(params, [x], ids)
+        return self._cache[(tuple(p.name for p in params), tuple(np.round(x, 12)), tuple(ids))][1]
+
+    def jacobian(self, params, x, ids) -> np.ndarray:
+        """Forward-difference ∂r/∂x (steps toward the interior of the bounds), one batch of runs."""
+        xs, steps = [], []
+        for j, p in enumerate(params):
+            lo, hi = p.x_bounds
+            h = p.x_step
+            if x[j] + h > hi:
+                h = -h
+            xp = np.array(x, float)
+            xp[j] += h
+            xs.append(xp)
+            steps.append(h)
+        rs = self.residual_batch(params, [np.asarray(x, float)] + xs, ids)
+        r0 = rs[0]
+        return np.column_stack([(ri - r0) / h for ri, h in zip(rs[1:], steps)]) if params else np.zeros((r0.size, 0))
+
+    def fit(self, params: tuple, x0s: list, ids) -> Fit:
+        """Robust bounded least squares (scipy TRF) from each start in ``x0s``; the lowest cost wins."""
+        best = None
+        nf = 0
+        if not params:
+            r = self.residual_batch(params, [np.zeros(0)], ids)[0]
+            return Fit(params, np.zeros(0), r, np.zeros((r.size, 0)), 0.5 * float(r @ r), 1)
+        lb = np.array([p.x_bounds[0] for p in params])
+        ub = np.array([p.x_bounds[1] for p in params])
+        for x0 in x0s:
+            x0 = np.clip(np.asarray(x0, float), lb, ub)
+            res = least_squares(lambda x: self.residual_batch(params, [x], ids)[0], x0,
+                                jac=lambda x: self.jacobian(params, x, ids), bounds=(lb, ub),
+                                loss=self.spec.wf("loss"), f_scale=self.spec.wf("f_scale"),
+                                max_nfev=self.spec.wf("max_nfev"), x_scale=ub - lb, method="trf")
+            nf += res.nfev
+            r = self.residual_batch(params, [res.x], ids)[0]
+            cost = 0.5 * float(r @ r)
+            if best is None or cost < best[1]:
+                best = (res.x, cost, r)
+        x, cost, r = best
+        return Fit(params, x, r, self.jacobian(params, x, ids), cost, nf)
+
+
+# ------------------------------------------------------------------------------------------------
+def _gap(problem: Problem, params, x, ids) -> dict:
+    """Held-out gap: RMS standardized residual per observable and in total (same metric before/after)."""
+    if not ids:
+        return {}
+    r = problem.residual_batch(params, [x], ids)[0]
+    obs = problem.obs[problem.mask(ids)]
+    g = {o: float(np.sqrt(np.mean(r[obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(obs == o)}
+    g["total"] = float(np.sqrt(np.mean(r**2)))
+    return g
+
+
+def _regime_mismatch(problem: Problem, params, x, ids) -> dict:
+    out = {}
+    pred = problem.prediction(params, x, ids)
+    for cid in ids:
+        if cid in problem.data.regimes:
+            meas = problem.data.regimes[cid][1]
+            mod = pred[cid].get("regime")
+            out[cid] = {"measured": meas, "model": mod, "match": (mod == meas) if mod is not None else None}
+    return out
+
+
+def localize(problem: Problem, fit: Fit, ids) -> dict:
+    """Where the calibrated model misses: per observable, per phase, per condition, serial correlation."""
+    m = problem.mask(ids)
+    r = fit.r
+    obs, ph, cond, ser = problem.obs[m], problem.phase[m], problem.cond[m], problem.series[m]
+    out = {"per_observable": {}, "per_phase": {}, "per_condition": {}}
+    for o in CURVE_OBSERVABLES:
+        s = obs == o
+        if s.any():
+            out["per_observable"][o] = {"rms": float(np.sqrt(np.mean(r[s] ** 2))), "mean": float(np.mean(r[s])), "n": int(s.sum())}
+    for k, name in enumerate(stats.PHASES):
+        s = ph == k
+        if s.any():
+            out["per_phase"][name] = {"rms": float(np.sqrt(np.mean(r[s] ** 2))), "mean": float(np.mean(r[s])), "n": int(s.sum())}
+    for cid in ids:
+        s = cond == cid
+        out["per_condition"][cid] = {o: float(np.mean(r[s & (obs == o)])) for o in CURVE_OBSERVABLES if np.any(s & (obs == o))}
+    sys_ = stats.systematic_test(r, ser, problem.spec.wf("z_crit"), problem.spec.wf("rho_crit"))
+    names = problem.series_names
+    out["series"] = {names[int(k)]: v for k, v in sys_["series"].items()}
+    out["systematic"] = sys_["systematic"]
+    out["regimes"] = _regime_mismatch(problem, fit.params, fit.x, ids)
+    out["regime_misclassified"] = sum(1 for v in out["regimes"].values() if v["match"] is False)
+    return out
+
+
+def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
+    """Signature of each candidate (one perturbed run per condition at its probe strength), projected off
+    the calibrated parameters' directions; see :func:`stats.signature_table`."""
+    if not candidates:
+        return {}
+    params = fit.params
+    vals0 = fit.values()
+    vlist = [vals0] + [{**vals0, "effect:" + c: problem.spec.probe_strength(c)} for c in candidates]
+    preds = problem.predict(vlist, ids)
+    m = problem.mask(ids)
+    ms = [problem.model_vector(p, m) for p in preds]
+    sigs = {c: (ms[i + 1] - ms[0]) / problem.sig[m] for i, c in enumerate(candidates)}
+    w = stats.series_weights(fit.r, problem.series[m])
+    free = free_columns(fit)
+    return stats.signature_table(fit.r, w, -fit.J[:, free], sigs, min_ratio=problem.spec.wf("min_ratio"),
+                                 tie_cos=problem.spec.wf("tie_cos"))
+
+
+def free_columns(fit: Fit, rtol: float = 1e-4) -> np.ndarray:
+    """Columns of the calibrated parameters NOT pinned at a bound: a parameter at its bound cannot absorb
+    a signature any further, so projecting it out would hide an effect the data call for."""
+    keep = []
+    for j, p in enumerate(fit.params):
+        lo, hi = p.x_bounds
+        tol = rtol * (hi - lo)
+        keep.append(lo + tol < fit.x[j] < hi - tol)
+    return np.array(keep, bool) if keep else np.zeros(0, bool)
+
+
+def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, holdout, gap_base: dict) -> dict:
+    """Joint fit of the baseline parameters and the candidate's strength; acceptance evidence."""
+    spec = problem.spec
+    cp = spec.candidate_param(cand)
+    params = base_fit.params + (cp,)
+    probe = spec.probe_strength(cand)
+    a0 = float(np.clip(screen_row.get("amplitude", 1.0) * probe, cp.lower, cp.upper))
+    starts = [np.append(base_fit.x, a0)]
+    if abs(a0 - probe) > 1e-12 * max(1.0, abs(probe)):
+        starts.append(np.append(base_fit.x, probe))
+    # the baseline's fit may have bent its parameters (even to a bound) to mimic the missing effect:
+    # also start from the spec's initial values with the probe strength
+    x_init = np.array([p.to_x(p.initial) for p in base_fit.params] + [probe])
+    if not any(np.allclose(x_init, s_) for s_ in starts):
+        starts.append(x_init)
+    rng = np.random.default_rng(spec.wf("seed"))
+    for _ in range(max(0, spec.wf("starts") - len(starts))):
+        lb = np.array([p.x_bounds[0] for p in params]); ub = np.array([p.x_bounds[1] for p in params])
+        starts.append(lb + rng.random(len(params)) * (ub - lb))
+    f = problem.fit(params, starts, train)
+    ser = problem.series[problem.mask(train)]
+    w = stats.series_weights(f.r, ser)        # weights from the richer model, applied to both
+    k0 = len(base_fit.params)
+    b0 = stats.bic(base_fit.r, w, k0)
+    b1 = stats.bic(f.r, w, k0 + 1)
+    c0, n_eff = stats.effective_chi2(base_fit.r, w)
+    c1, _ = stats.effective_chi2(f.r, w)
+    explained = (c0 - c1) / max(c0 - n_eff, 1e-12) if c0 > n_eff else 0.0
+    lo, hi, sd = stats.wald_interval(f.J, f.r, w, len(params) - 1, float(f.x[-1]))
+    gap = _gap(problem, params, f.x, holdout)
+    e = get_effect(cand)
+    gap_ok = bool(holdout) and gap["total"] <= (1 - spec.wf("min_gap_reduction")) * gap_base["total"]
+    passed = bool(b1 - b0 <= spec.wf("delta_bic") and lo > e.off and gap_ok and explained >= spec.wf("min_explained"))
+    return {"effect": cand, "fit": f, "delta_bic": float(b1 - b0), "strength": float(f.x[-1]),
+            "strength_interval": [float(max(lo, cp.lower)), float(min(hi, cp.upper))], "strength_sd": sd,
+            "explained_fraction": float(explained), "gap": gap, "gap_ok": gap_ok,
+            "interval_excludes_off": bool(lo > e.off), "passed": passed,
+            "values": f.values()}
+
+
+def add_discretization_error(problem: Problem, fine_forward) -> dict:
+    """Correct the data for the model's discretization error and widen the uncertainties.
+
+    err = (fine − coarse) per point, from the baseline at its initial values on ``fine_forward``'s and on
+    the workflow's discretization.  The coarse model is compared with y − err (a bias correction valid
+    when the discretization error depends weakly on the parameters), and ``disc_error_fraction``·err is
+    added in quadrature to σ for the part that does.  Returns the RMS of err per observable."""
+    ids = problem.data.ids
+    vals = {p.name: p.initial for p in problem.spec.calibrate}
+    coarse = problem.predict([vals], ids)[0]
+    jobs = [(problem.overrides(cid, vals), problem.times[cid]) for cid in ids]
+    fine = dict(zip(ids, fine_forward.predict_many(jobs)))
+    allm = np.ones(problem.y.size, bool)
+    err = problem.model_vector(fine, allm) - problem.model_vector(coarse, allm)
+    err = np.where(np.isfinite(err), err, 0.0)
+    frac = problem.spec.wf("disc_error_fraction")
+    problem.y = problem.y - err                       # compare the coarse model with mesh-corrected data
+    problem.sig = np.sqrt(problem.sig**2 + (frac * err) ** 2)   # the correction itself is uncertain
+    return {o: float(np.sqrt(np.mean(err[problem.obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(problem.obs == o)}
+
+
+def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=None, figures: bool = True,
+                 fine_forward=None) -> dict:
+    """Steps 1–5 of the workflow; returns the report dict (written to ``out_dir`` when given).
+
+    fine_forward : optional forward model on a finer discretization; its difference to ``forward`` at the
+    initial baseline is added in quadrature to the measured uncertainties (see add_discretization_error).
+    """
+    problem = Problem(data, spec, forward)
+    disc_err = add_discretization_error(problem, fine_forward) if fine_forward is not None else None
+    ids = data.ids
+    holdout = spec.holdout(ids)
+    train = [i for i in ids if i not in holdout]
+    if not train:
+        raise ValueError("every condition is held out: nothing left to calibrate on")
+    if not holdout:
+        raise ValueError("no held-out condition: the gap on unseen conditions cannot be measured")
+    base_params = tuple(spec.calibrate)
+    x0 = np.array([p.to_x(p.initial) for p in base_params])
+    starts = [x0]
+    rng = np.random.default_rng(spec.wf("seed"))
+    for _ in range(spec.wf("starts") - 1):
+        lb = np.array([p.x_bounds[0] for p in base_params]); ub = np.array([p.x_bounds[1] for p in base_params])
+        starts.append(lb + rng.random(len(base_params)) * (ub - lb))
+    fit0 = problem.fit(base_params, starts, train)
+    gap_before = _gap(problem, fit0.params, fit0.x, holdout)
+    loc0 = localize(problem, fit0, train)
+    current, gap_cur, loc = fit0, gap_before, loc0
+    remaining = list(spec.candidates)
+    accepted, rounds, verdict, tie = [], [], None, []
+    first_candidates = None
+    for rnd in range(spec.wf("max_rounds")):
+        if not remaining:
+            break
+        scr = screen(problem, current, remaining, train)
+        order = sorted([c for c in remaining if scr[c]["identifiable"] and scr[c]["score"] > 0],
+                       key=lambda c: -scr[c]["score"])
+        chosen = []
+        for c in order[: spec.wf("max_refits")]:
+            for cc in [c] + scr[c]["tied_with"]:
+                if cc not in chosen and cc in order:
+                    chosen.append(cc)
+        refits = {c: refit(problem, current, c, scr[c], train, holdout, gap_cur) for c in chosen}
+        rows = []
+        for c in remaining:
+            rf = refits.get(c)
+            rows.append({"effect": c, "score": scr[c]["score"], "identifiable": scr[c]["identifiable"],
+                         "signature_ratio": scr[c]["ratio"], "tied_with": scr[c]["tied_with"],
+                         "delta_bic": rf["delta_bic"] if rf else None, "passed": rf["passed"] if rf else False,
+                         "strength": rf["strength"] if rf else None,
+                         "strength_interval": rf["strength_interval"] if rf else None,
+                         "explained_fraction": rf["explained_fraction"] if rf else None,
+                         "heldout_gap": rf["gap"] if rf else None})
+        if first_candidates is None:
+            first_candidates = rows
+        passing = sorted([refits[c] for c in refits if refits[c]["passed"]], key=lambda d: d["delta_bic"])
+        rounds.append({"round": rnd + 1, "baseline_values": current.values(), "candidates": rows,
+                       "pinned_at_bound": [p.name for p, f in zip(current.params, free_columns(current)) if not f],
+                       "systematic_before": loc["systematic"]})
+        if not passing:
+            break
+        best = passing[0]
+        tied = [p["effect"] for p in passing[1:] if p["delta_bic"] - best["delta_bic"] < spec.wf("tie_bic")]
+        if tied:
+            tie = [best["effect"]] + tied
+            verdict = "tie"
+            break
+        accepted.append({"effect": best["effect"], "strength": best["strength"],
+                         "strength_interval": best["strength_interval"], "delta_bic": best["delta_bic"],
+                         "scaling": spec.scaling.get(best["effect"], "none"), "unit": get_effect(best["effect"]).unit})
+        current, gap_cur = best["fit"], best["gap"]
+        loc = localize(problem, current, train)
+        remaining.remove(best["effect"])
+        if not loc["systematic"]:
+            break
+    if verdict is None:
+        if accepted:
+            verdict = "named"
+        else:
+            verdict = "unexplained_discrepancy" if loc0["systematic"] else "no_missing_effect"
+    named = accepted[0] if accepted and verdict == "named" else None
+    report = {
+        "verdict": verdict,
+        "named_effect": named["effect"] if named else None,
+        "strength": named["strength"] if named else None,
+        "strength_interval": named["strength_interval"] if named else None,
+        "strength_scaling": named["scaling"] if named else None,
+        "accepted": accepted,
+        "tie": tie,
+        "candidates": first_candidates or [],
+        "not_identifiable": [c["effect"] for c in (first_candidates or []) if not c["identifiable"]],
+        "gap_before": gap_before,
+        "gap_after": gap_cur if verdict == "named" else gap_before,
+        "calibrated_baseline": fit0.values(),
+        "final_values": current.values() if verdict == "named" else fit0.values(),
+        "train": train, "holdout": holdout,
+        "localization_before": _jsonable(loc0),
+        "localization_after": _jsonable(loc) if verdict == "named" else None,
+        "residuals_systematic_after": bool(loc["systematic"]) if verdict == "named" else bool(loc0["systematic"]),
+        "rounds": _jsonable(rounds),
+        "forward_runs": int(getattr(forward, "n_runs", 0)),
+        "discretization_error_rms": disc_err,
+    }
+    report = _jsonable(report)
+    if out_dir is not None:
+        from .report import write_report
+
+        write_report(report, problem, fit0, current if verdict == "named" else fit0, out_dir, figures=figures)
+    return report
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items() if not isinstance(v, Fit)}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return o

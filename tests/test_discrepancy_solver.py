@@ -1,0 +1,66 @@
+"""Discrepancy workflow with the real solver: forward-model plumbing (fast) and twin experiments (slow).
+
+The slow tests run campaigns/discrepancy_twins_ci.toml (data on h = 5 mm, dt_max = 0.01 s; workflow on
+h = 8 mm, dt_max = 0.02 s, 3 conditions, t_end = 0.05 s).  Expected cost on 2 idle cores: about
+10–15 minutes per twin (see the report of results/discrepancy/twins_ci/summary.json for measured times).
+"""
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from solver import RunOptions
+from sweep.discrepancy.forward import SolverForward, observables_from_timeseries, params_hash
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_observables_from_timeseries_interpolates_and_flags_missing_times():
+    ts = pd.DataFrame({"t": [0.1, 0.2, 0.3], "p_inj": [10.0, 20.0, 40.0], "front_radius_mean": [6.0, 7.0, 8.0],
+                       "open_tip_radius": [0.0, 9.0, 15.0]})
+    out = observables_from_timeseries(ts, {"p_inj": [0.05, 0.15, 0.25, 0.35], "crack_length": [0.1, 0.3]}, r_inner=5.0)
+    np.testing.assert_allclose(out["p_inj"][:3], [10.0, 15.0, 30.0])
+    assert np.isnan(out["p_inj"][3])                  # after the last step: no value, never extrapolated
+    np.testing.assert_allclose(out["crack_length"], [0.0, 10.0])
+
+
+def test_params_hash_is_stable_and_sensitive():
+    a = params_hash({"E": 331.0, "beta": 0.0}, {"h": 8.0})
+    assert a == params_hash({"beta": 0.0, "E": 331.0 + 1e-14}, {"h": 8.0})
+    assert a != params_hash({"E": 331.0, "beta": 1e-3}, {"h": 8.0})
+    assert a != params_hash({"E": 331.0, "beta": 0.0}, {"h": 6.0})
+
+
+def test_solver_forward_runs_once_and_serves_the_cache(tmp_path):
+    # one tiny run: h = 12 mm, 3 steps of 2 ms
+    fwd = SolverForward({"beta": 0.0}, RunOptions(h=12.0, t_end=0.006, dt0=0.002, dt_max=0.002), tmp_path)
+    times = {"p_inj": np.array([0.002, 0.004, 0.006]), "front_radius_mean": np.array([0.006])}
+    p1 = fwd.predict_one({"w_i": 50.0}, times)
+    p2 = fwd.predict_one({"w_i": 50.0}, times)
+    assert fwd.n_runs == 1
+    np.testing.assert_array_equal(p1["p_inj"], p2["p_inj"])
+    # the pressure rises monotonically under constant injection from rest
+    assert np.all(np.diff(p1["p_inj"]) > 0) and p1["p_inj"][0] > 0
+    # the front starts near r_i + l_S/2-ish and can only be inside the annulus
+    assert 5.0 < p1["front_radius_mean"][0] < 53.0
+
+
+def test_cli_rejects_bad_data_before_any_run(tmp_path, capsys):
+    from sweep.discrepancy.cli import main
+
+    (tmp_path / "spec.toml").write_text('[baseline]\neffects_off=["damage_viscosity"]\n[holdout]\nevery=2\n')
+    rc = main(["discrepancy", "run", "--measured", str(tmp_path / "nope"), "--model", str(tmp_path / "spec.toml"),
+               "--out", str(tmp_path / "out")])
+    assert rc == 2 and "does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["damage_viscosity", "negative_control", "compliant_boundary", "outside_catalogue"])
+def test_real_solver_twin(tmp_path, name):
+    from sweep.discrepancy.twins import run_twins
+
+    s = run_twins(ROOT / "campaigns" / "discrepancy_twins_ci.toml", tmp_path / "res", tmp_path / "cache", only=[name])
+    assert s[name]["passed"], json.dumps(s[name], indent=1)

@@ -1,0 +1,188 @@
+"""Statistics of the discrepancy workflow and twin experiments on the cheap analytic forward model.
+
+The forward model here is sweep.discrepancy.toy (closed form): what is under test is the workflow's
+statistics (calibration, screening, identifiability, acceptance, verdicts), not the physics.  The
+twin data are generated with a smaller "mesh error" (h = 2 vs 8 in the workflow) and Gaussian noise.
+"""
+import json
+
+import numpy as np
+import pytest
+
+from sweep.discrepancy import ToyForward, load_measured, make_twin, run_workflow, spec_from_dict
+from sweep.discrepancy import stats
+
+OFF = ["damage_viscosity", "compliant_boundary", "crack_permeability", "volumetric_coupling"]
+TIMES = np.linspace(0.02, 1.0, 50)
+CONDS = {"a": {"w_i": 30.0}, "b": {"w_i": 50.0}, "c": {"w_i": 70.0}, "d": {"w_i": 40.0}}
+DATA_BASE = {"beta": 0.0, "outer_compliance": 0.0, "crack_permeability": 0.0, "volumetric_coupling": 0.0}
+
+
+# ----------------------------------------------------------------------------- statistics
+def test_lag1_autocorrelation_and_weights():
+    rng = np.random.default_rng(0)
+    white = rng.normal(size=4000)
+    assert abs(stats.lag1_autocorrelation(white)) < 4 / np.sqrt(4000)          # 4 standard errors
+    assert stats.lag1_autocorrelation(np.ones(50)) == pytest.approx(49 / 50)    # an offset is systematic
+    ar = np.zeros(20000)
+    e = rng.normal(size=ar.size)
+    for i in range(1, ar.size):
+        ar[i] = 0.9 * ar[i - 1] + e[i]
+    w = stats.series_weights(ar, np.zeros(ar.size, int))
+    assert w[0] == pytest.approx(0.1 / 1.9, rel=0.15)                          # n_eff/n = (1-ρ)/(1+ρ)
+    assert stats.series_weights(np.ones(10), np.zeros(10, int))[0] == pytest.approx(0.1)  # floor 1/n
+
+
+def test_projection_and_tie_detection():
+    t = np.linspace(0, 1, 40)
+    J = np.column_stack([t, np.ones_like(t)])
+    assert np.allclose(stats.project_out(J, 3 * t - 2), 0, atol=1e-12)
+    r = np.exp(-t / 0.2) * 5
+    sig = {"a": np.exp(-t / 0.2), "b": 2 * np.exp(-t / 0.2), "c": 2 * t + 1, "d": np.zeros_like(t)}
+    tab = stats.signature_table(r, np.ones_like(t), J, sig)
+    assert tab["a"]["tied_with"] == ["b"] and tab["b"]["tied_with"] == ["a"]
+    assert not tab["c"]["identifiable"] and tab["c"]["ratio"] < 1e-12           # inside the baseline's span
+    assert not tab["d"]["identifiable"]                                        # null signature
+    # linearized amplitude: r = 5 s_a exactly after projection of r and s_a alike
+    assert tab["a"]["amplitude"] == pytest.approx(5.0, rel=1e-9)
+
+
+def test_wald_interval_of_a_linear_model():
+    rng = np.random.default_rng(3)
+    x = np.linspace(0, 1, 200)
+    J = -x[:, None]                    # r = y - a x, ∂r/∂a = -x
+    r = rng.normal(size=x.size)
+    lo, hi, sd = stats.wald_interval(J, r, np.ones_like(x), 0, 2.0)
+    assert sd == pytest.approx(np.sqrt(max(1.0, r @ r / 199)) / np.sqrt(x @ x), rel=1e-10)
+    assert lo == pytest.approx(2.0 - 1.96 * sd) and hi == pytest.approx(2.0 + 1.96 * sd)
+
+
+def test_systematic_test_separates_noise_from_offset():
+    rng = np.random.default_rng(1)
+    ser = np.repeat([0, 1], 100)
+    assert not stats.systematic_test(rng.normal(size=200), ser)["systematic"]
+    assert stats.systematic_test(rng.normal(size=200) + 1.0, ser)["systematic"]
+
+
+# ----------------------------------------------------------------------------- twin experiments
+def _spec(cands=OFF, holdout=("d",), calibrate=("kbar", "E")):
+    bounds = {"kbar": (5e-4, 5e-3), "E": (150.0, 700.0)}
+    return spec_from_dict({"baseline": {"effects_off": OFF},
+                           "calibrate": [{"name": n, "lower": bounds[n][0], "upper": bounds[n][1]} for n in calibrate],
+                           "candidates": {"effects": list(cands)}, "holdout": {"ids": list(holdout)},
+                           "options": {"h": 8.0, "t_end": 1.0}})
+
+
+def _twin(tmp_path, hidden, conds=CONDS, times=TIMES, anomaly=0.0, observables=("p_inj", "front_radius_mean", "crack_length"), seed=1):
+    fwd = ToyForward(DATA_BASE, h=2.0, anomaly=anomaly)      # "finer mesh": smaller discretization error
+    return load_measured(make_twin(tmp_path / "data", fwd, conds, times, hidden, seed=seed, observables=observables))
+
+
+@pytest.mark.parametrize("hidden,effect,truth", [
+    ({"beta": 40.0}, "damage_viscosity", 40.0),
+    ({"crack_permeability": 0.6}, "crack_permeability", 0.6),
+    ({"outer_compliance": 0.05}, "compliant_boundary", 0.05),
+])
+def test_hidden_effect_is_named_with_its_strength(tmp_path, hidden, effect, truth):
+    rep = run_workflow(_twin(tmp_path, hidden), _spec(), ToyForward({}, h=8.0), out_dir=tmp_path / "out",
+                       figures=(effect == "damage_viscosity"))
+    assert rep["verdict"] == "named" and rep["named_effect"] == effect
+    lo, hi = rep["strength_interval"]
+    assert lo <= truth <= hi and lo > 0
+    assert rep["gap_after"]["total"] <= 0.5 * rep["gap_before"]["total"]
+    # with the effect, the held-out gap is at noise level: RMS of unit normals over 150 points, ±4 se
+    assert abs(rep["gap_after"]["total"] - 1.0) < 4 * np.sqrt(1 / (2 * 150)) + 0.05
+    row = {c["effect"]: c for c in rep["candidates"]}[effect]
+    assert row["delta_bic"] <= -10 and row["identifiable"]
+    saved = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert saved["named_effect"] == effect and (tmp_path / "out" / "report.md").is_file()
+    for key in ("strength", "strength_interval", "verdict", "candidates", "gap_before", "gap_after"):
+        assert key in saved
+
+
+def test_negative_control_names_nothing(tmp_path):
+    rep = run_workflow(_twin(tmp_path, {}), _spec(), ToyForward({}, h=8.0))
+    assert rep["verdict"] == "no_missing_effect" and rep["named_effect"] is None
+    assert rep["gap_after"] == rep["gap_before"]
+    assert not rep["localization_before"]["systematic"]
+
+
+def test_effect_outside_the_catalogue_is_unexplained(tmp_path):
+    rep = run_workflow(_twin(tmp_path, {}, anomaly=1.0), _spec(), ToyForward({}, h=8.0))
+    assert rep["verdict"] == "unexplained_discrepancy" and rep["named_effect"] is None
+    assert rep["localization_before"]["systematic"]
+
+
+def test_confounded_with_a_baseline_parameter_is_not_identifiable(tmp_path):
+    # pressure only: the compliance only rescales p, exactly as k̄ does
+    d = _twin(tmp_path, {"outer_compliance": 0.05}, observables=("p_inj",))
+    rep = run_workflow(d, _spec(cands=["compliant_boundary", "damage_viscosity"]), ToyForward({}, h=8.0))
+    assert "compliant_boundary" in rep["not_identifiable"]
+    assert rep["named_effect"] is None and rep["verdict"] == "no_missing_effect"
+    # the calibrated k̄ absorbed it: P0/(1 + 2c) = 0.05 w η / k̄'  ->  k̄' = 1.1 k̄
+    assert rep["calibrated_baseline"]["kbar"] == pytest.approx(0.0015 * 1.1, rel=0.02)
+
+
+def test_confounded_candidates_tie_and_another_rate_resolves(tmp_path):
+    # one injection rate, pressure before initiation: the β bump (∝ w_i) and the volumetric bump (rate
+    # independent) have the same shape -> tie; a second rate tells them apart.
+    times = np.linspace(0.01, 0.19, 40)
+    one_rate = {"a": {"w_i": 50.0, "eta_o": 0.25}, "b": {"w_i": 50.0, "eta_o": 0.33}, "h": {"w_i": 50.0, "eta_o": 0.29}}
+    spec = _spec(cands=["damage_viscosity", "volumetric_coupling"], holdout=("h",), calibrate=("kbar",))
+    rep = run_workflow(_twin(tmp_path / "1", {"beta": 40.0}, one_rate, times, observables=("p_inj",)), spec,
+                       ToyForward({}, h=8.0))
+    assert rep["verdict"] == "tie" and sorted(rep["tie"]) == ["damage_viscosity", "volumetric_coupling"]
+    assert rep["named_effect"] is None
+    rows = {c["effect"]: c for c in rep["candidates"]}
+    assert rows["damage_viscosity"]["tied_with"] == ["volumetric_coupling"]
+    two_rates = {**one_rate, "r": {"w_i": 25.0, "eta_o": 0.29}}
+    rep2 = run_workflow(_twin(tmp_path / "2", {"beta": 40.0}, two_rates, times, observables=("p_inj",)), spec,
+                        ToyForward({}, h=8.0))
+    assert rep2["verdict"] == "named" and rep2["named_effect"] == "damage_viscosity"
+    lo, hi = rep2["strength_interval"]
+    assert lo <= 40.0 <= hi
+
+
+def test_twin_pass_rule():
+    from sweep.discrepancy.twins import twin_passed
+
+    rep = {"named_effect": "damage_viscosity", "verdict": "named", "strength_interval": [50.0, 70.0],
+           "gap_before": {"total": 4.0}, "gap_after": {"total": 1.9}}
+    assert twin_passed({"expect": "damage_viscosity", "hidden": {"beta": 60.0}}, rep)
+    assert not twin_passed({"expect": "damage_viscosity", "hidden": {"beta": 75.0}}, rep)      # outside interval
+    assert twin_passed({"expect": "damage_viscosity", "hidden": {"beta": "law"}, "truth": 65.7}, rep)
+    assert not twin_passed({"expect": "compliant_boundary", "hidden": {"outer_compliance": 0.01}}, rep)
+    assert not twin_passed({"expect": "damage_viscosity", "hidden": {"beta": 60.0}},
+                           {**rep, "gap_after": {"total": 2.1}})                                # gap not halved
+    assert twin_passed({"expect": "no_missing_effect"}, {**rep, "verdict": "no_missing_effect"})
+
+
+def test_parameter_pinned_at_its_bound_does_not_hide_a_signature_but_a_ridge_is_not_named(tmp_path):
+    # k̄ bounded so that it cannot absorb the compliance (needs k̄' = 1.1 k̄ > upper bound = k̄): screening
+    # keeps the compliance identifiable.  In the joint refit k̄ is free again and p ∝ 1/(k̄ (1 + 2c)) is an
+    # exact ridge: the strength is not separately determined, its interval is the whole range, and
+    # nothing is named (never a confident wrong strength: the refit's best point here is c ≈ 0.075).
+    d = _twin(tmp_path, {"outer_compliance": 0.05}, observables=("p_inj",))
+    spec = spec_from_dict({"baseline": {"effects_off": OFF},
+                           "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 1.5e-3},
+                                         {"name": "E", "lower": 150.0, "upper": 700.0}],
+                           "candidates": {"effects": ["compliant_boundary"]}, "holdout": {"ids": ["d"]},
+                           "options": {"h": 8.0, "t_end": 1.0}})
+    rep = run_workflow(d, spec, ToyForward({}, h=8.0))
+    assert rep["rounds"][0]["pinned_at_bound"] == ["kbar"]
+    row = rep["candidates"][0]
+    assert row["identifiable"] and row["delta_bic"] < -10
+    assert row["strength_interval"] == [0.0, 0.2] and not row["passed"]
+    assert rep["named_effect"] is None and rep["verdict"] == "unexplained_discrepancy"
+
+
+def test_discretization_correction_from_a_finer_forward_model(tmp_path):
+    # toy mesh error 0.02 h (1 − e^{−t/τ}) kPa: h = 8 vs 2 gives err = −0.12 (1 − e^{−t/τ}), τ = 0.3 s at E = 331
+    d = _twin(tmp_path, {"beta": 40.0})
+    rep = run_workflow(d, _spec(), ToyForward({}, h=8.0), fine_forward=ToyForward({}, h=2.0))
+    expect = 0.12 * np.sqrt(np.mean((1 - np.exp(-TIMES / 0.3)) ** 2))
+    assert rep["discretization_error_rms"]["p_inj"] == pytest.approx(expect, rel=1e-9)
+    assert rep["discretization_error_rms"]["front_radius_mean"] == 0.0
+    assert rep["named_effect"] == "damage_viscosity"
+    lo, hi = rep["strength_interval"]
+    assert lo <= 40.0 <= hi
