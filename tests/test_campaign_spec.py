@@ -179,7 +179,7 @@ def test_range_values_give_the_same_key_as_typed_values():
 # the paper's campaign files
 # ---------------------------------------------------------------------------
 EXPECTED_SIZES = {"reference": 1, "mesh_convergence": 3, "ca_star_vs_cement": 30, "fracture_sensitivity": 7,
-                  "branching_number": 7, "nf_vs_nb": 80, "demo": 6, "fracture_sensitivity_coarse": 7}
+                  "branching_number": 7, "nf_vs_nb": 80, "demo": 6, "fracture_sensitivity_coarse": 7, "ca_star_vs_cement_coarse": 16}
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED_SIZES))
