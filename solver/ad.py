@@ -141,15 +141,3 @@ def as_dual_like(x, ref):
 def clip(x: Dual, lo: float, hi: float) -> Dual:
     """Clip to [lo, hi]; derivative zero outside."""
     return where(x.v < lo, lo, where(x.v > hi, hi, x))
-
-
-def stack(items: list, axis: int = -1):
-    """Stack Duals along a new value axis (``axis`` counts value axes); plain arrays stack as numpy does."""
-    ref = next((it for it in items if isinstance(it, Dual)), None)
-    if ref is None:
-        shape = np.broadcast_shapes(*(np.shape(it) for it in items))
-        return np.stack([np.broadcast_to(it, shape) for it in items], axis=axis)
-    items = [as_dual_like(it, ref) for it in items]
-    nd = ref.v.ndim + 1
-    ax = axis if axis >= 0 else nd + axis
-    return Dual(np.stack([it.v for it in items], axis=ax), np.stack([it.d for it in items], axis=ax))

@@ -277,15 +277,6 @@ def qp_inputs(U_elem: np.ndarray, geom: Geometry, quad: Quadrature) -> np.ndarra
     return out
 
 
-def basis(geom: Geometry, quad: Quadrature) -> np.ndarray:
-    """Test/trial basis (M, nq, 3 nodes, 3): value N_a(q) and ∇N_a."""
-    M, nq = len(geom.areas), len(quad.weights)
-    B = np.empty((M, nq, 3, 3))
-    B[..., 0] = quad.bary[None]
-    B[..., 1:] = geom.grads[:, None]
-    return B
-
-
 def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = True, n_fields: int | None = None):
     """Element residuals and Jacobians of the weak form Σ_q w |e| Σ_k F_ik(q) B_ak(q).
 

@@ -160,3 +160,15 @@ def test_thick_cylinder_is_axisymmetric_and_reacts_the_load():
     L, n = fem.outward_normals(np.asarray(m.points), m.inner_edges, np.asarray(m.triangles))
     assert np.abs((L[:, None] * n).sum(axis=0)).max() < 1e-10
     assert L.sum() == pytest.approx(2 * math.pi * RI, rel=1e-2)
+
+
+def test_edge_mass_and_load_integrate_the_boundary():
+    """∫_Γ N_a N_b summed over a, b is the boundary length; ∫_Γ g N_a sums to g times it (polygon of the circle)."""
+    from solver.mesh import annulus_mesh
+
+    m = annulus_mesh(h=2.0)
+    N = len(m.points)
+    L = m.edge_lengths("inner").sum()
+    assert abs(fem.edge_mass(m.points, m.inner_edges, N).sum() - L) < 1e-12 * L
+    assert abs(fem.edge_load(m.points, m.inner_edges, N, 3.0).sum() - 3.0 * L) < 1e-12 * L
+    assert abs(L - 2 * np.pi * 5.0) < 0.01 * 2 * np.pi * 5.0  # inscribed polygon, h = 2 on r = 5
