@@ -277,6 +277,15 @@ def qp_inputs(U_elem: np.ndarray, geom: Geometry, quad: Quadrature) -> np.ndarra
     return out
 
 
+def _field_derivatives(c: Dual, M: int, nq: int):
+    """The fields a Dual coefficient depends on and its derivatives (M, nq, n_fields_used, 3) w.r.t. them."""
+    fields = sorted({s // 3 for s in c.idx})
+    D = np.zeros((M, nq, len(fields) * 3))
+    pos = {f: n for n, f in enumerate(fields)}
+    D[..., [3 * pos[s // 3] + s % 3 for s in c.idx]] = c.dd
+    return fields, D.reshape(M, nq, len(fields), 3)
+
+
 def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = True, n_fields: int | None = None):
     """Element residuals and Jacobians of the weak form Σ_q w |e| Σ_k F_ik(q) B_ak(q).
 
@@ -301,7 +310,7 @@ def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = Tr
     Fe = np.zeros((M, 3, neq))
     Ke = None
     if need_jacobian:
-        nf = n_fields if n_fields is not None else next(c for row in F for c in row if c is not None).d.shape[-1] // 3
+        nf = n_fields if n_fields is not None else next(c for row in F for c in row if c is not None).nvar // 3
         Ke = np.zeros((M, 3, neq, 3, nf))
         # trial basis per point: (M, nq, 3 slots l, 3 nodes b)
         Bt = np.empty((M, nq, 3, 3))
@@ -320,13 +329,18 @@ def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = Tr
                 Fe[:, :, i] += (wq * v).sum(axis=1)[:, None] * G[:, :, k - 1]
             if not need_jacobian:
                 continue
-            D = c.d.reshape(M, nq, nf, 3)
-            T = np.matmul(D, Bt)  # (M, nq, nf, 3 b): ∂F_ik/∂U_jb at each point
+            fields, D = _field_derivatives(c, M, nq)  # only the fields F_ik depends on
+            if not fields:
+                continue
+            T = np.matmul(D, Bt)  # (M, nq, nfc, 3 b): ∂F_ik/∂U_jb at each point
+            nfc = len(fields)
+            Ki = Ke[:, :, i]  # a view (M, 3, 3, nf); one advanced index keeps the axis order below
+            cols = slice(fields[0], fields[-1] + 1) if fields[-1] - fields[0] + 1 == nfc else fields
             if k == 0:
-                # Σ_q w N_a(q) T(q): a batched (3 x nq) @ (nq x 3nf) product per element
-                Ta = np.matmul(Wt, T.reshape(M, nq, -1)).reshape(M, 3, nf, 3)
-                Ke[:, :, i] += Ta.transpose(0, 1, 3, 2)
+                # Σ_q w N_a(q) T(q): a batched (3 x nq) @ (nq x 3nfc) product per element
+                Ta = np.matmul(Wt, T.reshape(M, nq, -1)).reshape(M, 3, nfc, 3)
+                Ki[..., cols] += Ta.transpose(0, 1, 3, 2)
             else:
                 Tq = np.einsum("mq,mqjb->mbj", wq, T)
-                Ke[:, :, i] += G[:, :, None, None, k - 1] * Tq[:, None]
+                Ki[..., cols] += G[:, :, None, None, k - 1] * Tq[:, None]
     return Fe, Ke

@@ -34,6 +34,8 @@ class StepFailure(Exception):
     """A time step could not be solved at the current dt."""
 
 
+
+
 @dataclass
 class SimulationResult:
     """Outcome of :func:`simulate`: status "ok" or "failed" (then ``reason``), time series, snapshots."""
@@ -196,7 +198,7 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         if mesh is None:
             from .mesh import annulus_mesh
 
-            mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed)
+            mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed, h_inner=options.h_inner)
         _validate_mesh(mesh)
         if phi0 is None:
             from .porosity import initial_porosity

@@ -13,6 +13,22 @@
    0.5; the P1 interpolation error alone is 0.23 % at h = 1; the FE solution is
    1.5 % too stiff at the inner wall at h = 1, i.e. the compliance error
    (energy error)²).  So 1 % is reached at h = 0.5, not at h = 1 (2 % there).
+3. The same cylinder on meshes graded towards the hole (``annulus_mesh(...,
+   h_inner=...)``: size h_inner on r = a growing linearly to h at a + 5 mm).
+   The error follows c (h_eff/a)² with the energy-weighted mean size
+   h_eff² = ∫ h(r)² r⁻⁵ dr / ∫ r⁻⁵ dr (|u''|² r ∝ r⁻⁵ for the b²/r term),
+   c = 0.33–0.42 for the L2 error and 0.40–0.72 for the max nodal error over
+   all the uniform and graded meshes measured.  Measured (triangles, max nodal,
+   relative L2):
+       h = 1, uniform          20,410   1.94 %   1.63 %
+       h = 1, h_inner = 0.5    20,788   0.77 %   0.67 %   (h_eff = 0.66)
+       h = 1, h_inner = 0.25   21,761   0.62 %   0.36 %   (h_eff = 0.52)
+       h = 1, h_inner = 0.125  23,360   0.49 %   0.28 %   (h_eff = 0.46)
+       h = 2, uniform           5,101   6.42 %   5.88 %
+       h = 2, h_inner = 1       5,194   2.98 %   2.65 %   (h_eff = 1.32)
+   So grading to h_inner = 0.5 meets 1 % at h = 1 with 2 % more elements (the
+   uniform mesh needs h = 0.5: 80,903 elements); the error then saturates at
+   the contribution of the uniform part (h_eff -> 0.41 mm as h_inner -> 0).
 """
 import functools
 import math
@@ -22,7 +38,7 @@ import pytest
 import scipy.sparse.linalg as spla
 
 fem = pytest.importorskip("solver.fem")
-from solver.mesh import annulus_mesh  # noqa: E402
+from solver.mesh import GRADING_LENGTH, annulus_mesh, annulus_size  # noqa: E402
 
 RI, RO = 5.0, 53.0
 HS = (4.0, 2.0, 1.0)
@@ -102,8 +118,8 @@ def _lame(p, E, nu, a, b):
 
 
 @functools.lru_cache(maxsize=None)
-def _solve_cylinder(h, p=10.0, E=331.0, nu=0.2):
-    m = annulus_mesh(RI, RO, h=h)
+def _solve_cylinder(h, h_inner=None, p=10.0, E=331.0, nu=0.2):
+    m = annulus_mesh(RI, RO, h=h, h_inner=h_inner)
     pts, tri = np.asarray(m.points), np.asarray(m.triangles)
     N = m.n_nodes
     K = fem.elasticity_matrix(pts, tri, E, nu).tocsr()
@@ -143,6 +159,46 @@ def test_thick_cylinder_lame():
     # c (h/a)^2 with c ~ 0.4 (see module docstring): < 2 % at h = 1, < 1 % at h = 0.5
     assert emax[2] < 0.025 and el2[2] < 0.02, (emax, el2)
     assert emax[3] < 0.01 and el2[3] < 0.01, (emax, el2)
+
+
+def _h_eff(h, h_inner):
+    """Energy-weighted mean mesh size of the graded annulus: sqrt(∫ size² r⁻⁵ dr / ∫ r⁻⁵ dr), mm."""
+    r = np.geomspace(RI, RO, 20001)
+    w = r**-5.0
+    size = annulus_size(r, h, h_inner, RI, GRADING_LENGTH)
+
+    def trap(f):  # trapezoidal rule (np.trapezoid needs numpy >= 2)
+        return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
+
+    return math.sqrt(trap(size**2 * w) / trap(w))
+
+
+def test_thick_cylinder_lame_graded_mesh():
+    """Issue target: displacement error < 1 % at h = 1 with a mesh graded towards the hole.
+
+    Tolerance: the error model c (h_eff/a)² of the module docstring.  h_inner = 0.5
+    (h_eff = 0.66 mm, (h_eff/a)² = 1.75 %): L2 <= 0.42 · 1.75 % = 0.73 % with the largest
+    c measured (0.67 % measured), max nodal 0.77 % measured (c = 0.44: with this choice the
+    size is exactly 0.1 r in the transition zone, every ring up to r = 10 has 63 nodes and
+    the mesh there has no defects; the largest c_max measured elsewhere, 0.72, would give
+    1.26 %).  h_inner = 0.25 (h_eff = 0.52, (h_eff/a)² = 1.06 %) meets 1 % even with the
+    largest c of either error (<= 0.45 % L2, <= 0.76 % max; measured 0.36 %, 0.62 %): the
+    choice with margin for the 1 % claim.
+    """
+    his = (None, 0.5, 0.25, 0.125)
+    res = [_solve_cylinder(1.0, hi) for hi in his]
+    emax = np.array([r[1] for r in res])
+    el2 = np.array([r[2] for r in res])
+    assert emax[1] < 0.01 and el2[1] < 0.01, (emax, el2)
+    assert emax[2] < 0.01 and el2[2] < 0.01, (emax, el2)
+    # convergence in h_inner (None = uniform h = 1)
+    assert np.all(np.diff(emax) < 0) and np.all(np.diff(el2) < 0), (emax, el2)
+    # the error model: c_L2 = L2 error / (h_eff/a)² within the measured band, uniform and graded,
+    # h = 1 and h = 2
+    for h, hi in [(1.0, hi) for hi in his] + [(2.0, None), (2.0, 1.0)]:
+        el2_h = _solve_cylinder(h, hi)[2]
+        c = el2_h / (_h_eff(h, hi) / RI) ** 2
+        assert 0.3 < c < 0.45, (h, hi, el2_h, c)
 
 
 def test_thick_cylinder_is_axisymmetric_and_reacts_the_load():

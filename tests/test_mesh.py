@@ -183,3 +183,130 @@ def test_meshio_round_trip(tmp_path, suffix):
     rr = read_mesh(tmp_path / f"rect{suffix}")
     assert sorted(rr.boundary_edges) == ["bottom", "left", "right", "top"]
     assert all(np.array_equal(rr.boundary_edges[k], rect.boundary_edges[k]) for k in rect.boundary_edges)
+
+
+# ---------------------------------------------------------------------------
+# graded annulus (h_inner)
+# ---------------------------------------------------------------------------
+# sha256 of (points, triangles, inner edges, outer edges) of the quasi-uniform meshes, recorded
+# with the generator as it was before the h_inner option existed (numpy 2.4 / scipy on the
+# project machine): h_inner=None must keep giving these meshes bit for bit (stored results
+# depend on them).  A different CPU/libm could change the last bits of the node coordinates
+# (cos/sin); the triangles would still match.
+_UNIFORM_SHA256 = {
+    (1.0, None): "3326df9f2ec356d42ce75b842075af93baaadeeaee7e56df08d36be2156e2898",
+    (2.0, None): "c514d918d6dcfdf28d3f971e5df212ccfb79f04a18622b641e5bd28a87fe5ac7",
+    (4.0, None): "ca69e7b0519450563a593d0f61ba57ba993c0277ab10c60e54398252d8731d7d",
+    (2.0, 1): "51a92cd85cb9c96740bd82708713d1a6cff312e810721ff7cdc7f09cdeb55bbb",
+}
+
+
+def _sha256(m):
+    import hashlib
+
+    d = hashlib.sha256()
+    for a in (m.points, m.triangles, m.boundary_edges["inner"], m.boundary_edges["outer"]):
+        d.update(np.ascontiguousarray(a).tobytes())
+    return d.hexdigest()
+
+
+@pytest.mark.parametrize("h,seed", list(_UNIFORM_SHA256))
+def test_uniform_mesh_unchanged_by_grading_option(h, seed):
+    from solver import mesh as mod
+
+    mod._annulus_cached.cache_clear()
+    m = annulus_mesh(RI, RO, h=h, seed=seed)
+    assert _sha256(m) == _UNIFORM_SHA256[(h, seed)]
+    # h_inner=None / == h (any grading_length) are the same (memoized) uniform mesh
+    assert annulus_mesh(RI, RO, h=h, seed=seed, h_inner=None) is m
+    assert annulus_mesh(RI, RO, h=h, seed=seed, h_inner=h, grading_length=2.0) is m
+
+
+@pytest.fixture(scope="module", params=[0.5, 0.25])
+def graded(request):
+    return request.param, annulus_mesh(RI, RO, h=1.0, h_inner=request.param)
+
+
+def test_graded_quality_area_boundary(graded):
+    hi, m = graded
+    assert m.min_angle_deg().min() >= 25.0
+    assert np.all(m.areas > 0)
+    assert m.areas.sum() == pytest.approx(math.pi * (RO**2 - RI**2), rel=5e-3)
+    poly = polygon_area_exact(RO, len(m.outer_edges)) - polygon_area_exact(RI, len(m.inner_edges))
+    assert m.areas.sum() == pytest.approx(poly, rel=1e-12)
+    for name, r in (("inner", RI), ("outer", RO)):
+        rr = np.hypot(*m.points[m.boundary_nodes(name)].T)
+        assert np.abs(rr - r).max() < 1e-12
+        e = m.boundary_edges[name]
+        assert len(e) == len(m.boundary_nodes(name))
+        assert np.all(np.bincount(e.ravel())[np.unique(e)] == 2)
+    others = np.setdiff1d(np.arange(m.n_nodes), np.concatenate([m.boundary_nodes("inner"), m.boundary_nodes("outer")]))
+    rr = np.hypot(*m.points[others].T)
+    assert rr.min() > RI and rr.max() < RO
+    assert m.n_nodes - len(m.edges()) + m.n_elements == 0  # annulus: Euler characteristic 0
+    # every boundary edge of the triangulation is tagged
+    assert len(m.inner_edges) + len(m.outer_edges) == len(m.boundary_nodes("inner")) + len(m.boundary_nodes("outer"))
+
+
+def test_graded_local_edge_length(graded):
+    from solver.mesh import GRADING_LENGTH, annulus_size
+
+    hi, m = graded
+    e = m.edges()
+    L = np.linalg.norm(m.points[e[:, 1]] - m.points[e[:, 0]], axis=1)
+    rm = np.hypot(*(0.5 * (m.points[e[:, 0]] + m.points[e[:, 1]])).T)
+    # on and next to the inner circle: h_inner
+    assert m.edge_lengths("inner").mean() == pytest.approx(hi, rel=0.05)
+    assert np.all(np.abs(m.edge_lengths("inner") / hi - 1) < 0.25)
+    assert L[rm < RI + hi].mean() == pytest.approx(hi, rel=0.1)
+    # beyond the transition: h
+    far = rm > RI + GRADING_LENGTH + 1.0
+    assert L[far].mean() == pytest.approx(1.0, rel=0.05)
+    assert m.edge_lengths("outer").mean() == pytest.approx(1.0, rel=0.05)
+    # everywhere, the edges follow the size function: mean ratio per 1-mm ring within 5 %
+    ratio = L / annulus_size(rm, 1.0, hi, RI, GRADING_LENGTH)
+    k = np.floor(np.maximum(rm - RI, 0.0)).astype(int)  # chord midpoints lie just inside r = RI
+    per_ring = np.bincount(k, ratio) / np.bincount(k)
+    assert np.abs(per_ring - 1).max() < 0.05, per_ring
+    # the refinement is local: a few % more elements than the uniform h = 1 mesh
+    n_uniform = annulus_mesh(RI, RO, h=1.0).n_elements
+    assert n_uniform < m.n_elements < 1.1 * n_uniform
+
+
+def test_graded_other_sizes_and_seeds():
+    from solver import mesh as mod
+
+    for h, hi, gl, seed in [(2.0, 1.0, 5.0, None), (2.0, 1.0, 5.0, 4), (1.0, 0.5, 2.5, 1), (4.0, 0.5, 5.0, None)]:
+        m = annulus_mesh(RI, RO, h=h, h_inner=hi, grading_length=gl, seed=seed)
+        assert m.min_angle_deg().min() >= 25.0, (h, hi, gl, seed)
+        assert np.all(m.areas > 0)
+        assert m.edge_lengths("inner").mean() == pytest.approx(hi, rel=0.05)
+        assert m.edge_lengths("outer").mean() == pytest.approx(h, rel=0.05)
+    # deterministic without the cache; the cache key has h_inner and grading_length
+    a = annulus_mesh(RI, RO, h=2.0, h_inner=1.0)
+    mod._annulus_cached.cache_clear()
+    b = annulus_mesh(RI, RO, h=2.0, h_inner=1.0)
+    assert a is not b and _sha256(a) == _sha256(b)
+    assert annulus_mesh(RI, RO, h=2.0, h_inner=1.0) is b
+    assert annulus_mesh(RI, RO, h=2.0, h_inner=0.5) is not b
+    c = annulus_mesh(RI, RO, h=2.0, h_inner=1.0, grading_length=10.0)
+    assert c is not b and c.n_elements > b.n_elements
+
+
+@pytest.mark.parametrize("kw,msg", [
+    (dict(h_inner=0.0), "h_inner=0.0 is out of range: allowed (0, h = 1.0]"),
+    (dict(h_inner=-0.5), "h_inner=-0.5 is out of range: allowed (0, h = 1.0]"),
+    (dict(h_inner=1.5), "h_inner=1.5 is out of range: allowed (0, h = 1.0]"),
+    (dict(h_inner=float("nan")), "h_inner=nan is out of range"),
+    (dict(h_inner=float("inf")), "h_inner=inf is out of range"),
+    (dict(h_inner="0.5"), "h_inner='0.5' is out of range"),
+    (dict(h_inner=True), "h_inner=True is out of range"),
+    (dict(h_inner=0.5, grading_length=0.0), "grading_length=0.0 is out of range: allowed a finite number > 0"),
+    (dict(h_inner=0.5, grading_length=-1.0), "grading_length=-1.0 is out of range"),
+    (dict(h_inner=0.5, grading_length=float("inf")), "grading_length=inf is out of range"),
+    (dict(h_inner=0.5, grading_length=None), "grading_length=None is out of range"),
+])
+def test_graded_validation(kw, msg):
+    with pytest.raises(ValueError) as e:
+        annulus_mesh(RI, RO, h=1.0, **kw)
+    assert msg in str(e.value)

@@ -1,0 +1,69 @@
+"""The sparse-solve interface (solver/linsolve.py) on the real coupled Jacobian.
+
+Every backend must solve the Newton system to round-off: relative residual
+below 1e-10 (the solve checks it and refines), and both backends must agree.
+PARDISO is an optional extra: its tests are skipped where it is not installed.
+"""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from solver import Parameters, linsolve
+from solver.mesh import annulus_mesh
+from solver.model import build_discretization, residual_and_jacobian, step_data
+from solver.porosity import random_porosity
+
+
+def _jacobian(h=4.0, scale=1.0):
+    p = Parameters()
+    mesh = annulus_mesh(p.r_inner, p.r_outer, h)
+    disc = build_discretization(mesh, p, random_porosity(mesh, seed=0))
+    N, nf = disc.n_nodes, disc.n_fields
+    rng = np.random.default_rng(0)
+    r = np.hypot(*disc.points.T)
+    U = np.zeros((N, nf))
+    U[:, 0:2] = 1e-3 * scale * rng.standard_normal((N, 2))
+    U[:, 2] = 200 * scale * (p.r_outer - r) / (p.r_outer - p.r_inner)
+    U[:, 3] = np.clip(1.5 - (r - p.r_inner) / 10, 0, 1)
+    data = step_data(disc, p, 0.99 * U, np.zeros(N), 1e-2)
+    R, J = residual_and_jacobian(disc, p, U, data)
+    disc.dirichlet.apply_matrix(J)
+    return sp.csr_matrix(J), R
+
+
+def _rel_res(A, x, b):
+    return np.linalg.norm(A @ x - b) / np.linalg.norm(b)
+
+
+def test_superlu_solves_the_coupled_jacobian_to_round_off():
+    J, R = _jacobian()
+    x = linsolve.factorize(J, "superlu").solve(-R)
+    assert _rel_res(J, x, -R) < 1e-10
+
+
+def test_auto_keeps_superlu_for_small_systems_and_rejects_unknown_backends():
+    assert linsolve.resolve("auto", linsolve.PARDISO_MIN_SIZE - 1) == "superlu"
+    with pytest.raises(ValueError, match="linear_solver='mumps'"):
+        linsolve.resolve("mumps")
+
+
+def test_pardiso_matches_superlu_reuses_its_analysis_and_refactorizes_stale_factors():
+    pytest.importorskip("pypardiso")
+    J1, R1 = _jacobian()
+    J2, R2 = _jacobian(scale=1.5)  # same pattern, other values: PARDISO's numerical phase only
+    assert np.array_equal(J1.indices, J2.indices) and not np.allclose(J1.data, J2.data)
+    x_ref1 = linsolve.factorize(J1, "superlu").solve(-R1)
+    x_ref2 = linsolve.factorize(J2, "superlu").solve(-R2)
+    f1 = linsolve.factorize(J1, "pypardiso")
+    x1 = f1.solve(-R1)
+    assert _rel_res(J1, x1, -R1) < 1e-10
+    assert np.linalg.norm(x1 - x_ref1) <= 1e-8 * np.linalg.norm(x_ref1)
+    n0 = linsolve.STATS["factorizations"]
+    f2 = linsolve.factorize(J2, "pypardiso")  # takes over the process-wide PARDISO instance
+    x2 = f2.solve(-R2)
+    assert _rel_res(J2, x2, -R2) < 1e-10
+    assert np.linalg.norm(x2 - x_ref2) <= 1e-8 * np.linalg.norm(x_ref2)
+    # f1's factors were replaced: solving with it must factorize J1 again, not use J2's factors
+    x1b = f1.solve(-R1)
+    assert _rel_res(J1, x1b, -R1) < 1e-10
+    assert linsolve.STATS["factorizations"] == n0 + 2
