@@ -179,7 +179,17 @@ def test_range_values_give_the_same_key_as_typed_values():
 # the paper's campaign files
 # ---------------------------------------------------------------------------
 EXPECTED_SIZES = {"reference": 1, "mesh_convergence": 3, "ca_star_vs_cement": 30, "fracture_sensitivity": 7,
-                  "branching_number": 7, "nf_vs_nb": 80, "demo": 6, "fracture_sensitivity_coarse": 7, "ca_star_vs_cement_coarse": 16}
+                  "branching_number": 7, "nf_vs_nb": 80, "demo": 6, "fracture_sensitivity_coarse": 7, "ca_star_vs_cement_coarse": 16,
+                  "ca_star_vs_cement_h2": 30, "fracture_sensitivity_h2": 7, "branching_number_h2": 7, "nf_vs_nb_h2": 80}
+
+
+@pytest.mark.parametrize("name", ["ca_star_vs_cement", "fracture_sensitivity", "branching_number", "nf_vs_nb"])
+def test_h2_campaigns_are_their_studies_at_h_2(name):
+    """The h = 2 mm versions run exactly the grid of the h = 1 mm study, only the mesh differs."""
+    full, h2 = (grid_points(load_spec(CAMPAIGNS / f"{n}.toml")) for n in (name, f"{name}_h2"))
+    assert [p.params for p in full] == [p.params for p in h2]
+    assert all(p.options["h"] == 1.0 for p in full) and all(p.options["h"] == 2.0 for p in h2)
+    assert [{**p.options, "h": 0} for p in full] == [{**p.options, "h": 0} for p in h2]
 
 
 @pytest.mark.parametrize("name", sorted(EXPECTED_SIZES))
