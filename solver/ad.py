@@ -49,9 +49,15 @@ def _combine(a, ca, b, cb, shape):
         db = b.dd if cb is None else b.dd * cb[..., None]
         return a.idx, da + db
     u, pa, pb = _union(a.idx, b.idx)
+    da = a.dd if ca is None else a.dd * ca[..., None]
+    db = b.dd if cb is None else b.dd * cb[..., None]
+    if isinstance(pa, slice) and isinstance(pb, slice) and (pa.stop == pb.start or pb.stop == pa.start):
+        # disjoint, one set entirely before the other (the common case): one concatenation, no scatter
+        parts = (da, db) if pa.start == 0 else (db, da)
+        return u, np.concatenate([np.broadcast_to(x, shape + x.shape[-1:]) for x in parts], axis=-1)
     out = np.zeros(shape + (len(u),))
-    out[..., pa] += a.dd if ca is None else a.dd * ca[..., None]
-    out[..., pb] += b.dd if cb is None else b.dd * cb[..., None]
+    out[..., pa] += da
+    out[..., pb] += db
     return u, out
 
 

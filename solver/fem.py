@@ -133,6 +133,18 @@ class BlockAssembler:
         data = np.bincount(self._slot, weights=Ke.ravel(), minlength=self.nnz)
         return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.ndof, self.ndof))
 
+    def matrix_field_major(self, Kf: np.ndarray) -> sp.csr_matrix:
+        """As :meth:`matrix` for element matrices laid out (M, nf equation, nf field, 3 a, 3 b).
+
+        The layout in which :func:`assemble_forms` accumulates (each term adds to a contiguous block);
+        the slot map is permuted once instead of the element matrices at every assembly.
+        """
+        if not hasattr(self, "_slot_fm"):
+            nf = self.n_fields
+            self._slot_fm = self._slot.reshape(-1, 3, nf, 3, nf).transpose(0, 2, 4, 1, 3).ravel()
+        data = np.bincount(self._slot_fm, weights=Kf.ravel(), minlength=self.nnz)
+        return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.ndof, self.ndof))
+
     def vector(self, Fe: np.ndarray) -> np.ndarray:
         return np.bincount(self.edofs.ravel(), weights=Fe.ravel(), minlength=self.ndof)
 
@@ -295,7 +307,8 @@ def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = Tr
     Coefficients are :class:`Dual` numbers whose derivative slots are the
     inputs of :func:`qp_inputs` flattened as ``3 * field + l``, or plain
     arrays when ``need_jacobian`` is False.  Returns ``Fe`` (M, 3, neq) and
-    ``Ke`` (M, 3, neq, 3, nf) (local node, equation; local node, field).
+    ``Ke`` (M, neq, nf, 3, 3) (equation, field; test node a, trial node b), the layout of
+    :meth:`BlockAssembler.matrix_field_major`.
 
     Because ∇N_a is constant on a P1 element, the gradient part of the test
     side is summed over quadrature points before it meets ∇N_a, and the
@@ -311,8 +324,8 @@ def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = Tr
     Ke = None
     if need_jacobian:
         nf = n_fields if n_fields is not None else next(c for row in F for c in row if c is not None).nvar // 3
-        Ke = np.zeros((M, 3, neq, 3, nf))
-        bary_pairs = (bary[:, :, None] * bary[:, None, :]).reshape(nq, 9)  # N_a N_b at the points
+        Ke = np.zeros((M, neq, nf, 3, 3))  # field-major: every term adds to a contiguous block
+        bary_pairs = bary[:, :, None] * bary[:, None, :]  # (nq, 3 a, 3 b): N_a N_b at the points
     for i, row in enumerate(F):
         for k, c in enumerate(row):
             if c is None:
@@ -328,22 +341,24 @@ def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = Tr
             if not fields:
                 continue
             nfc = len(fields)
-            Ki = Ke[:, :, i]  # a view (M, 3, 3, nf); one advanced index keeps the axis order below
+            Ki = Ke[:, i]  # a view (M, nf, 3 a, 3 b)
             cols = slice(fields[0], fields[-1] + 1) if fields[-1] - fields[0] + 1 == nfc else fields
-            # ∂F_ik/∂U_jb at point q = D_j0 N_b(q) + D_j1 ∂N_b/∂x + D_j2 ∂N_b/∂y; the sums over q are
-            # written as large matrix products (no batched 3 x 3 products, which numpy does slowly)
-            WD = (wq[:, :, None, None] * D).transpose(0, 2, 3, 1)  # (M, nfc, 3 slots, nq)
+            # ∂F_ik/∂U_jb at point q = D_j0 N_b(q) + D_j1 ∂N_b/∂x + D_j2 ∂N_b/∂y, summed over the (few)
+            # points with explicit broadcasts: no batched 3 x 3 products (slow in numpy) and no BLAS calls
+            # with an inner dimension of 3 (multithreaded BLAS made those 2x slower on a busy machine)
+            WD = wq[:, None, :, None] * D.transpose(0, 2, 1, 3)  # (M, nfc, nq, 3 slots)
             Gb = G.transpose(0, 2, 1)[:, None]  # (M, 1, 2, 3 b)
             if k == 0:
                 # Σ_q w N_a N_b D_j0 + Σ_l (Σ_q w N_a D_jl) ∂N_b/∂x_l
-                A = (WD[:, :, 0].reshape(-1, nq) @ bary_pairs).reshape(M, nfc, 3, 3)
-                H = (WD[:, :, 1:].reshape(-1, nq) @ bary).reshape(M, nfc, 2, 3)  # (m, j, l, a)
-                A += H[:, :, 0, :, None] * Gb[:, :, 0, None, :] + H[:, :, 1, :, None] * Gb[:, :, 1, None, :]
-                Ki[..., cols] += A.transpose(0, 2, 3, 1)
+                A = sum(WD[:, :, q, 0, None, None] * bary_pairs[q] for q in range(nq))  # (M, nfc, 3 a, 3 b)
+                H1 = sum(WD[:, :, q, 1, None] * bary[q] for q in range(nq))  # (M, nfc, 3 a)
+                H2 = sum(WD[:, :, q, 2, None] * bary[q] for q in range(nq))
+                A += H1[..., None] * Gb[:, :, 0, None, :] + H2[..., None] * Gb[:, :, 1, None, :]
+                Ki[:, cols] += A
             else:
                 # ∂N_a/∂x_k Σ_q w (D_j0 N_b + D_j1 ∂N_b/∂x + D_j2 ∂N_b/∂y)
-                Tq = (WD[:, :, 0].reshape(-1, nq) @ bary).reshape(M, nfc, 3)
-                s = WD[:, :, 1:].sum(axis=3)  # (M, nfc, 2)
+                Tq = sum(WD[:, :, q, 0, None] * bary[q] for q in range(nq))  # (M, nfc, 3 b)
+                s = WD[:, :, :, 1:].sum(axis=2)  # (M, nfc, 2)
                 Tq += s[:, :, 0, None] * Gb[:, :, 0] + s[:, :, 1, None] * Gb[:, :, 1]
-                Ki[..., cols] += G[:, :, None, None, k - 1] * Tq.transpose(0, 2, 1)[:, None]
+                Ki[:, cols] += G[:, None, :, None, k - 1] * Tq[:, :, None, :]
     return Fe, Ke

@@ -250,11 +250,11 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
         Fp, Kp = fem.assemble_forms(projection_forms(Xv), disc.geom, fem.VERTEX, need_jacobian, nf)
         Fe = np.concatenate([Fe, Fp], axis=2)
         if need_jacobian:
-            Ke = np.concatenate([Ke, Kp], axis=2)
+            Ke = np.concatenate([Ke, Kp], axis=1)
     R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
     if not need_jacobian:
         return R, None
-    J = disc.asm.matrix(Ke.reshape(M, 3 * nf, 3 * nf))
+    J = disc.asm.matrix_field_major(Ke)
     J.data += np.bincount(disc.boundary_slots, weights=disc.boundary_vals, minlength=disc.asm.nnz)
     return R, J
 
