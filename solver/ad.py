@@ -42,21 +42,25 @@ def _positions(p: list):
     return np.asarray(p)
 
 
+def _scatter(dd, pos, shape, n: int) -> np.ndarray:
+    """Derivative slots ``dd`` placed at positions ``pos`` of ``n`` slots (zeros elsewhere)."""
+    out = np.zeros(shape + (n,))
+    out[..., pos] = dd
+    return out
+
+
 def _combine(a, ca, b, cb, shape):
     """Derivative slots of ca * a + cb * b (ca, cb: value-shaped factors or None for 1) on the union of slots."""
-    if a.idx == b.idx:
-        da = a.dd if ca is None else a.dd * ca[..., None]
-        db = b.dd if cb is None else b.dd * cb[..., None]
-        return a.idx, da + db
-    u, pa, pb = _union(a.idx, b.idx)
     da = a.dd if ca is None else a.dd * ca[..., None]
     db = b.dd if cb is None else b.dd * cb[..., None]
+    if a.idx == b.idx:
+        return a.idx, da + db
+    u, pa, pb = _union(a.idx, b.idx)
     if isinstance(pa, slice) and isinstance(pb, slice) and (pa.stop == pb.start or pb.stop == pa.start):
         # disjoint, one set entirely before the other (the common case): one concatenation, no scatter
         parts = (da, db) if pa.start == 0 else (db, da)
         return u, np.concatenate([np.broadcast_to(x, shape + x.shape[-1:]) for x in parts], axis=-1)
-    out = np.zeros(shape + (len(u),))
-    out[..., pa] += da
+    out = _scatter(da, pa, shape, len(u))
     out[..., pb] += db
     return u, out
 
@@ -101,10 +105,7 @@ class Dual:
         """Dense derivative, shape ``v.shape + (nvar,)``."""
         if len(self.idx) == self.nv:
             return np.broadcast_to(self.dd, np.shape(self.v) + (self.nv,))
-        out = np.zeros(np.shape(self.v) + (self.nv,))
-        if self.idx:
-            out[..., list(self.idx)] = self.dd
-        return out
+        return _scatter(self.dd, list(self.idx), np.shape(self.v), self.nv)
 
     # -- arithmetic -------------------------------------------------------
     def __add__(self, o):
@@ -194,11 +195,7 @@ def where(cond: np.ndarray, a, b) -> Dual:
     if a.idx == b.idx:
         return a._new(v, np.where(c, a.dd, b.dd))
     u, pa, pb = _union(a.idx, b.idx)
-    da = np.zeros(shape + (len(u),))
-    db = np.zeros(shape + (len(u),))
-    da[..., pa] = a.dd
-    db[..., pb] = b.dd
-    return a._new(v, np.where(c, da, db), u)
+    return a._new(v, np.where(c, _scatter(a.dd, pa, shape, len(u)), _scatter(b.dd, pb, shape, len(u))), u)
 
 
 def positive_part(x: Dual) -> Dual:

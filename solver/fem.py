@@ -113,6 +113,7 @@ class BlockAssembler:
         cols = np.tile(self.edofs, (1, 3 * nf)).ravel()
         key = rows.astype(np.int64) * self.ndof + cols
         ukey, self._slot = np.unique(key, return_inverse=True)
+        self._slot_fm = None  # the same map for field-major element matrices, made on first use
         self._ukey = ukey
         self.indices = (ukey % self.ndof).astype(np.int32)
         urows = ukey // self.ndof
@@ -129,9 +130,11 @@ class BlockAssembler:
             raise ValueError("entries outside the element sparsity pattern")
         return pos
 
-    def matrix(self, Ke: np.ndarray) -> sp.csr_matrix:
-        data = np.bincount(self._slot, weights=Ke.ravel(), minlength=self.nnz)
+    def _csr(self, data: np.ndarray) -> sp.csr_matrix:
         return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.ndof, self.ndof))
+
+    def matrix(self, Ke: np.ndarray) -> sp.csr_matrix:
+        return self._csr(np.bincount(self._slot, weights=Ke.ravel(), minlength=self.nnz))
 
     def matrix_field_major(self, Kf: np.ndarray) -> sp.csr_matrix:
         """As :meth:`matrix` for element matrices laid out (M, nf equation, nf field, 3 a, 3 b).
@@ -139,11 +142,10 @@ class BlockAssembler:
         The layout in which :func:`assemble_forms` accumulates (each term adds to a contiguous block);
         the slot map is permuted once instead of the element matrices at every assembly.
         """
-        if not hasattr(self, "_slot_fm"):
+        if self._slot_fm is None:
             nf = self.n_fields
             self._slot_fm = self._slot.reshape(-1, 3, nf, 3, nf).transpose(0, 2, 4, 1, 3).ravel()
-        data = np.bincount(self._slot_fm, weights=Kf.ravel(), minlength=self.nnz)
-        return sp.csr_matrix((data, self.indices.copy(), self.indptr.copy()), shape=(self.ndof, self.ndof))
+        return self._csr(np.bincount(self._slot_fm, weights=Kf.ravel(), minlength=self.nnz))
 
     def vector(self, Fe: np.ndarray) -> np.ndarray:
         return np.bincount(self.edofs.ravel(), weights=Fe.ravel(), minlength=self.ndof)

@@ -144,20 +144,23 @@ class _Pardiso:
             STATS["factorizations"] += 1
             self._factorize()
         b = np.asarray(b, float)
-        s.set_phase(33)
-        # No internal iterative refinement (PARDISO overwrites iparm(8) with the number of steps it made, so
-        # it is reset before every call): the residual is checked below and refined only when needed.
-        s.set_iparm(8, 0)
-        x = s._call_pardiso(self.A, np.asfortranarray(b)).reshape(b.shape)
+        x = self._substitute(s, b)
         nb = max(np.linalg.norm(b), 1e-300)
         for _ in range(3):  # iterative refinement, rarely needed (perturbed pivots)
             r = b - self.A @ x
             if np.linalg.norm(r) <= 1e-10 * nb:
                 break
             STATS["refinements"] = STATS.get("refinements", 0) + 1
-            s.set_iparm(8, 0)
-            x = x + s._call_pardiso(self.A, np.asfortranarray(r)).reshape(b.shape)
+            x = x + self._substitute(s, r)
         return x
+
+    def _substitute(self, s, b: np.ndarray) -> np.ndarray:
+        """Forward and back substitution with the current factors (PARDISO phase 33)."""
+        s.set_phase(33)
+        # No internal iterative refinement (PARDISO overwrites iparm(8) with the number of steps it made, so
+        # it is reset before every call): solve() checks the residual and refines only when needed.
+        s.set_iparm(8, 0)
+        return s._call_pardiso(self.A, np.asfortranarray(b)).reshape(b.shape)
 
 
 def factorize(A: sp.spmatrix, kind: str = "auto"):

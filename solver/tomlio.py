@@ -4,6 +4,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
+#: raised by :func:`read_toml` on malformed TOML
+TOMLDecodeError = tomllib.TOMLDecodeError
+
 
 def toml_value(v) -> str:
     """TOML literal of a bool, string, int, float or list of those (floats round-trip exactly via repr)."""
@@ -26,8 +34,5 @@ def write_flat_toml(path, d: dict, header: str | None = None) -> None:
 
 
 def read_toml(path) -> dict:
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
+    """Parse the TOML file ``path`` (the one TOML reader of the project; tomli on Python 3.10)."""
     return tomllib.loads(Path(path).read_text())

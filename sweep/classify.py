@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import hashlib
 import math
-import tomllib
 from collections import OrderedDict
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -40,6 +39,8 @@ from typing import Any, Mapping, NamedTuple
 
 import numpy as np
 from scipy import ndimage as ndi
+
+from solver.tomlio import read_toml
 
 __all__ = [
     "REGIMES",
@@ -741,8 +742,7 @@ def _run_params(run_dir: Path) -> dict[str, Any]:
     f = run_dir / "params.toml"
     if not f.is_file():
         return {}
-    with open(f, "rb") as fh:
-        data = tomllib.load(fh)
+    data = read_toml(f)
     flat: dict[str, Any] = {}
     for k, v in data.items():  # accept flat or one level of tables
         if isinstance(v, dict):

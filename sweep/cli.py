@@ -33,11 +33,9 @@ def _split_sets(pairs):
 
 def _load_config(path):
     """A TOML file with optional [parameters] and [options] tables (or a flat parameter table)."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
-    data = tomllib.loads(Path(path).read_text())
+    from solver.tomlio import read_toml
+
+    data = read_toml(path)
     if "parameters" in data or "options" in data:
         return dict(data.get("parameters", {})), dict(data.get("options", {}))
     return data, {}

@@ -28,14 +28,12 @@ def _figure(nrows=1, ncols=1, size=(6, 4.5)):
 
 def paper_reported(path=None) -> dict:
     """The paper's reported figures (TOML), searched beside the project when no path is given."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
+    from solver.tomlio import read_toml
+
     cands = [Path(path)] if path else [Path(p) for p in PAPER_TOML_CANDIDATES] + [Path(__file__).resolve().parents[2] / "shared/data/paper_reported.toml"]
     for c in cands:
         if c.exists():
-            return tomllib.loads(c.read_text())
+            return read_toml(c)
     raise FileNotFoundError("paper_reported.toml not found; pass --paper PATH")
 
 

@@ -528,16 +528,14 @@ def _check_run(run: dict) -> None:
 
 def load_spec(path) -> CampaignSpec:
     """Read and validate a campaign TOML file (see the module docstring for the format)."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
+    from solver.tomlio import TOMLDecodeError, read_toml
+
     p = Path(path)
     if not p.is_file():
         raise SpecError(f"campaign spec {str(p)!r} not found")
     try:
-        d = tomllib.loads(p.read_text())
-    except tomllib.TOMLDecodeError as e:
+        d = read_toml(p)
+    except TOMLDecodeError as e:
         raise SpecError(f"{p}: invalid TOML: {e}") from None
     return spec_from_dict(d, source=str(p))
 

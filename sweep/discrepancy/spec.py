@@ -202,11 +202,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
 
 def load_spec(path) -> DiscrepancySpec:
     """Read and validate a SPEC TOML file."""
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
+    from solver.tomlio import read_toml
+
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"discrepancy spec {path} not found")
-    return spec_from_dict(tomllib.loads(path.read_text()))
+    return spec_from_dict(read_toml(path))

@@ -33,11 +33,9 @@ __all__ = ["load_twin_campaign", "run_twins", "twin_passed"]
 
 
 def load_twin_campaign(path) -> dict:
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
-    d = tomllib.loads(Path(path).read_text())
+    from solver.tomlio import read_toml
+
+    d = read_toml(path)
     for key in ("data", "conditions", "spec", "twin"):
         if key not in d:
             raise ValueError(f"twin campaign {path}: missing table [{key}]")
