@@ -66,6 +66,7 @@ class Discretization:
     dirichlet_values: np.ndarray
     lumped_mass: np.ndarray  # (N,) mm²
     inner_length: float  # mm
+    chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
 
     @property
     def n_nodes(self) -> int:
@@ -136,7 +137,7 @@ def build_discretization(mesh, params, phi0: np.ndarray) -> Discretization:
         inner_nodes=inner_n, outer_nodes=outer_n, inner_edges=inner_e, outer_edges=outer_e,
         phi0=np.asarray(phi0, float), boundary_slots=slots, boundary_vals=vals, boundary_op=op,
         inject=inject, dirichlet=asm.dirichlet_rows(dofs), dirichlet_values=values,
-        lumped_mass=lumped, inner_length=float(L.sum()),
+        lumped_mass=lumped, inner_length=float(L.sum()), chunks=fem.element_chunks(len(tri)),
     )
 
 
@@ -149,6 +150,10 @@ class StepData:
     phi_n: np.ndarray  # porosity at quadrature points (M, nq)
     S_n: np.ndarray  # saturation at quadrature points (M, nq)
     ev_n: np.ndarray  # volumetric strain per element (M,)
+
+    def take(self, sl: slice) -> "StepData":
+        """The same data restricted to the elements of ``sl`` (views, no copies)."""
+        return StepData(dt=self.dt, d_q=self.d_q[sl], phi_n=self.phi_n[sl], S_n=self.S_n[sl], ev_n=self.ev_n[sl])
 
 
 def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: float) -> StepData:
@@ -230,27 +235,51 @@ def projection_forms(X: list) -> list:
     return [[g(GX, 0) - g(S, 1), None, None], [g(GY, 0) - g(S, 2), None, None]]
 
 
-def _variables(disc: Discretization, U: np.ndarray, quad: fem.Quadrature, dual: bool = True) -> list:
+def _variables(U_elem: np.ndarray, geom: fem.Geometry, quad: fem.Quadrature, dual: bool = True) -> list:
     """Point-wise inputs as Duals (for the Jacobian) or plain arrays (residual only: no derivative cost)."""
-    inp = fem.qp_inputs(U[disc.triangles], disc.geom, quad)
+    inp = fem.qp_inputs(U_elem, geom, quad)
     M, nq = inp.shape[:2]
     flat = inp.reshape(M, nq, -1)
     return Dual.variables(flat) if dual else [flat[..., k] for k in range(flat.shape[-1])]
 
 
-def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: StepData, need_jacobian=True):
-    """Unconstrained residual (ndof,) and Jacobian (CSR) at nodal state U (N, nf)."""
+def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepData, sl: slice, need_jacobian=True):
+    """Element residuals Fe (m, 3, nf) and field-major Jacobians Ke (m, nf, nf, 3, 3) of the elements ``sl``."""
     nf = disc.n_fields
-    X = _variables(disc, U, fem.STRANG3, need_jacobian)
-    F = pointwise_forms(X, params, disc.phi0, data, nf)
-    Fe, Ke = fem.assemble_forms(F, disc.geom, fem.STRANG3, need_jacobian, nf)
-    M = len(disc.triangles)
+    U_elem = U[disc.triangles[sl]]
+    geom = fem.Geometry(disc.geom.areas[sl], disc.geom.grads[sl])
+    X = _variables(U_elem, geom, fem.STRANG3, need_jacobian)
+    F = pointwise_forms(X, params, disc.phi0[sl], data.take(sl), nf)
+    Fe, Ke = fem.assemble_forms(F, geom, fem.STRANG3, need_jacobian, nf)
     if nf == 7:
-        Xv = _variables(disc, U, fem.VERTEX, need_jacobian)
-        Fp, Kp = fem.assemble_forms(projection_forms(Xv), disc.geom, fem.VERTEX, need_jacobian, nf)
+        Xv = _variables(U_elem, geom, fem.VERTEX, need_jacobian)
+        Fp, Kp = fem.assemble_forms(projection_forms(Xv), geom, fem.VERTEX, need_jacobian, nf)
         Fe = np.concatenate([Fe, Fp], axis=2)
         if need_jacobian:
             Ke = np.concatenate([Ke, Kp], axis=1)
+    return Fe, Ke
+
+
+def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: StepData, need_jacobian=True):
+    """Unconstrained residual (ndof,) and Jacobian (CSR) at nodal state U (N, nf).
+
+    Elements are processed in chunks of a few thousand (``disc.chunks``): the dual-number
+    intermediates of a chunk stay in cache, which is faster than whole-mesh arrays, and
+    the chunks can run on several threads (:func:`solver.fem.map_chunks`).  Each chunk
+    writes its own rows of Fe and Ke, so the result does not depend on the thread count.
+    """
+    nf = disc.n_fields
+    M = len(disc.triangles)
+    Fe = np.empty((M, 3, nf))
+    Ke = np.empty((M, nf, nf, 3, 3)) if need_jacobian else None
+
+    def work(sl):
+        fe, ke = element_residuals(disc, params, U, data, sl, need_jacobian)
+        Fe[sl] = fe
+        if need_jacobian:
+            Ke[sl] = ke
+
+    fem.map_chunks(work, disc.chunks or (slice(0, M),))
     R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
     if not need_jacobian:
         return R, None

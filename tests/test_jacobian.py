@@ -74,3 +74,44 @@ def test_newton_converges_quadratically():
     e = norms[k[-3:]]
     order = np.log(e[2] / e[1]) / np.log(e[1] / e[0])
     assert order > 1.7, norms
+
+
+def test_chunked_and_threaded_assembly_give_identical_matrices(monkeypatch):
+    """Element chunks (and threads over them) only reorder work: R and J must be bitwise the same."""
+    import dataclasses
+
+    from solver import fem
+
+    p = Parameters()
+    mesh = annulus_mesh(h=4.0)
+    disc = build_discretization(mesh, p, random_porosity(mesh, seed=3))
+    assert disc.chunks == fem.element_chunks(len(disc.triangles))
+    rng = np.random.default_rng(2)
+    U = _state(disc, rng)
+    data = step_data(disc, p, 0.9 * U, np.clip(0.5 * rng.random(disc.n_nodes), 0, 1), 1e-3)
+    whole = dataclasses.replace(disc, chunks=())
+    R0, J0 = residual_and_jacobian(whole, p, U, data)
+    Rr0, _ = residual_and_jacobian(whole, p, U, data, need_jacobian=False)
+    np.testing.assert_allclose(Rr0, R0, rtol=1e-12, atol=1e-12 * np.abs(R0).max())
+    small = dataclasses.replace(disc, chunks=fem.element_chunks(len(disc.triangles), 97))
+    for threads in ("1", "3"):
+        monkeypatch.setenv("DCHFRAC_ASSEMBLY_THREADS", threads)
+        R, J = residual_and_jacobian(small, p, U, data)
+        assert np.array_equal(R, R0) and np.array_equal(J.indptr, J0.indptr) and np.array_equal(J.data, J0.data)
+        Rr, _ = residual_and_jacobian(small, p, U, data, need_jacobian=False)
+        assert np.array_equal(Rr, Rr0)
+
+
+def test_element_chunks_and_thread_setting_are_validated(monkeypatch):
+    from solver import fem
+
+    ch = fem.element_chunks(10, 4)
+    assert [(c.start, c.stop) for c in ch] == [(0, 4), (4, 8), (8, 10)]
+    with pytest.raises(ValueError, match="chunk size"):
+        fem.element_chunks(10, 0)
+    monkeypatch.setenv("DCHFRAC_ASSEMBLY_THREADS", "two")
+    with pytest.raises(ValueError, match="DCHFRAC_ASSEMBLY_THREADS.*'two'"):
+        fem.assembly_threads()
+    monkeypatch.setenv("DCHFRAC_ASSEMBLY_THREADS", "0")
+    with pytest.raises(ValueError, match="positive integer"):
+        fem.assembly_threads()

@@ -126,9 +126,11 @@ class SolverForward(ForwardModel):
             self.n_runs += len(todo)
             od = self.options.to_dict()
             if self.n_jobs != 1 and len(todo) > 1:
-                from joblib import Parallel, delayed
+                from joblib import Parallel, delayed, parallel_config
 
-                Parallel(n_jobs=self.n_jobs, backend="loky")(delayed(_run_one)(p, od, rd, True) for rd, p in todo.items())
+                # one BLAS/PARDISO thread per solver run: n_jobs runs already share the cores
+                with parallel_config(backend="loky", inner_max_num_threads=1):
+                    Parallel(n_jobs=self.n_jobs)(delayed(_run_one)(p, od, rd, True) for rd, p in todo.items())
             else:
                 for rd, p in todo.items():
                     _run_one(p, od, rd, True)

@@ -61,8 +61,11 @@ def twin_passed(twin: dict, rep: dict) -> bool:
     return bool(inside and rep["gap_after"]["total"] <= 0.5 * rep["gap_before"]["total"])
 
 
-def run_twins(campaign, results, cache, only=None, n_jobs: int = 1) -> dict:
-    """Run the twin experiments of ``campaign`` (path or dict); returns the summary dict."""
+def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
+    """Run the twin experiments of ``campaign`` (path or dict); returns the summary dict.
+
+    n_jobs : parallel solver runs (default: the spec's ``workflow.n_jobs``).
+    """
     from solver import RunOptions
 
     from .data import load_measured
@@ -73,6 +76,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int = 1) -> dict:
 
     camp = load_twin_campaign(campaign) if not isinstance(campaign, dict) else campaign
     spec = spec_from_dict(camp["spec"])
+    n_jobs = spec.wf("n_jobs") if n_jobs is None else int(n_jobs)
     dat = camp["data"]
     a, b, n = dat["times"]
     times = np.linspace(float(a), float(b), int(n))
@@ -120,7 +124,7 @@ def main(argv=None) -> int:
     ap.add_argument("--results", required=True)
     ap.add_argument("--cache", required=True)
     ap.add_argument("--only", nargs="*")
-    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: the spec's workflow.n_jobs)")
     a = ap.parse_args(argv)
     s = run_twins(a.campaign, a.results, a.cache, a.only, a.jobs)
     print(json.dumps(s, indent=1))
