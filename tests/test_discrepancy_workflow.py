@@ -186,3 +186,30 @@ def test_discretization_correction_from_a_finer_forward_model(tmp_path):
     assert rep["named_effect"] == "damage_viscosity"
     lo, hi = rep["strength_interval"]
     assert lo <= 40.0 <= hi
+
+
+def test_discretization_correction_is_refreshed_at_the_named_model(tmp_path):
+    """An effect whose discretization error grows with its strength (toy: β → β (1 + 0.05 h)) biases the
+    strength fitted with a correction made at the baseline (β = 0); re-estimating the correction at the
+    named model's fit removes the bias (fixed point β_fit (1 + 0.05·2) = 40 (1 + 0.05·2), i.e. β_fit = 40)."""
+    fwd = ToyForward(DATA_BASE, h=2.0, beta_mesh=0.05)
+    d = load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"beta": 40.0}, seed=1,
+                                observables=("p_inj", "front_radius_mean", "crack_length")))
+    reps = {}
+    for n in (0, 2):
+        spec = spec_from_dict({**{"baseline": {"effects_off": OFF}, "candidates": {"effects": OFF},
+                                  "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
+                                  "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
+                                                {"name": "E", "lower": 150.0, "upper": 700.0}]},
+                               "workflow": {"disc_refresh": n}})
+        reps[n] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.05),
+                               fine_forward=ToyForward({}, h=2.0, beta_mesh=0.05))
+        assert reps[n]["named_effect"] == "damage_viscosity"
+    # without the refresh the strength is biased low, with an interval that misses the truth
+    # (the crack-initiation time, which does not depend on h in the toy, keeps the bias below 40·(1 − 1.1/1.4))
+    lo0, hi0 = reps[0]["strength_interval"]
+    assert reps[0]["strength"] < 40.0 and hi0 < 40.0 and reps[0]["discretization_refresh"] == []
+    lo, hi = reps[2]["strength_interval"]
+    assert lo <= 40.0 <= hi and abs(reps[2]["strength"] - 40.0) < 0.3 * abs(reps[0]["strength"] - 40.0)
+    assert len(reps[2]["discretization_refresh"]) == 2
+    assert reps[2]["accepted"][0]["strength_before_refresh"] == pytest.approx(reps[0]["strength"], rel=1e-9)

@@ -24,12 +24,15 @@ Example (units mm, s, kPa)::
 
     [discretization]                 # optional: RunOptions overrides of a finer check run; the difference
     h = 6.0                          # fine − coarse of the initial baseline, per point, is subtracted from
-    dt_max = 0.01                    # the data and disc_error_fraction of it added in quadrature to σ
+    dt_max = 0.01                    # the data and disc_error_fraction of it added in quadrature to σ;
+                                     # once an effect is named, the correction is re-estimated at the
+                                     # named model's fit and the model refitted (disc_refresh times)
 
     [workflow]                       # criteria (defaults shown)
     delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5
     min_ratio = 0.15; tie_cos = 0.95; max_rounds = 3; max_refits = 2; starts = 1
     loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; n_jobs = 1; seed = 0
+    disc_error_fraction = 0.5; disc_refresh = 1
 """
 from __future__ import annotations
 
@@ -45,7 +48,7 @@ SCALINGS = ("none", "sqrt_cement")
 _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
-                    disc_error_fraction=0.5)
+                    disc_error_fraction=0.5, disc_refresh=1)
 
 
 @dataclass(frozen=True)

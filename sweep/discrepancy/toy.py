@@ -13,7 +13,9 @@ Not physics: closed-form curves whose effects have the *kind* of signatures the 
     regime    = "fracturing" if crack(t_end) > 1 mm else "porous_invasion"
 
 ``anomaly`` (not a Parameters field, read from the constructor) adds 30 sin(2π t/0.5) kPa to p:
-an effect outside the catalogue.  h (mm) comes from the constructor and adds 0.02 h (1 − e^{−t/τ}) kPa.
+an effect outside the catalogue.  h (mm) comes from the constructor and adds 0.02 h (1 − e^{−t/τ}) kPa;
+``beta_mesh`` b makes the damage-viscosity term mesh dependent, β → β (1 + b h), as an effect whose
+discretization error grows with its strength (damage on a mesh that barely resolves l_d).
 """
 from __future__ import annotations
 
@@ -27,10 +29,11 @@ __all__ = ["ToyForward"]
 class ToyForward(ForwardModel):
     """Closed-form stand-in for the solver (see the module docstring); counts evaluations in ``n_runs``."""
 
-    def __init__(self, base: dict | None = None, h: float = 8.0, anomaly: float = 0.0):
+    def __init__(self, base: dict | None = None, h: float = 8.0, anomaly: float = 0.0, beta_mesh: float = 0.0):
         self.base = dict(base or {})
         self.h = float(h)
         self.anomaly = float(anomaly)
+        self.beta_mesh = float(beta_mesh)
         self.n_runs = 0
 
     def predict_one(self, overrides: dict, times: dict) -> dict:
@@ -38,11 +41,11 @@ class ToyForward(ForwardModel):
 
         self.n_runs += 1
         p = Parameters.from_dict({**self.base, **overrides})
-        beta = p.damage_viscosity
+        beta = p.damage_viscosity * (1.0 + self.beta_mesh * self.h)
         c, v, s, kf = p.outer_compliance, p.volumetric_coupling, p.crack_permeability, p.korteweg_factor
         P0 = 0.05 * p.w_i * p.eta_o / p.kbar
         tau = 0.3 * 331.0 / p.E
-        ti = 0.2 * (1 + 0.01 * beta)
+        ti = 0.2 * (1 + 0.01 * p.damage_viscosity)
         rate = p.w_i / 50.0
 
         def pres(t):

@@ -306,15 +306,19 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
             "values": f.values()}
 
 
-def add_discretization_error(problem: Problem, fine_forward) -> dict:
+def add_discretization_error(problem: Problem, fine_forward, values: dict | None = None) -> dict:
     """Correct the data for the model's discretization error and widen the uncertainties.
 
-    err = (fine − coarse) per point, from the baseline at its initial values on ``fine_forward``'s and on
-    the workflow's discretization.  The coarse model is compared with y − err (a bias correction valid
-    when the discretization error depends weakly on the parameters), and ``disc_error_fraction``·err is
-    added in quadrature to σ for the part that does.  Returns the RMS of err per observable."""
+    err = (fine − coarse) per point, from the model at ``values`` (default: the baseline at its initial
+    values) on ``fine_forward``'s and on the workflow's discretization.  The coarse model is compared with
+    y − err (a bias correction valid when the discretization error depends weakly on the parameters), and
+    ``disc_error_fraction``·err is added in quadrature to σ for the part that does.  Always applied to
+    the data as measured, so calling it again (at other values) replaces the earlier correction.
+    Returns the RMS of err per observable."""
+    if not hasattr(problem, "y_measured"):
+        problem.y_measured, problem.sig_measured = problem.y.copy(), problem.sig.copy()
     ids = problem.data.ids
-    vals = {p.name: p.initial for p in problem.spec.calibrate}
+    vals = values if values is not None else {p.name: p.initial for p in problem.spec.calibrate}
     coarse = problem.predict([vals], ids)[0]
     jobs = [(problem.overrides(cid, vals), problem.times[cid]) for cid in ids]
     fine = dict(zip(ids, fine_forward.predict_many(jobs)))
@@ -322,9 +326,34 @@ def add_discretization_error(problem: Problem, fine_forward) -> dict:
     err = problem.model_vector(fine, allm) - problem.model_vector(coarse, allm)
     err = np.where(np.isfinite(err), err, 0.0)
     frac = problem.spec.wf("disc_error_fraction")
-    problem.y = problem.y - err                       # compare the coarse model with mesh-corrected data
-    problem.sig = np.sqrt(problem.sig**2 + (frac * err) ** 2)   # the correction itself is uncertain
+    problem.y = problem.y_measured - err              # compare the coarse model with mesh-corrected data
+    problem.sig = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2)   # the correction itself is uncertain
+    problem._cache.clear()                            # cached residuals refer to the previous correction
     return {o: float(np.sqrt(np.mean(err[problem.obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(problem.obs == o)}
+
+
+def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list, train, holdout) -> tuple:
+    """Re-estimate the discretization correction at the named model's fitted values and refit it.
+
+    The first correction is made at the baseline, without the effect the workflow has not found yet;
+    an effect that changes the discretization error (damage on a mesh that barely resolves l_d does)
+    biases its fitted strength.  Repeated ``disc_refresh`` times: correct at the current fit, refit from
+    it.  Returns (fit, accepted with updated strengths and intervals, record of each pass)."""
+    record = []
+    for _ in range(problem.spec.wf("disc_refresh")):
+        err = add_discretization_error(problem, fine_forward, fit.values())
+        fit = problem.fit(fit.params, [fit.x], train)
+        record.append({"values": _jsonable(fit.values()), "discretization_error_rms": err})
+    w = stats.series_weights(fit.r, problem.series[problem.mask(train)])
+    names = [p.name for p in fit.params]
+    out = []
+    for a in accepted:
+        j = names.index("effect:" + a["effect"])
+        cp = fit.params[j]
+        lo, hi, _ = stats.wald_interval(fit.J, fit.r, w, j, float(fit.x[j]))
+        out.append({**a, "strength_before_refresh": a["strength"], "strength": float(fit.x[j]),
+                    "strength_interval": [float(max(lo, cp.lower)), float(min(hi, cp.upper))]})
+    return fit, out, record
 
 
 def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=None, figures: bool = True,
@@ -406,6 +435,12 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
             verdict = "named"
         else:
             verdict = "unexplained_discrepancy" if loc0["systematic"] else "no_missing_effect"
+    refresh = []
+    if verdict == "named" and fine_forward is not None and spec.wf("disc_refresh") > 0:
+        current, accepted, refresh = refresh_named_model(problem, fine_forward, current, accepted, train, holdout)
+        gap_before = _gap(problem, fit0.params, fit0.x, holdout)   # same (refreshed) data for both gaps
+        gap_cur = _gap(problem, current.params, current.x, holdout)
+        loc = localize(problem, current, train)
     named = accepted[0] if accepted and verdict == "named" else None
     report = {
         "verdict": verdict,
@@ -428,6 +463,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "rounds": _jsonable(rounds),
         "forward_runs": int(getattr(forward, "n_runs", 0)),
         "discretization_error_rms": disc_err,
+        "discretization_refresh": refresh,
     }
     report = _jsonable(report)
     if out_dir is not None:
