@@ -243,20 +243,29 @@ def _variables(U_elem: np.ndarray, geom: fem.Geometry, quad: fem.Quadrature, dua
     return Dual.variables(flat) if dual else [flat[..., k] for k in range(flat.shape[-1])]
 
 
-def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepData, sl: slice, need_jacobian=True):
-    """Element residuals Fe (m, 3, nf) and field-major Jacobians Ke (m, nf, nf, 3, 3) of the elements ``sl``."""
+def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepData, sl: slice, need_jacobian=True,
+                      out: tuple | None = None):
+    """Element residuals Fe (m, 3, nf) and field-major Jacobians Ke (m, nf, nf, 3, 3) of the elements ``sl``.
+
+    ``out = (Fe, Ke)``: zeroed arrays of those shapes to accumulate into (``Ke`` None without the Jacobian).
+    """
     nf = disc.n_fields
+    m = sl.stop - sl.start
+    if out is None:
+        out = (np.zeros((m, 3, nf)), np.zeros((m, nf, nf, 3, 3)) if need_jacobian else None)
+    Fe, Ke = out
     U_elem = U[disc.triangles[sl]]
     geom = fem.Geometry(disc.geom.areas[sl], disc.geom.grads[sl])
     X = _variables(U_elem, geom, fem.STRANG3, need_jacobian)
     F = pointwise_forms(X, params, disc.phi0[sl], data.take(sl), nf)
-    Fe, Ke = fem.assemble_forms(F, geom, fem.STRANG3, need_jacobian, nf)
+    neq = len(F)
+    fem.assemble_forms(F, geom, fem.STRANG3, need_jacobian, nf,
+                       out=(Fe[:, :, :neq], Ke[:, :neq] if need_jacobian else None))
     if nf == 7:
+        # the two gradient-projection equations fill the last rows of the same arrays
         Xv = _variables(U_elem, geom, fem.VERTEX, need_jacobian)
-        Fp, Kp = fem.assemble_forms(projection_forms(Xv), geom, fem.VERTEX, need_jacobian, nf)
-        Fe = np.concatenate([Fe, Fp], axis=2)
-        if need_jacobian:
-            Ke = np.concatenate([Ke, Kp], axis=1)
+        fem.assemble_forms(projection_forms(Xv), geom, fem.VERTEX, need_jacobian, nf,
+                           out=(Fe[:, :, neq:], Ke[:, neq:] if need_jacobian else None))
     return Fe, Ke
 
 
@@ -266,18 +275,16 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
     Elements are processed in chunks of a few thousand (``disc.chunks``): the dual-number
     intermediates of a chunk stay in cache, which is faster than whole-mesh arrays, and
     the chunks can run on several threads (:func:`solver.fem.map_chunks`).  Each chunk
-    writes its own rows of Fe and Ke, so the result does not depend on the thread count.
+    accumulates into its own rows of Fe and Ke, so the result does not depend on the thread count.
     """
     nf = disc.n_fields
     M = len(disc.triangles)
-    Fe = np.empty((M, 3, nf))
-    Ke = np.empty((M, nf, nf, 3, 3)) if need_jacobian else None
+    Fe = np.zeros((M, 3, nf))
+    Ke = np.zeros((M, nf, nf, 3, 3)) if need_jacobian else None
 
     def work(sl):
-        fe, ke = element_residuals(disc, params, U, data, sl, need_jacobian)
-        Fe[sl] = fe
-        if need_jacobian:
-            Ke[sl] = ke
+        element_residuals(disc, params, U, data, sl, need_jacobian,
+                          out=(Fe[sl], Ke[sl] if need_jacobian else None))
 
     fem.map_chunks(work, disc.chunks or (slice(0, M),))
     R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
