@@ -213,3 +213,53 @@ def test_discretization_correction_is_refreshed_at_the_named_model(tmp_path):
     assert lo <= 40.0 <= hi and abs(reps[2]["strength"] - 40.0) < 0.3 * abs(reps[0]["strength"] - 40.0)
     assert len(reps[2]["discretization_refresh"]) == 2
     assert reps[2]["accepted"][0]["strength_before_refresh"] == pytest.approx(reps[0]["strength"], rel=1e-9)
+
+
+# ----------------------------------------------------------------------------- profile-likelihood interval
+def _named_fit(tmp_path, calibrate, train=("a", "b", "c"), observables=("p_inj", "front_radius_mean"), loss="soft_l1"):
+    from sweep.discrepancy.workflow import Problem
+
+    data = _twin(tmp_path, {"beta": 40.0}, observables=observables)
+    spec = _spec(cands=["damage_viscosity"], calibrate=calibrate)
+    spec.workflow.update(loss=loss, max_nfev=50)
+    prob = Problem(data, spec, ToyForward({}, h=2.0))
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    x0 = [p.to_x(p.initial) for p in spec.calibrate] + [30.0]
+    return prob, prob.fit(params, [np.array(x0)], list(train)), list(train)
+
+
+def test_profile_interval_equals_wald_for_a_model_linear_in_the_strength(tmp_path):
+    from sweep.discrepancy.workflow import profile_interval
+
+    # nothing else calibrated, one series (p_inj of one condition, so one weight) fitted by plain least
+    # squares, p_inj linear in β: Δχ²(β) is exactly the Wald parabola about the fit
+    prob, fit, train = _named_fit(tmp_path, calibrate=(), train=("b",), observables=("p_inj",), loss="linear")
+    pr = profile_interval(prob, fit, 0, train)
+    lo_w, hi_w = pr["wald"]
+    # to the optimizer's precision: least_squares stops with β̂ off the exact minimum by ~1e-4 of the half-width
+    tol = 1e-3 * (hi_w - lo_w) / 2
+    assert pr["lower"] == pytest.approx(lo_w, abs=tol) and pr["upper"] == pytest.approx(hi_w, abs=tol)
+    assert lo_w < 40.0 < hi_w
+    assert prob.fixed == {}                                   # the held value does not leak into later fits
+
+
+def test_profile_interval_matches_a_brute_force_profile(tmp_path):
+    from sweep.discrepancy.workflow import profile_interval
+
+    prob, fit, train = _named_fit(tmp_path, calibrate=("E",))
+    pr = profile_interval(prob, fit, 1, train)
+    # brute force: Δχ² of E refitted at each β of a fine grid, with the same weights and threshold
+    w = stats.series_weights(fit.r, prob.series[prob.mask(train)])
+    c_hat, _ = stats.effective_chi2(fit.r, w)
+    grid = np.linspace(pr["lower"] - 0.3 * (pr["upper"] - pr["lower"]), pr["upper"] + 0.3 * (pr["upper"] - pr["lower"]), 41)
+    d = []
+    for b in grid:
+        prob.fixed = {"effect:damage_viscosity": float(b)}
+        f = prob.fit(fit.params[:1], [fit.x[:1]], train)
+        d.append(stats.effective_chi2(f.r, w)[0] - c_hat)
+    prob.fixed = {}
+    inside = grid[np.array(d) < pr["threshold"]]
+    step = grid[1] - grid[0]
+    # the profile's ends agree with the grid's to within one grid step (plus the bracket's linear interpolation)
+    assert abs(inside.min() - pr["lower"]) <= 1.5 * step and abs(inside.max() - pr["upper"]) <= 1.5 * step
+    assert pr["lower"] < fit.values()["effect:damage_viscosity"] < pr["upper"]

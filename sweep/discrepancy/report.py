@@ -148,6 +148,11 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     for c in report["candidates"]:
         L.append(f"| {c['effect']} | {_f(c['score'])} | {_f(c['delta_bic'])} | {c['identifiable']} | {c['tied_with']} | "
                  f"{_f(c['strength'])} | {_f(c['strength_interval'])} | {_f(c['explained_fraction'])} | {c['passed']} |")
+    for eff, pr in (report.get("profiles") or {}).items():
+        L += ["", f"## Profile likelihood of `{eff}` (named model, training conditions)", "",
+              f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "
+              f"the linearized (Wald) interval was {_f(pr['wald'])}.", "", "| strength | Δχ² |", "|---|---|"]
+        L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
     L += ["", "## Held-out gap (RMS standardized residual)", "", "| observable | before | after |", "|---|---|---|"]
     for k, v in report["gap_before"].items():
         L.append(f"| {k} | {v:.4g} | {report['gap_after'].get(k, float('nan')):.4g} |")
@@ -162,7 +167,8 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     L += ["## Method", "",
           "Calibration: scipy least_squares (TRF, bounds, robust loss) on whole training conditions. Evidence is "
           "counted with per-series weights n_eff/n from the lag-1 autocorrelation of the residuals. An effect is "
-          "accepted when ΔBIC <= threshold, its Wald 95 % interval (widened by misfit) excludes 'off', it explains at "
+          "accepted when ΔBIC <= threshold, its Wald 95 % interval (widened by misfit) excludes 'off' (for the named "
+          "effect, then also its profile-likelihood interval: the others refitted at fixed strength), it explains at "
           "least the required fraction of the excess χ², and it shrinks the held-out gap; candidates whose signature "
           "lies in the span of the calibrated parameters' sensitivities are not identifiable; candidates with "
           "collinear projected signatures, or passing refits within the tie threshold in ΔBIC, are ties.", ""]

@@ -33,6 +33,8 @@ Example (units mm, s, kPa)::
     min_ratio = 0.15; tie_cos = 0.95; max_rounds = 3; max_refits = 2; starts = 1
     loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; n_jobs = 1; seed = 0
     disc_error_fraction = 0.5; disc_refresh = 1
+    interval = "profile"             # the named strength's interval: "profile" (likelihood) or "wald"
+    profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
 """
 from __future__ import annotations
 
@@ -48,7 +50,7 @@ SCALINGS = ("none", "sqrt_cement")
 _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
-                    disc_error_fraction=0.5, disc_refresh=1)
+                    disc_error_fraction=0.5, disc_refresh=1, interval="profile", profile_expand=3)
 
 
 @dataclass(frozen=True)
@@ -198,6 +200,11 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     unknown = sorted(set(wf) - set(_WF_DEFAULTS))
     if unknown:
         _bad("workflow", unknown, f"keys among {sorted(_WF_DEFAULTS)}")
+    if wf.get("interval", "profile") not in ("profile", "wald"):
+        _bad("workflow.interval", wf["interval"], '"profile" or "wald"')
+    pe = wf.get("profile_expand", 3)
+    if not isinstance(pe, int) or isinstance(pe, bool) or not 0 <= pe <= 10:
+        _bad("workflow.profile_expand", pe, "an integer in [0, 10]")
     return DiscrepancySpec(base, off, tuple(cal), names, scaling, upper, probe,
                            tuple(ids) if ids is not None else None, every, opts, wf,
                            dict(disc) if disc is not None else None)

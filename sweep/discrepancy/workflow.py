@@ -71,6 +71,7 @@ class Problem:
             if overlap:
                 raise ValueError(f"condition {cid!r} sets calibrated parameter(s) {sorted(overlap)}")
         self._cache = {}
+        self.fixed = {}   # values held fixed while others are fitted (profile likelihood), e.g. {"effect:x": 3.0}
 
     # ----------------------------------------------------------------- overrides
     def overrides(self, cid: str, values: dict) -> dict:
@@ -132,10 +133,13 @@ class Problem:
         return np.isin(self.cond, list(ids))
 
     def _values(self, params, x) -> dict:
-        return {p.name: p.from_x(xi) for p, xi in zip(params, x)}
+        return {**self.fixed, **{p.name: p.from_x(xi) for p, xi in zip(params, x)}}
+
+    def _key(self, params, x, ids) -> tuple:
+        return (tuple(p.name for p in params), tuple(np.round(x, 12)), tuple(ids), tuple(sorted(self.fixed.items())))
 
     def residual_batch(self, params, xs: list, ids) -> list:
-        keys = [(tuple(p.name for p in params), tuple(np.round(x, 12)), tuple(ids)) for x in xs]
+        keys = [self._key(params, x, ids) for x in xs]
         need = [i for i, k in enumerate(keys) if k not in self._cache]
         if need:
             preds = self.predict([self._values(params, xs[i]) for i in need], ids)
@@ -146,7 +150,7 @@ class Problem:
 
     def prediction(self, params, x, ids) -> dict:
         self.residual_batch(params, [x], ids)
-        return self._cache[(tuple(p.name for p in params), tuple(np.round(x, 12)), tuple(ids))][1]
+        return self._cache[self._key(params, x, ids)][1]
 
     def jacobian(self, params, x, ids) -> np.ndarray:
         """Forward-difference ∂r/∂x (steps toward the interior of the bounds), one batch of runs."""
@@ -356,6 +360,67 @@ def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list
     return fit, out, record
 
 
+def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841) -> dict:
+    """Profile-likelihood interval of parameter ``j`` of ``fit`` (internal coordinates).
+
+    The Wald interval trusts a linearization at the fit; when the effect's signature saturates or trades
+    against a calibrated parameter along a curved valley (β against E: a smaller β with a stiffer E
+    reproduces the early pressure), it is falsely narrow.  Here the other parameters are refitted with
+    parameter j held at trial values, and the interval is where the weighted χ² (the same per-series
+    weights n_eff/n and misfit scale as the Wald interval) rises by less than ``level``·scale (3.84: 95 %
+    for one parameter).  Each side starts at the Wald bound and doubles its distance from the fit
+    (``profile_expand`` times) until the criterion is crossed, then interpolates linearly; a side that
+    never crosses ends at the parameter's bound.  Returns lower/upper (parameter units) and the points.
+    """
+    params, x_hat = fit.params, np.asarray(fit.x, float)
+    p = params[j]
+    free = params[:j] + params[j + 1:]
+    w = stats.series_weights(fit.r, problem.series[problem.mask(ids)])
+    chi2_hat, n = stats.effective_chi2(fit.r, w)
+    scale = max(1.0, chi2_hat / max(n - len(params), 1.0))
+    thr = level * scale
+    x_lo, x_hi = p.x_bounds
+    lo_w, hi_w, _ = stats.wald_interval(fit.J, fit.r, w, j, float(x_hat[j]))
+    points = [{"value": p.from_x(x_hat[j]), "delta_chi2": 0.0}]
+
+    def dchi2(xj: float) -> float:
+        problem.fixed = {p.name: p.from_x(xj)}
+        try:
+            f = problem.fit(free, [np.delete(x_hat, j)], ids)
+        finally:
+            problem.fixed = {}
+        c, _ = stats.effective_chi2(f.r, w)
+        d = float(c - chi2_hat)
+        points.append({"value": p.from_x(xj), "delta_chi2": d, "others": _jsonable(f.values())})
+        return d
+
+    def side(sign: int) -> float:
+        bound = x_hi if sign > 0 else x_lo
+        wald = hi_w if sign > 0 else lo_w
+        step = abs(wald - x_hat[j]) if np.isfinite(wald) else 0.25 * (x_hi - x_lo)
+        step = max(step, 1e-6 * (x_hi - x_lo))
+        x_in, d_in = float(x_hat[j]), 0.0
+        for _ in range(problem.spec.wf("profile_expand") + 1):
+            xt = float(np.clip(x_hat[j] + sign * step, x_lo, x_hi))
+            if xt == x_in:
+                return bound
+            d = dchi2(xt)
+            if d >= thr:   # crossed: linear interpolation of Δχ² between the last inside point and this one
+                return x_in + (thr - d_in) / (d - d_in) * (xt - x_in)
+            x_in, d_in = xt, d
+            if xt == bound:
+                return bound
+            step *= 2.0
+        return x_in   # not crossed within the bracket: the last point that was inside (a lower bound on the width)
+
+    lo, hi = side(-1), side(+1)
+    points.sort(key=lambda q: q["value"])
+    return {"lower": float(p.from_x(lo)), "upper": float(p.from_x(hi)), "threshold": float(thr),
+            "wald": [float(p.from_x(lo_w)) if np.isfinite(lo_w) else -math.inf,
+                     float(p.from_x(hi_w)) if np.isfinite(hi_w) else math.inf],
+            "points": points}
+
+
 def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=None, figures: bool = True,
                  fine_forward=None) -> dict:
     """Steps 1–5 of the workflow; returns the report dict (written to ``out_dir`` when given).
@@ -441,6 +506,19 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         gap_before = _gap(problem, fit0.params, fit0.x, holdout)   # same (refreshed) data for both gaps
         gap_cur = _gap(problem, current.params, current.x, holdout)
         loc = localize(problem, current, train)
+    profiles = {}
+    if verdict == "named" and spec.wf("interval") == "profile":
+        # the named strengths' intervals from the profile likelihood (the Wald ones screened candidates)
+        names = [p.name for p in current.params]
+        for a in accepted:
+            j = names.index("effect:" + a["effect"])
+            pr = profile_interval(problem, current, j, train)
+            profiles[a["effect"]] = pr
+            a["strength_interval_wald"] = a["strength_interval"]
+            a["strength_interval"] = [pr["lower"], pr["upper"]]
+        if any(a["strength_interval"][0] <= get_effect(a["effect"]).off for a in accepted):
+            # the acceptance rule (the interval excludes "off") fails once the interval is honest
+            verdict = "unexplained_discrepancy" if loc0["systematic"] else "no_missing_effect"
     named = accepted[0] if accepted and verdict == "named" else None
     report = {
         "verdict": verdict,
@@ -464,6 +542,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "forward_runs": int(getattr(forward, "n_runs", 0)),
         "discretization_error_rms": disc_err,
         "discretization_refresh": refresh,
+        "profiles": profiles,
     }
     report = _jsonable(report)
     if out_dir is not None:
