@@ -183,12 +183,17 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
         ax.scatter(C[m & ~fr], cs[m & ~fr], marker="o", facecolors="none", edgecolors=col,
                    label=f"{s}: porous invasion")
         ax.scatter(C[m & fr], cs[m & fr], marker="^", color=col, label=f"{s}: fracturing")
-    sep = None
+    sep, no_fit = None, None
     if fit and fr.any() and (~fr).any() and len(C) >= 3:
         try:
             sep = fit_exponential_separatrix(C, cs, fr, ridge=ridge)
-        except ValueError:
-            sep = None
+        except ValueError as exc:
+            no_fit = str(exc)   # said on the figure: a missing line must not look like an omission
+    elif fit:
+        no_fit = "both regimes are needed to fit a separatrix"
+    if no_fit:
+        ax.text(0.5, -0.27, "no exponential separatrix: " + no_fit, transform=ax.transAxes, fontsize=6.5,
+                va="top", ha="center", wrap=True)
     if sep is not None:
         cc = np.linspace(C.min(), C.max(), 200) if np.ptp(C) > 0 else np.array([C[0] - 0.5, C[0] + 0.5])
         note = " (separable)" if sep.separable else ""
@@ -203,7 +208,7 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
               frameon=False)
     paths = _save(fig, out_path, formats)
-    return {"paths": paths, "fit": sep, "n_dropped": n_drop}
+    return {"paths": paths, "fit": sep, "no_fit_reason": no_fit, "n_dropped": n_drop}
 
 
 # --------------------------------------------------------------------------- N_f vs N_b

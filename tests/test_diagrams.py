@@ -103,6 +103,10 @@ def test_plot_ca_star(tmp_path):
     assert out["n_dropped"] == 1
     ref = fit_exponential_separatrix(C[1:], cs[1:], y[1:])
     assert out["fit"].A == pytest.approx(ref.A) and out["fit"].B == pytest.approx(ref.B)
+    assert out["no_fit_reason"] is None
+    # fracturing that decreases with Ca*: no separatrix, and the figure says why instead of omitting it
+    inv = plot_ca_star_vs_cement(df.assign(fracturing=~df["fracturing"].astype(bool)), tmp_path / "inv.png")
+    assert inv["fit"] is None and "does not increase with Ca*" in inv["no_fit_reason"]
     with pytest.raises(ValueError, match="cement"):
         plot_ca_star_vs_cement(df.drop(columns="cement"), tmp_path / "x")
 
