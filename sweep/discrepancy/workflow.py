@@ -270,6 +270,14 @@ def free_columns(fit: Fit, rtol: float = 1e-4) -> np.ndarray:
     return np.array(keep, bool) if keep else np.zeros(0, bool)
 
 
+def wald_bounds(fit: Fit, j: int, w) -> tuple[float, float, float]:
+    """Wald 95 % (lower, upper) of ``fit``'s parameter j in its units, clipped to its bounds, and its sd (x units)."""
+    p = fit.params[j]
+    lo, hi, sd = stats.wald_interval(fit.J, fit.r, w, j, float(fit.x[j]))
+    x_lo, x_hi = p.x_bounds
+    return float(p.from_x(max(lo, x_lo))), float(p.from_x(min(hi, x_hi))), sd
+
+
 def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, holdout, gap_base: dict) -> dict:
     """Joint fit of the baseline parameters and the candidate's strength; acceptance evidence."""
     spec = problem.spec
@@ -298,13 +306,13 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
     c0, n_eff = stats.effective_chi2(base_fit.r, w)
     c1, _ = stats.effective_chi2(f.r, w)
     explained = (c0 - c1) / max(c0 - n_eff, 1e-12) if c0 > n_eff else 0.0
-    lo, hi, sd = stats.wald_interval(f.J, f.r, w, len(params) - 1, float(f.x[-1]))
+    lo, hi, sd = wald_bounds(f, len(params) - 1, w)   # lo > off iff the unclipped bound is (off is the lower bound)
     gap = _gap(problem, params, f.x, holdout)
     e = get_effect(cand)
     gap_ok = bool(holdout) and gap["total"] <= (1 - spec.wf("min_gap_reduction")) * gap_base["total"]
     passed = bool(b1 - b0 <= spec.wf("delta_bic") and lo > e.off and gap_ok and explained >= spec.wf("min_explained"))
     return {"effect": cand, "fit": f, "delta_bic": float(b1 - b0), "strength": float(f.x[-1]),
-            "strength_interval": [float(max(lo, cp.lower)), float(min(hi, cp.upper))], "strength_sd": sd,
+            "strength_interval": [lo, hi], "strength_sd": sd,
             "explained_fraction": float(explained), "gap": gap, "gap_ok": gap_ok,
             "interval_excludes_off": bool(lo > e.off), "passed": passed,
             "values": f.values()}
@@ -336,7 +344,7 @@ def add_discretization_error(problem: Problem, fine_forward, values: dict | None
     return {o: float(np.sqrt(np.mean(err[problem.obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(problem.obs == o)}
 
 
-def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list, train, holdout) -> tuple:
+def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list, train) -> tuple:
     """Re-estimate the discretization correction at the named model's fitted values and refit it.
 
     The first correction is made at the baseline, without the effect the workflow has not found yet;
@@ -353,17 +361,16 @@ def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list
     out = []
     for a in accepted:
         j = names.index("effect:" + a["effect"])
-        cp = fit.params[j]
-        lo, hi, _ = stats.wald_interval(fit.J, fit.r, w, j, float(fit.x[j]))
+        lo, hi, _ = wald_bounds(fit, j, w)
         out.append({**a, "strength_before_refresh": a["strength"], "strength": float(fit.x[j]),
-                    "strength_interval": [float(max(lo, cp.lower)), float(min(hi, cp.upper))]})
+                    "strength_interval": [lo, hi]})
     return fit, out, record
 
 
 def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841) -> dict:
     """Profile-likelihood interval of parameter ``j`` of ``fit`` (internal coordinates).
 
-    The Wald interval trusts a linearization at the fit; when the effect's signature saturates or trades
+    The Wald interval (clipped to the bounds) trusts a linearization at the fit; when the effect's signature saturates or trades
     against a calibrated parameter along a curved valley (β against E: a smaller β with a stiffer E
     reproduces the early pressure), it is falsely narrow.  Here the other parameters are refitted with
     parameter j held at trial values, and the interval is where the weighted χ² (the same per-series
@@ -380,7 +387,7 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     scale = max(1.0, chi2_hat / max(n - len(params), 1.0))
     thr = level * scale
     x_lo, x_hi = p.x_bounds
-    lo_w, hi_w, _ = stats.wald_interval(fit.J, fit.r, w, j, float(x_hat[j]))
+    lo_w, hi_w, _ = wald_bounds(fit, j, w)
     points = [{"value": p.from_x(x_hat[j]), "delta_chi2": 0.0}]
 
     def dchi2(xj: float) -> float:
@@ -396,9 +403,7 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
 
     def side(sign: int) -> float:
         bound = x_hi if sign > 0 else x_lo
-        wald = hi_w if sign > 0 else lo_w
-        step = abs(wald - x_hat[j]) if np.isfinite(wald) else 0.25 * (x_hi - x_lo)
-        step = max(step, 1e-6 * (x_hi - x_lo))
+        step = max(abs(p.to_x(hi_w if sign > 0 else lo_w) - x_hat[j]), 1e-6 * (x_hi - x_lo))
         x_in, d_in = float(x_hat[j]), 0.0
         for _ in range(problem.spec.wf("profile_expand") + 1):
             xt = float(np.clip(x_hat[j] + sign * step, x_lo, x_hi))
@@ -416,8 +421,7 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     lo, hi = side(-1), side(+1)
     points.sort(key=lambda q: q["value"])
     return {"lower": float(p.from_x(lo)), "upper": float(p.from_x(hi)), "threshold": float(thr),
-            "wald": [float(p.from_x(lo_w)) if np.isfinite(lo_w) else -math.inf,
-                     float(p.from_x(hi_w)) if np.isfinite(hi_w) else math.inf],
+            "wald": [lo_w, hi_w],
             "points": points}
 
 
@@ -502,7 +506,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
             verdict = "unexplained_discrepancy" if loc0["systematic"] else "no_missing_effect"
     refresh = []
     if verdict == "named" and fine_forward is not None and spec.wf("disc_refresh") > 0:
-        current, accepted, refresh = refresh_named_model(problem, fine_forward, current, accepted, train, holdout)
+        current, accepted, refresh = refresh_named_model(problem, fine_forward, current, accepted, train)
         gap_before = _gap(problem, fit0.params, fit0.x, holdout)   # same (refreshed) data for both gaps
         gap_cur = _gap(problem, current.params, current.x, holdout)
         loc = localize(problem, current, train)
