@@ -215,6 +215,144 @@ def test_discretization_correction_is_refreshed_at_the_named_model(tmp_path):
     assert reps[2]["accepted"][0]["strength_before_refresh"] == pytest.approx(reps[0]["strength"], rel=1e-9)
 
 
+# ----------------------------------------------------------------------------- mesh realizations
+class _Offset(ToyForward):
+    """The toy model plus constant offsets {observable: value} (kPa, mm): a "fine mesh realization" whose
+    difference to the coarse toy is known exactly; NaN after ``fail_after`` s for conditions with w_i in
+    ``fail_w`` (a realization whose run stopped early)."""
+
+    def __init__(self, offsets, fail_w=(), fail_after=np.inf):
+        super().__init__({}, h=8.0)
+        self.offsets, self.fail_w, self.fail_after = offsets, tuple(fail_w), fail_after
+
+    def predict_one(self, overrides, times):
+        out = super().predict_one(overrides, times)
+        for o, dv in self.offsets.items():
+            if o in out:
+                out[o] = out[o] + dv
+                if overrides["w_i"] in self.fail_w:
+                    out[o] = np.where(np.asarray(times[o]) > self.fail_after, np.nan, out[o])
+        return out
+
+
+def _problem(tmp_path, spec=None):
+    from sweep.discrepancy.workflow import Problem
+
+    return Problem(_twin(tmp_path, {"beta": 40.0}), spec or _spec(), ToyForward({}, h=8.0))
+
+
+def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread(tmp_path):
+    import statistics
+
+    from sweep.discrepancy.workflow import add_discretization_error
+
+    prob = _problem(tmp_path)
+    y0, s0 = prob.y.copy(), prob.sig.copy()
+    offsets = {"p_inj": [0.3, -0.1, 0.7], "front_radius_mean": [0.05, 0.0, 0.1], "crack_length": [0.0, 0.02, -0.02]}
+    # realization k fails (NaN) after fail_after s in the conditions with these w_i: in a (w_i = 30) two are
+    # left after 0.8 s; in b one after 0.9 s (no spread); in c none after 0.95 s (no correction)
+    rules = [((70.0,), 0.95), ((50.0, 70.0), 0.9), ((30.0, 50.0, 70.0), 0.8)]
+    fines = [_Offset({o: d[k] for o, d in offsets.items()}, fail_w=w, fail_after=ta) for k, (w, ta) in enumerate(rules)]
+    rms = add_discretization_error(prob, fines)
+    frac = prob.spec.wf("disc_error_fraction")
+    counts = {0: 0, 1: 0, 2: 0, 3: 0}
+    for n in range(y0.size):
+        d, w_i, t = offsets[prob.obs[n]], CONDS[prob.cond[n]]["w_i"], prob.t[n]
+        used = [d[k] for k, (w, ta) in enumerate(rules) if not (w_i in w and t > ta)]
+        counts[len(used)] += 1
+        err = statistics.mean(used) if used else 0.0
+        sd = statistics.stdev(used) if len(used) >= 2 else 0.0
+        assert prob.y[n] == pytest.approx(y0[n] - err, rel=0, abs=1e-9)
+        assert prob.sig[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2 + sd**2), rel=1e-9)
+        assert prob.realization_spread[n] == pytest.approx(sd, rel=1e-9, abs=1e-12)
+    assert min(counts.values()) > 0                           # 0, 1, 2 and 3 finite realizations all occur
+    assert set(rms) == {"p_inj", "front_radius_mean", "crack_length"} and rms["p_inj"] > 0
+
+
+def test_one_forward_or_a_list_of_one_is_the_unchanged_correction(tmp_path):
+    from sweep.discrepancy.workflow import add_discretization_error
+
+    fine = ToyForward({}, h=2.0)
+    ref = _problem(tmp_path)
+    y0, s0 = ref.y.copy(), ref.sig.copy()
+    # the correction as before mesh realizations, computed here from the models' vectors
+    allm = np.ones(y0.size, bool)
+    vals = {p.name: p.initial for p in ref.spec.calibrate}
+    def vec(f):
+        return ref.model_vector({cid: f.predict_one(ref.overrides(cid, vals), ref.times[cid]) for cid in ref.data.ids}, allm)
+
+    err = vec(fine) - vec(ToyForward({}, h=8.0))
+    err = np.where(np.isfinite(err), err, 0.0)
+    y_exp = y0 - err
+    s_exp = np.sqrt(s0**2 + (ref.spec.wf("disc_error_fraction") * err) ** 2)
+    for arg in (fine, [fine], (fine,)):
+        prob = _problem(tmp_path / type(arg).__name__)
+        add_discretization_error(prob, arg)
+        assert np.array_equal(prob.y, y_exp) and np.array_equal(prob.sig, s_exp)
+        assert np.array_equal(prob.realization_spread, np.zeros(y0.size))   # one realization: no spread
+    one = run_workflow(_twin(tmp_path / "w1", {"beta": 40.0}), _spec(), ToyForward({}, h=8.0), fine_forward=fine)
+    lst = run_workflow(_twin(tmp_path / "w2", {"beta": 40.0}), _spec(), ToyForward({}, h=8.0), fine_forward=[fine])
+    assert one == lst and one["realization_spread_rms"] == {"p_inj": 0.0, "front_radius_mean": 0.0, "crack_length": 0.0}
+    assert one["discretization_realizations"] == 1
+
+
+def test_workflow_reports_the_realization_spread(tmp_path):
+    import statistics
+
+    fines = [_Offset({"p_inj": v}) for v in (0.2, 0.5, 1.1)]
+    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), _spec(), ToyForward({}, h=8.0), fine_forward=fines,
+                       out_dir=tmp_path / "out", figures=False)
+    assert rep["discretization_realizations"] == 3
+    assert rep["discretization_error_rms"]["p_inj"] == pytest.approx(statistics.mean([0.2, 0.5, 1.1]), rel=1e-9)
+    assert rep["realization_spread_rms"]["p_inj"] == pytest.approx(statistics.stdev([0.2, 0.5, 1.1]), rel=1e-9)
+    assert rep["realization_spread_rms"]["front_radius_mean"] == pytest.approx(0.0, abs=1e-12)   # identical there
+    for r in rep["discretization_refresh"]:
+        assert r["realization_spread_rms"]["p_inj"] == pytest.approx(statistics.stdev([0.2, 0.5, 1.1]), rel=1e-9)
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "3 fine mesh realization(s)" in md and "p_inj 0.458 kPa" in md
+
+
+_DISC_SPEC = {"baseline": {"effects_off": OFF}, "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0}}
+
+
+@pytest.mark.parametrize("seeds", [[3], [-1], ["a"], [2, 2], [1, True], 5])
+def test_spec_rejects_bad_mesh_seeds(seeds):
+    with pytest.raises(ValueError, match="mesh_seeds") as exc:
+        spec_from_dict({**_DISC_SPEC, "discretization": {"h": 6.0, "mesh_seeds": seeds}})
+    assert repr(seeds) in str(exc.value) and "integers >= 0" in str(exc.value)
+
+
+def test_spec_rejects_mesh_seed_with_mesh_seeds():
+    with pytest.raises(ValueError, match="mesh_seed=4"):
+        spec_from_dict({**_DISC_SPEC, "discretization": {"h": 6.0, "mesh_seed": 4, "mesh_seeds": [1, 2]}})
+
+
+def test_fine_options_one_per_mesh_realization():
+    from solver import RunOptions
+    from sweep.discrepancy.spec import fine_options
+
+    assert fine_options(spec_from_dict(_DISC_SPEC)) == []
+    one = fine_options(spec_from_dict({**_DISC_SPEC, "discretization": {"h": 6.0, "dt_max": 0.01}}))
+    assert one == [{"h": 6.0, "t_end": 1.0, "dt_max": 0.01}]              # as before: no mesh_seed key
+    spec = spec_from_dict({**_DISC_SPEC, "discretization": {"h": 6.0, "mesh_seeds": [4, 0, 9]}})
+    assert spec.discretization["mesh_seeds"] == [4, 0, 9]
+    many = fine_options(spec)
+    assert many == [{"h": 6.0, "t_end": 1.0, "mesh_seed": s} for s in (4, 0, 9)]
+    assert [RunOptions.from_dict(o).mesh_seed for o in many] == [4, 0, 9]
+
+
+def test_twins_ci_campaign_has_fine_realizations_other_than_the_datas():
+    from pathlib import Path
+
+    from sweep.discrepancy.spec import fine_options
+    from sweep.discrepancy.twins import load_twin_campaign
+
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_ci.toml")
+    opts = fine_options(spec_from_dict(camp["spec"]))
+    assert [o["mesh_seed"] for o in opts] == [1, 2, 3] and all(o["h"] == 3.0 for o in opts)
+    assert camp["data"]["mesh_seed"] not in [o["mesh_seed"] for o in opts]
+
+
 # ----------------------------------------------------------------------------- profile-likelihood interval
 def _named_fit(tmp_path, calibrate, train=("a", "b", "c"), observables=("p_inj", "front_radius_mean"), loss="soft_l1"):
     from sweep.discrepancy.workflow import Problem

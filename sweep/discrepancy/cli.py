@@ -30,7 +30,7 @@ def cmd_run(args) -> int:
     from solver import RunOptions
 
     from .data import load_measured
-    from .forward import SolverForward
+    from .forward import SolverForward, fine_forwards
     from .spec import load_spec
     from .workflow import run_workflow
 
@@ -44,11 +44,8 @@ def cmd_run(args) -> int:
     cache = Path(args.cache) if args.cache else out / "cache"
     jobs = args.jobs if args.jobs is not None else spec.wf("n_jobs")
     fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
-    fine = None
-    if spec.discretization:
-        fine = SolverForward(spec.baseline_overrides(), RunOptions.from_dict({**spec.options, **spec.discretization}),
-                             cache, n_jobs=jobs)
-    rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
+    fine = fine_forwards(spec, cache, jobs)          # one per mesh realization ([discretization] mesh_seeds)
+    rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine or None)
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
                                           f"{rep['strength_interval']}" if rep["named_effect"] else ""))
     print(f"held-out gap (total): before {rep['gap_before'].get('total', float('nan')):.3g}, after "

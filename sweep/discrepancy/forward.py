@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["ForwardModel", "SolverForward", "params_hash", "observables_from_timeseries"]
+__all__ = ["ForwardModel", "SolverForward", "fine_forwards", "params_hash", "observables_from_timeseries"]
 
 
 class ForwardModel:
@@ -149,6 +149,21 @@ class SolverForward(ForwardModel):
         if "regime" in times:
             out["regime"] = _regime(rd) if ok else None
         return out
+
+
+def fine_forwards(spec, cache_dir, n_jobs: int = 1) -> list:
+    """The workflow's fine check models: one SolverForward per entry of :func:`.spec.fine_options` (one per
+    mesh realization with ``[discretization] mesh_seeds``, else one; [] without ``[discretization]``).
+
+    The data are one realization of mesh and porosity field; the workflow corrects with the realizations'
+    mean and adds their spread to σ (workflow.add_discretization_error).  One cache folder serves all:
+    the cache key hashes the options, mesh_seed included."""
+    from solver import RunOptions
+
+    from .spec import fine_options
+
+    return [SolverForward(spec.baseline_overrides(), RunOptions.from_dict(o), cache_dir, n_jobs=n_jobs)
+            for o in fine_options(spec)]
 
 
 def _regime(rd: Path):

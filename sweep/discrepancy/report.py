@@ -140,6 +140,14 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     if report["not_identifiable"]:
         L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null): "
               f"{report['not_identifiable']}", ""]
+    if report.get("discretization_error_rms") is not None:
+        def units(d):
+            return ", ".join(f"{o} {v:.3g} {UNITS.get(o, '')}" for o, v in (d or {}).items())
+
+        L += [f"Discretization correction at the initial baseline (RMS of fine − coarse): "
+              f"{units(report['discretization_error_rms'])}; spread over the "
+              f"{report.get('discretization_realizations', 1)} fine mesh realization(s) (RMS of their sample std, "
+              f"added in quadrature to σ): {units(report.get('realization_spread_rms'))}.", ""]
     L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}.", "",
           "## Calibrated baseline", "", _f(report["calibrated_baseline"]), "",
           "## Candidates (first round)", "",

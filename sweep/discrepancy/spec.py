@@ -27,6 +27,11 @@ Example (units mm, s, kPa)::
     dt_max = 0.01                    # the data and disc_error_fraction of it added in quadrature to σ;
                                      # once an effect is named, the correction is re-estimated at the
                                      # named model's fit and the model refitted (disc_refresh times)
+    mesh_seeds = [1, 2, 3]           # optional (not a RunOptions field): one fine run per mesh realization
+                                     # (mesh_seed = s: perturbed mesh and its element-wise porosity field),
+                                     # distinct integers >= 0, at least 2.  The data are one realization the
+                                     # model cannot know: the mean over realizations is the correction and
+                                     # their sample std (kPa, mm) is added in quadrature to σ
 
     [workflow]                       # criteria (defaults shown)
     delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5
@@ -44,7 +49,7 @@ from pathlib import Path
 
 from solver.effects import EFFECTS, get_effect
 
-__all__ = ["CalibParam", "DiscrepancySpec", "load_spec", "spec_from_dict", "SCALINGS"]
+__all__ = ["CalibParam", "DiscrepancySpec", "load_spec", "spec_from_dict", "fine_options", "SCALINGS"]
 
 SCALINGS = ("none", "sqrt_cement")
 _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
@@ -126,8 +131,39 @@ class DiscrepancySpec:
         return float(self.probe.get(name, get_effect(name).probe))
 
 
+def fine_options(spec: DiscrepancySpec) -> list[dict]:
+    """RunOptions dicts of the fine check runs, one per mesh realization ([] without ``[discretization]``).
+
+    ``[options]`` overridden by ``[discretization]`` without ``mesh_seeds`` (not a RunOptions field): one
+    entry, or with ``mesh_seeds`` one entry per seed s with ``mesh_seed = s``.  The measured data are one
+    realization of mesh and porosity field, which the model cannot know; the realizations' mean is the
+    better correction and their spread an uncertainty of the comparison (see workflow.add_discretization_error).
+    """
+    if not spec.discretization:    # absent (or empty, as before: no fine runs)
+        return []
+    disc = {k: v for k, v in spec.discretization.items() if k != "mesh_seeds"}
+    base = {**spec.options, **disc}
+    seeds = spec.discretization.get("mesh_seeds")
+    return [base] if seeds is None else [{**base, "mesh_seed": s} for s in seeds]
+
+
 def _bad(key, value, allowed):
     raise ValueError(f"discrepancy spec: {key}={value!r} is not allowed: {allowed}")
+
+
+def _check_mesh_seeds(disc: dict) -> None:
+    """``[discretization] mesh_seeds``: a list of at least 2 distinct integers >= 0, without ``mesh_seed``."""
+    seeds = disc["mesh_seeds"]
+    allowed = "a list of at least 2 distinct integers >= 0 (one fine run per mesh realization)"
+    if not isinstance(seeds, (list, tuple)) or len(seeds) < 2:
+        _bad("discretization.mesh_seeds", seeds, allowed)
+    for s in seeds:
+        if not isinstance(s, int) or isinstance(s, bool) or s < 0:
+            _bad("discretization.mesh_seeds", seeds, f"{allowed}; {s!r} is not")
+    if len(set(seeds)) != len(seeds):
+        _bad("discretization.mesh_seeds", seeds, f"{allowed}; a repeated seed repeats a realization")
+    if "mesh_seed" in disc:
+        _bad("discretization.mesh_seed", disc["mesh_seed"], "absent when mesh_seeds sets it per realization")
 
 
 def spec_from_dict(d: dict) -> DiscrepancySpec:
@@ -192,8 +228,10 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
         raise ValueError(f"discrepancy spec [options]: {exc}") from None
     disc = d.get("discretization")
     if disc is not None:
+        if "mesh_seeds" in disc:
+            _check_mesh_seeds(disc)
         try:
-            RunOptions.from_dict({**opts, **disc})
+            RunOptions.from_dict({**opts, **{k: v for k, v in disc.items() if k != "mesh_seeds"}})
         except ValueError as exc:
             raise ValueError(f"discrepancy spec [discretization]: {exc}") from None
     wf = dict(d.get("workflow", {}))

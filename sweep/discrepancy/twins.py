@@ -69,7 +69,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
     from solver import RunOptions
 
     from .data import load_measured
-    from .forward import SolverForward
+    from .forward import SolverForward, fine_forwards
     from .spec import spec_from_dict
     from .twin import make_twin
     from .workflow import run_workflow
@@ -99,18 +99,18 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
                            noise=dat.get("noise"), seed=int(dat.get("seed", 0)),
                            observables=tuple(dat.get("observables", ("p_inj", "front_radius_mean"))), regime=False)
         fwd = SolverForward(spec.baseline_overrides(), wf_opts, cache / "workflow", n_jobs=n_jobs)
-        fine = None
-        if spec.discretization:
-            fine = SolverForward(spec.baseline_overrides(), RunOptions.from_dict({**spec.options, **spec.discretization}),
-                                 cache / "workflow", n_jobs=n_jobs)
-        rep = run_workflow(load_measured(folder), spec, fwd, results / name, fine_forward=fine)
+        # one fine model per mesh realization ([spec.discretization] mesh_seeds): the data are one realization
+        # (their own mesh_seed) the workflow cannot know; the cache key includes mesh_seed
+        fine = fine_forwards(spec, cache / "workflow", n_jobs)
+        rep = run_workflow(load_measured(folder), spec, fwd, results / name, fine_forward=fine or None)
         summary[name] = {"hidden": twin.get("hidden", {}), "expect": twin["expect"], "verdict": rep["verdict"],
                          "named_effect": rep["named_effect"], "strength": rep["strength"],
                          "strength_interval": rep["strength_interval"], "tie": rep["tie"],
                          "not_identifiable": rep["not_identifiable"],
                          "gap_before": rep["gap_before"].get("total"), "gap_after": rep["gap_after"].get("total"),
                          "passed": twin_passed(twin, rep), "wall_time_s": round(time.time() - t0, 1),
-                         "forward_runs": rep["forward_runs"], "data_runs": gen.n_runs}
+                         "forward_runs": rep["forward_runs"], "data_runs": gen.n_runs,
+                         "realization_spread_rms": rep["realization_spread_rms"]}
         results.mkdir(parents=True, exist_ok=True)
         summary_path.write_text(json.dumps(summary, indent=1) + "\n")
     return summary

@@ -318,6 +318,33 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
             "values": f.values()}
 
 
+def realizations(fine_forward) -> list:
+    """The fine forward models as a list: None -> [], one model -> [model], a list/tuple -> its models."""
+    if fine_forward is None:
+        return []
+    return list(fine_forward) if isinstance(fine_forward, (list, tuple)) else [fine_forward]
+
+
+def realization_mean_spread(fines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-point mean and sample standard deviation (ddof = 1) over realizations, rows of ``fines`` (k, n).
+
+    Only finite values count (a realization that failed at a point is left out there); the mean is NaN
+    where none is finite, the spread 0 where fewer than 2 are.  Units those of ``fines`` (kPa, mm)."""
+    fines = np.atleast_2d(np.asarray(fines, float))
+    ok = np.isfinite(fines)
+    cnt = ok.sum(axis=0)
+    vals = np.where(ok, fines, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(cnt > 0, vals.sum(axis=0) / cnt, np.nan)
+        ss = np.where(ok, (fines - mean) ** 2, 0.0).sum(axis=0)
+        spread = np.where(cnt >= 2, np.sqrt(ss / (cnt - 1)), 0.0)
+    return mean, spread
+
+
+def _rms_per_observable(problem: Problem, v: np.ndarray) -> dict:
+    return {o: float(np.sqrt(np.mean(v[problem.obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(problem.obs == o)}
+
+
 def add_discretization_error(problem: Problem, fine_forward, values: dict | None = None) -> dict:
     """Correct the data for the model's discretization error and widen the uncertainties.
 
@@ -326,22 +353,38 @@ def add_discretization_error(problem: Problem, fine_forward, values: dict | None
     y − err (a bias correction valid when the discretization error depends weakly on the parameters), and
     ``disc_error_fraction``·err is added in quadrature to σ for the part that does.  Always applied to
     the data as measured, so calling it again (at other values) replaces the earlier correction.
-    Returns the RMS of err per observable."""
+
+    ``fine_forward`` may also be a list/tuple of k forward models, realizations of the fine mesh (other
+    mesh seeds: other perturbed meshes and element-wise porosity fields).  The measured data are one such
+    realization and the model cannot know which: fine − coarse from any single realization carries that
+    realization's own deviation (1.5 kPa in p_inj for the solver at h = 3 mm), which no same-mesh
+    fine/coarse difference sees.  Then err = mean_k(fine_k) − coarse (the mean is the better correction)
+    and the realizations' sample std s (ddof = 1; kPa, mm) is an uncertainty of the comparison:
+    σ² = σ_measured² + (disc_error_fraction·err)² + s².  Non-finite values are left out per point (s = 0
+    where fewer than 2 realizations are finite, err = 0 where none is or the coarse model is not).  With
+    one model s = 0 and the result is that of the single model.  The per-point s is kept in
+    ``problem.realization_spread``.  Returns the RMS of err per observable."""
+    fines_fw = realizations(fine_forward)
+    if not fines_fw:
+        raise ValueError("add_discretization_error: no fine forward model")
     if not hasattr(problem, "y_measured"):
         problem.y_measured, problem.sig_measured = problem.y.copy(), problem.sig.copy()
     ids = problem.data.ids
     vals = values if values is not None else {p.name: p.initial for p in problem.spec.calibrate}
     coarse = problem.predict([vals], ids)[0]
     jobs = [(problem.overrides(cid, vals), problem.times[cid]) for cid in ids]
-    fine = dict(zip(ids, fine_forward.predict_many(jobs)))
     allm = np.ones(problem.y.size, bool)
-    err = problem.model_vector(fine, allm) - problem.model_vector(coarse, allm)
+    fines = [problem.model_vector(dict(zip(ids, f.predict_many(jobs))), allm) for f in fines_fw]
+    fine, spread = realization_mean_spread(np.vstack(fines))
+    err = fine - problem.model_vector(coarse, allm)
     err = np.where(np.isfinite(err), err, 0.0)
     frac = problem.spec.wf("disc_error_fraction")
     problem.y = problem.y_measured - err              # compare the coarse model with mesh-corrected data
-    problem.sig = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2)   # the correction itself is uncertain
+    # the correction itself is uncertain (frac·err), and so is which mesh realization the data are (spread)
+    problem.sig = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2 + spread**2)
+    problem.realization_spread = spread
     problem._cache.clear()                            # cached residuals refer to the previous correction
-    return {o: float(np.sqrt(np.mean(err[problem.obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(problem.obs == o)}
+    return _rms_per_observable(problem, err)
 
 
 def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list, train) -> tuple:
@@ -350,12 +393,14 @@ def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list
     The first correction is made at the baseline, without the effect the workflow has not found yet;
     an effect that changes the discretization error (damage on a mesh that barely resolves l_d does)
     biases its fitted strength.  Repeated ``disc_refresh`` times: correct at the current fit, refit from
-    it.  Returns (fit, accepted with updated strengths and intervals, record of each pass)."""
+    it.  ``fine_forward``: one forward model or a list of mesh realizations (see add_discretization_error).
+    Returns (fit, accepted with updated strengths and intervals, record of each pass)."""
     record = []
     for _ in range(problem.spec.wf("disc_refresh")):
         err = add_discretization_error(problem, fine_forward, fit.values())
         fit = problem.fit(fit.params, [fit.x], train)
-        record.append({"values": _jsonable(fit.values()), "discretization_error_rms": err})
+        record.append({"values": _jsonable(fit.values()), "discretization_error_rms": err,
+                       "realization_spread_rms": _rms_per_observable(problem, problem.realization_spread)})
     w = stats.series_weights(fit.r, problem.series[problem.mask(train)])
     names = [p.name for p in fit.params]
     out = []
@@ -429,11 +474,15 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
                  fine_forward=None) -> dict:
     """Steps 1–5 of the workflow; returns the report dict (written to ``out_dir`` when given).
 
-    fine_forward : optional forward model on a finer discretization; its difference to ``forward`` at the
-    initial baseline is added in quadrature to the measured uncertainties (see add_discretization_error).
+    fine_forward : optional forward model on a finer discretization, or a list of them (realizations of
+    the fine mesh and porosity field); its difference to ``forward`` at the initial baseline corrects the
+    data and widens the measured uncertainties, and the realizations' spread is added in quadrature
+    (see add_discretization_error).
     """
     problem = Problem(data, spec, forward)
+    fine_forward = realizations(fine_forward) or None
     disc_err = add_discretization_error(problem, fine_forward) if fine_forward is not None else None
+    spread_rms = _rms_per_observable(problem, problem.realization_spread) if fine_forward is not None else None
     ids = data.ids
     holdout = spec.holdout(ids)
     train = [i for i in ids if i not in holdout]
@@ -545,6 +594,8 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "rounds": _jsonable(rounds),
         "forward_runs": int(getattr(forward, "n_runs", 0)),
         "discretization_error_rms": disc_err,
+        "realization_spread_rms": spread_rms,
+        "discretization_realizations": len(fine_forward) if fine_forward is not None else 0,
         "discretization_refresh": refresh,
         "profiles": profiles,
     }
