@@ -286,7 +286,8 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
         element_residuals(disc, params, U, data, sl, need_jacobian,
                           out=(Fe[sl], Ke[sl] if need_jacobian else None))
 
-    fem.map_chunks(work, disc.chunks or (slice(0, M),))
+    n = fem.assembly_threads()
+    fem.map_chunks(work, (disc.chunks or (slice(0, M),)) if n <= 1 else fem.thread_chunks(M, n))
     R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
     if not need_jacobian:
         return R, None

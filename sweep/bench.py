@@ -2,8 +2,9 @@
 
 Measured (wall-clock seconds, this machine):
 * one Newton iteration at h = 2, 1, 0.5 mm split into residual+Jacobian
-  assembly, factorization and solve, for the default backend and SuperLU;
-* a 0.2 s coupled run at h = 2 mm (wall time, accepted steps, factorizations
+  assembly (on 1 thread and on every core; compiled or numpy kernels,
+  ``solver.kernels``), factorization and solve, for the default backend and SuperLU;
+* a 0.2 s coupled run at h = 2 mm (assembly on every core) (wall time, accepted steps, factorizations
   per accepted step, wall seconds per simulated second);
 * the reference case at h = 2 mm to 2 s (not with ``--quick``);
 * optionally the paper's reference run (h = 1 mm to 2 s).
@@ -12,15 +13,42 @@ Speed is measured here, never by timed tests.
 from __future__ import annotations
 
 import json
+import os
 import platform
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 
+def _best(fn, repeats: int = 3) -> float:
+    """Best wall time (s) of ``repeats`` calls after one warm-up call (compiled kernels, caches, pools)."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+@contextmanager
+def _assembly_threads(n: int):
+    """Set DCHFRAC_ASSEMBLY_THREADS to ``n`` inside the block (solver.fem.assembly_threads)."""
+    old = os.environ.get("DCHFRAC_ASSEMBLY_THREADS")
+    os.environ["DCHFRAC_ASSEMBLY_THREADS"] = str(n)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("DCHFRAC_ASSEMBLY_THREADS")
+        else:
+            os.environ["DCHFRAC_ASSEMBLY_THREADS"] = old
+
+
 def _newton_iteration(h: float, backends) -> dict:
-    from solver import Parameters, linsolve
+    from solver import Parameters, kernels, linsolve
     from solver.mesh import annulus_mesh
     from solver.model import build_discretization, residual_and_jacobian, step_data
     from solver.porosity import random_porosity
@@ -40,15 +68,20 @@ def _newton_iteration(h: float, backends) -> dict:
     U[:, 2] = 200 * (p.r_outer - r) / (p.r_outer - p.r_inner)
     U[:, 3] = np.clip(1.5 - (r - p.r_inner) / 10, 0, 1)
     data = step_data(disc, p, 0.99 * U, np.zeros(N), 1e-2)
-    t0 = time.perf_counter()
-    R, _ = residual_and_jacobian(disc, p, U, data, need_jacobian=False)
-    t_res = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t_res = _best(lambda: residual_and_jacobian(disc, p, U, data, need_jacobian=False))
+    # assembly on 1 thread (what each solver of a campaign gets) and on every core (a single run; the
+    # PARDISO factorization below uses every core too): best of 3 after a warm-up call
+    threads = sorted({1, os.cpu_count() or 1})
+    t_threads = {}
+    for n in threads:
+        with _assembly_threads(n):
+            t_threads[n] = _best(lambda: residual_and_jacobian(disc, p, U, data))
+    t_asm, t_asm_par = t_threads[1], t_threads[threads[-1]]
     R, J = residual_and_jacobian(disc, p, U, data)
-    t_asm = time.perf_counter() - t0
     disc.dirichlet.apply_matrix(J)
     out = {"h_mm": h, "nodes": N, "elements": len(disc.triangles), "unknowns": N * nf, "jacobian_nnz": int(J.nnz),
-           "mesh_s": t_mesh, "setup_s": t_setup, "residual_s": t_res, "residual_and_jacobian_s": t_asm, "backends": {}}
+           "mesh_s": t_mesh, "setup_s": t_setup, "kernels": kernels.backend(), "residual_s": t_res,
+           "residual_and_jacobian_s": t_asm, "residual_and_jacobian_s_by_threads": t_threads, "backends": {}}
     for kind in backends:
         if kind == "superlu" and len(backends) > 1 and N * nf > 150_000:
             out["backends"][kind] = {"skipped": "SuperLU above 150,000 unknowns takes minutes and GBs; measured only below"}
@@ -65,8 +98,11 @@ def _newton_iteration(h: float, backends) -> dict:
         f.solve(R)
         t_sol = time.perf_counter() - t0
         total = t_asm + t_fac + t_sol
+        total_par = t_asm_par + t_fac + t_sol
         out["backends"][kind] = {"factorize_first_s": t_first, "factorize_s": t_fac, "solve_s": t_sol, "newton_iteration_s": total,
-                                 "assembly_fraction": t_asm / total}
+                                 "assembly_fraction": t_asm / total,
+                                 f"newton_iteration_s_{threads[-1]}_threads": total_par,
+                                 f"assembly_fraction_{threads[-1]}_threads": t_asm_par / total_par}
     return out
 
 
@@ -74,9 +110,11 @@ def _coupled_run(h: float, t_end: float) -> dict:
     """The reference experiment (Parameters() defaults: C = 1.2 %, random porosity) at mesh size h to t_end."""
     from solver import Parameters, RunOptions, simulate
 
-    res = simulate(Parameters(), RunOptions(h=h, t_end=t_end, snapshot_times=[]))
+    threads = os.cpu_count() or 1  # a single run: assembly on every core, as the factorization
+    with _assembly_threads(threads):
+        res = simulate(Parameters(), RunOptions(h=h, t_end=t_end, snapshot_times=[]))
     n = len(res.timeseries)
-    return {"h_mm": h, "t_end_s": t_end, "status": res.status, "wall_s": res.wall_time, "accepted_steps": n,
+    return {"h_mm": h, "t_end_s": t_end, "assembly_threads": threads, "status": res.status, "wall_s": res.wall_time, "accepted_steps": n,
             "rejected_steps": len(res.rejected_steps), "factorizations": res.factorizations,
             "factorizations_per_step": res.factorizations / max(n, 1),
             "wall_s_per_sim_s": res.wall_time / t_end,

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from solver import Parameters, RunOptions
+from solver import Parameters, RunOptions, kernels
 from solver.mesh import annulus_mesh
 from solver.model import build_discretization, residual_and_jacobian, step_data
 from solver.porosity import random_porosity
@@ -21,9 +21,14 @@ def _state(disc, rng):
     return U
 
 
+@pytest.mark.parametrize("backend", ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
+    not kernels.numba_available(), reason="numba not installed"))])
 @pytest.mark.parametrize("changes", [{}, {"korteweg_factor": 0.0}, {"crack_permeability": 0.5, "outer_compliance": 0.1, "volumetric_coupling": 0.0}])
-def test_taylor_remainder_is_second_order(changes):
-    """|R(U + εV) − R(U) − ε J V| must fall as ε²: halving the slope test over three decades."""
+def test_taylor_remainder_is_second_order(changes, backend, monkeypatch):
+    """|R(U + εV) − R(U) − ε J V| must fall as ε²: halving the slope test over three decades.
+
+    Run with the numpy element kernels and the compiled ones (solver.kernels)."""
+    monkeypatch.setenv("DCHFRAC_KERNELS", backend)
     p = Parameters(**changes)
     mesh = annulus_mesh(h=4.0)
     disc = build_discretization(mesh, p, random_porosity(mesh, seed=3))

@@ -1,0 +1,201 @@
+"""Compiled assembly kernels (optional: numba), with the numpy path as the reference.
+
+The element Jacobian of a weak-form term Σ_q w |e| F_ik(q) B_ak(q) is a contraction of the
+point-wise derivatives ∂F_ik/∂(input slot) with the P1 shape functions (see
+:func:`solver.fem.assemble_forms`).  In numpy that contraction needs broadcast temporaries per
+(term, field) and a dense copy of the sparse dual derivatives; compiled, it is one pass over
+the elements with a 3 x 3 accumulator, and the CSR scatter is a gather over the inverted slot map
+(:class:`SlotSum`), which can run on threads, instead of a ``bincount`` over 9 M weights.  Both give the same matrices to round-off (summation order differs);
+``tests/test_kernels.py`` checks that and the Taylor tests run on whichever path is active.
+
+Selection: ``DCHFRAC_KERNELS`` = ``auto`` (default: numba when importable), ``numba`` (error if
+it is not installed) or ``numpy``.  numba is an optional extra (``pip install dchfrac[fast]``);
+the code runs without it.  Kernels release the GIL (``nogil``), so the element chunks of
+:func:`solver.fem.map_chunks` run them on several threads; they are serial inside, so they never
+compete with a campaign's one-solver-per-core parallelism or nest thread pools.
+"""
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+
+import numpy as np
+
+__all__ = ["backend", "numba_available", "forms_jacobian", "SlotSum", "qp_inputs"]
+
+_CHOICES = ("auto", "numba", "numpy")
+
+
+@lru_cache(maxsize=None)
+def numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def backend() -> str:
+    """The active kernel backend, ``"numba"`` or ``"numpy"``, from ``DCHFRAC_KERNELS``."""
+    v = os.environ.get("DCHFRAC_KERNELS", "auto").strip().lower()
+    if v not in _CHOICES:
+        raise ValueError(f"DCHFRAC_KERNELS must be one of {_CHOICES}, got {v!r}")
+    if v == "numpy":
+        return "numpy"
+    if v == "numba" and not numba_available():
+        raise ValueError("DCHFRAC_KERNELS='numba' but numba is not installed (pip install numba, or dchfrac[fast])")
+    return "numba" if numba_available() else "numpy"
+
+
+# ---------------------------------------------------------------- kernels (pure Python bodies)
+def _forms_jacobian_py(Ke, wq, bary, G, dds, t_eq, t_k, t_off, s_field, s_l):  # pragma: no cover - compiled
+    """Ke[e, i, f, a, b] += Σ_q wq[e,q] Σ_{slots s of (i, f)} dd[e,q,s] T_a^k(q) B_b^l(q).
+
+    Term t (coefficient F_ik, i = t_eq[t], k = t_k[t]) has derivatives dds[t] (M, nq, ns_t) with
+    respect to its slots t_off[t] ... t_off[t] + ns_t - 1 of s_field (the field) and s_l (l).  Test side T_a^0 = N_a(q), T_a^k = ∂N_a/∂x_{k-1} (constant on the
+    element); trial side B_b^0 = N_b(q), B_b^l = ∂N_b/∂x_{l-1}.  Whichever side is constant is pulled
+    out of the point sum.  All terms of one element are added before the next element, so its
+    block of Ke (neq nf 9 doubles) stays in L1.
+    """
+    M, nq = wq.shape
+    wd = np.empty(nq)
+    for e in range(M):
+        for term in range(len(dds)):
+          dd = dds[term]
+          i = t_eq[term]
+          k = t_k[term]
+          for s in range(dd.shape[2]):
+            f = s_field[t_off[term] + s]
+            l = s_l[t_off[term] + s]
+            for q in range(nq):
+                wd[q] = wq[e, q] * dd[e, q, s]
+            if k == 0 and l == 0:
+                # Σ_q w D N_a N_b: the only case needing the point-wise product
+                for a in range(3):
+                    for b in range(3):
+                        acc = 0.0
+                        for q in range(nq):
+                            acc += wd[q] * bary[q, a] * bary[q, b]
+                        Ke[e, i, f, a, b] += acc
+            elif k == 0:
+                # (Σ_q w D N_a) ∂N_b/∂x_l
+                for a in range(3):
+                    h = 0.0
+                    for q in range(nq):
+                        h += wd[q] * bary[q, a]
+                    for b in range(3):
+                        Ke[e, i, f, a, b] += h * G[e, b, l - 1]
+            else:
+                # ∂N_a/∂x_k (Σ_q w D B_b)
+                for b in range(3):
+                    t = 0.0
+                    if l == 0:
+                        for q in range(nq):
+                            t += wd[q] * bary[q, b]
+                    else:
+                        for q in range(nq):
+                            t += wd[q]
+                        t *= G[e, b, l - 1]
+                    for a in range(3):
+                        Ke[e, i, f, a, b] += G[e, a, k - 1] * t
+
+
+def _qp_inputs_py(U_elem, bary, grads, out):  # pragma: no cover - compiled
+    """out[e, q, f] = (Σ_a N_a(q) U[e,a,f], Σ_a ∂N_a/∂x U[e,a,f], Σ_a ∂N_a/∂y U[e,a,f])."""
+    M, _, nf = U_elem.shape
+    nq = bary.shape[0]
+    for e in range(M):
+        for f in range(nf):
+            gx = 0.0
+            gy = 0.0
+            for a in range(3):
+                gx += grads[e, a, 0] * U_elem[e, a, f]
+                gy += grads[e, a, 1] * U_elem[e, a, f]
+            for q in range(nq):
+                v = 0.0
+                for a in range(3):
+                    v += bary[q, a] * U_elem[e, a, f]
+                out[e, q, f, 0] = v
+                out[e, q, f, 1] = gx
+                out[e, q, f, 2] = gy
+
+
+def _gather_sum_py(perm, ptr, values, out, s0, s1):  # pragma: no cover - compiled
+    """out[s] = Σ_{j = ptr[s]}^{ptr[s+1]-1} values[perm[j]] for s in [s0, s1): each sum in a fixed order."""
+    for s in range(s0, s1):
+        acc = 0.0
+        for j in range(ptr[s], ptr[s + 1]):
+            acc += values[perm[j]]
+        out[s] = acc
+
+
+@lru_cache(maxsize=None)
+def _compiled():
+    import numba
+
+    jit = numba.njit(cache=True, nogil=True, fastmath=False)
+    return jit(_forms_jacobian_py), jit(_gather_sum_py), jit(_qp_inputs_py)
+
+
+# ---------------------------------------------------------------- public entry points
+def forms_jacobian(Ke: np.ndarray, wq: np.ndarray, bary: np.ndarray, G: np.ndarray, terms: list) -> None:
+    """Add the element Jacobians of all ``terms`` to ``Ke`` (M, neq, nf, 3, 3), in place (compiled).
+
+    wq (M, nq): quadrature weight × element area (mm²); bary (nq, 3): N_a at the points;
+    G (M, 3, 2): ∂N_a/∂x (1/mm).  ``terms``: (i, k, dd, idx) per coefficient F_ik with derivatives
+    dd (M, nq, len(idx)) (or broadcastable) with respect to the input slots ``idx`` (slot = 3 field + l,
+    l = 0 value, 1, 2 gradient); k = 0 for the test-function value, 1 or 2 for its gradient.
+    """
+    kern = _compiled()[0]
+    M, nq = wq.shape
+    terms = [t for t in terms if len(t[3])]
+    if not terms:
+        return
+    idx = np.concatenate([np.asarray(t[3], np.int64) for t in terms])
+    t_eq = np.array([t[0] for t in terms], np.int64)
+    t_k = np.array([t[1] for t in terms], np.int64)
+    t_off = np.cumsum([0] + [len(t[3]) for t in terms[:-1]]).astype(np.int64)
+    # read-only broadcast views: one array type for every term (a homogeneous tuple), no copies
+    dds = tuple(np.broadcast_to(t[2], (M, nq, len(t[3]))) for t in terms)
+    kern(Ke, wq, bary, G, dds, t_eq, t_k, t_off, idx // 3, idx % 3)
+
+
+class SlotSum:
+    """Sum of entries into CSR slots, ``out[s] = Σ_{j: slot[j] = s} values[j]``, in a fixed order.
+
+    The inverse of the slot map is computed once (a stable sort: contributions to a slot are summed
+    in element order), so every sum is a contiguous gather, and disjoint ranges of slots can be
+    summed on ``threads`` threads with identical results for any thread count.
+    """
+
+    def __init__(self, slot: np.ndarray, n_slots: int):
+        itype = np.int32 if slot.size < 2**31 else np.int64
+        self.perm = np.argsort(slot, kind="stable").astype(itype)
+        self.ptr = np.concatenate([[0], np.cumsum(np.bincount(slot, minlength=n_slots))]).astype(np.int64)
+        self.n_slots = int(n_slots)
+
+    def __call__(self, values: np.ndarray, threads: int = 1, pool=None) -> np.ndarray:
+        gather = _compiled()[1]
+        out = np.empty(self.n_slots)
+        values = values.reshape(-1)
+        if threads <= 1 or pool is None:
+            gather(self.perm, self.ptr, values, out, 0, self.n_slots)
+            return out
+        # split by contributions (not slots) so the threads get equal work
+        cuts = np.searchsorted(self.ptr, np.linspace(0, self.ptr[-1], threads + 1)[1:-1])
+        bounds = [0, *cuts.tolist(), self.n_slots]
+        futures = [pool.submit(gather, self.perm, self.ptr, values, out, a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+        for f in futures:
+            f.result()
+        return out
+
+
+def qp_inputs(U_elem: np.ndarray, bary: np.ndarray, grads: np.ndarray) -> np.ndarray:
+    """Point-wise value and gradient (M, nq, nf, 3) of P1 fields from nodal values U_elem (M, 3, nf) (compiled).
+
+    bary (nq, 3): N_a at the points; grads (M, 3, 2): ∂N_a/∂x (1/mm).  Same as :func:`solver.fem.qp_inputs`.
+    """
+    M, _, nf = U_elem.shape
+    out = np.empty((M, bary.shape[0], nf, 3))
+    _compiled()[2](np.ascontiguousarray(U_elem), bary, grads, out)
+    return out
