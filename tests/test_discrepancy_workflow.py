@@ -353,6 +353,21 @@ def test_twins_ci_campaign_has_fine_realizations_other_than_the_datas():
     assert camp["data"]["mesh_seed"] not in [o["mesh_seed"] for o in opts]
 
 
+def test_twins_refuse_data_on_a_checked_mesh_realization(tmp_path):
+    """A twin whose data come from one of the fine check meshes would test an easier problem: refused first."""
+    import copy
+    from pathlib import Path
+
+    from sweep.discrepancy.twins import load_twin_campaign, run_twins
+
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_ci.toml")
+    bad = copy.deepcopy(camp)
+    bad["data"]["mesh_seed"] = 2
+    with pytest.raises(ValueError, match=r"mesh_seed=2 is among .*mesh_seeds=\[1, 2, 3\]"):
+        run_twins(bad, tmp_path / "res", tmp_path / "cache")
+    assert not (tmp_path / "res").exists() and not (tmp_path / "cache").exists()  # before any work
+
+
 # ----------------------------------------------------------------------------- profile-likelihood interval
 def _named_fit(tmp_path, calibrate, train=("a", "b", "c"), observables=("p_inj", "front_radius_mean"), loss="soft_l1"):
     from sweep.discrepancy.workflow import Problem

@@ -61,6 +61,18 @@ def twin_passed(twin: dict, rep: dict) -> bool:
     return bool(inside and rep["gap_after"]["total"] <= 0.5 * rep["gap_before"]["total"])
 
 
+def check_data_realization(camp: dict, spec) -> None:
+    """The data's mesh realization must not be one of the workflow's fine check realizations.
+
+    Otherwise the correction would contain the data's own mesh error, which a real experiment never
+    offers (its "mesh" is unknown): the twin would test an easier problem than the one it stands for."""
+    seeds = (spec.discretization or {}).get("mesh_seeds") or []
+    data_seed = camp["data"].get("mesh_seed")
+    if data_seed is not None and data_seed in seeds:
+        raise ValueError(f"twin campaign: [data] mesh_seed={data_seed} is among [spec.discretization] "
+                         f"mesh_seeds={list(seeds)}; the data's mesh realization must not be one the workflow checks")
+
+
 def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
     """Run the twin experiments of ``campaign`` (path or dict); returns the summary dict.
 
@@ -76,6 +88,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
 
     camp = load_twin_campaign(campaign) if not isinstance(campaign, dict) else campaign
     spec = spec_from_dict(camp["spec"])
+    check_data_realization(camp, spec)
     n_jobs = spec.wf("n_jobs") if n_jobs is None else int(n_jobs)
     dat = camp["data"]
     a, b, n = dat["times"]
