@@ -151,13 +151,19 @@ def forms_jacobian(Ke: np.ndarray, wq: np.ndarray, bary: np.ndarray, G: np.ndarr
     terms = [t for t in terms if len(t[3])]
     if not terms:
         return
-    idx = np.concatenate([np.asarray(t[3], np.int64) for t in terms])
-    t_eq = np.array([t[0] for t in terms], np.int64)
-    t_k = np.array([t[1] for t in terms], np.int64)
-    t_off = np.cumsum([0] + [len(t[3]) for t in terms[:-1]]).astype(np.int64)
-    # read-only broadcast views: one array type for every term (a homogeneous tuple), no copies
-    dds = tuple(np.broadcast_to(t[2], (M, nq, len(t[3]))) for t in terms)
-    kern(Ke, wq, bary, G, dds, t_eq, t_k, t_off, idx // 3, idx % 3)
+    # read-only broadcast views, no copies.  numba types a tuple of arrays by their layouts: contiguous
+    # ('C') and broadcast ('A') views make different tuple types, so the terms go in (at most) two
+    # homogeneous groups, one kernel call each
+    views = [np.broadcast_to(t[2], (M, nq, len(t[3]))) for t in terms]
+    for contiguous in (True, False):
+        group = [(t, v) for t, v in zip(terms, views) if v.flags.c_contiguous == contiguous]
+        if not group:
+            continue
+        idx = np.concatenate([np.asarray(t[3], np.int64) for t, _ in group])
+        t_eq = np.array([t[0] for t, _ in group], np.int64)
+        t_k = np.array([t[1] for t, _ in group], np.int64)
+        t_off = np.cumsum([0] + [len(t[3]) for t, _ in group[:-1]]).astype(np.int64)
+        kern(Ke, wq, bary, G, tuple(v for _, v in group), t_eq, t_k, t_off, idx // 3, idx % 3)
 
 
 class SlotSum:

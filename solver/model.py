@@ -240,7 +240,15 @@ def _variables(U_elem: np.ndarray, geom: fem.Geometry, quad: fem.Quadrature, dua
     inp = fem.qp_inputs(U_elem, geom, quad)
     M, nq = inp.shape[:2]
     flat = inp.reshape(M, nq, -1)
-    return Dual.variables(flat) if dual else [flat[..., k] for k in range(flat.shape[-1])]
+    n = flat.shape[-1]
+    # gradients of P1 fields are constant on an element: one column (M, 1), broadcast against the point
+    # values, so every quantity made of gradients only (strains, spectral split, Korteweg stress) is
+    # computed once per element instead of once per point
+    cols = [flat[:, :, k] if k % 3 == 0 else flat[:, :1, k] for k in range(n)]
+    if not dual:
+        return cols
+    one = np.ones((1, 1, 1))
+    return [Dual(v, np.broadcast_to(one, v.shape + (1,)), (k,), n) for k, v in enumerate(cols)]
 
 
 def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepData, sl: slice, need_jacobian=True,

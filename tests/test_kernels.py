@@ -112,3 +112,24 @@ def test_thread_chunks_cover_the_elements_in_a_multiple_of_the_threads(n, thread
     assert all(a.stop == b.start for a, b in zip(ch[:-1], ch[1:]))
     assert len(ch) % threads == 0 or n < threads * 2
     assert max(c.stop - c.start for c in ch) <= max(-(-n // threads), 2 * fem.THREAD_CHUNK_ELEMENTS)
+
+
+@needs_numba
+def test_compiled_contraction_matches_numpy_for_mixed_derivative_layouts(monkeypatch):
+    """Contiguous and broadcast derivative arrays (per-point and per-element coefficients) in one form:
+    numba types them differently, and the compiled path must still give the numpy element matrices."""
+    from solver.ad import Dual
+
+    rng = np.random.default_rng(4)
+    _, disc, _, _ = _problem()
+    geom, quad, M, nq, nf = disc.geom, fem.STRANG3, len(disc.triangles), 3, 3
+    per_point = Dual(rng.standard_normal((M, nq)), rng.standard_normal((M, nq, 3)), (0, 4, 8), 3 * nf)
+    per_elem = Dual(rng.standard_normal((M, 1)), rng.standard_normal((M, 1, 2)), (1, 5), 3 * nf)
+    const_d = Dual(rng.standard_normal((M, nq)), np.broadcast_to(np.ones((1, 1, 1)), (M, nq, 1)), (6,), 3 * nf)
+    F = [[per_point, per_elem, const_d], [None, per_point, per_elem], [per_elem, None, None]]
+    out = {}
+    for backend in ("numpy", "numba"):
+        monkeypatch.setenv("DCHFRAC_KERNELS", backend)
+        out[backend] = fem.assemble_forms(F, geom, quad, True, nf)
+    for a, b in zip(out["numpy"], out["numba"]):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-14 * np.abs(a).max())
