@@ -50,6 +50,27 @@ def test_solver_forward_runs_once_and_serves_the_cache(tmp_path):
     assert 5.0 < p1["front_radius_mean"][0] < 53.0
 
 
+def test_solver_forward_reruns_an_interrupted_cache_entry(tmp_path):
+    """A run killed mid-way leaves summary.json with status "running": not a result, it is run again."""
+    import json
+
+    from sweep.discrepancy.forward import finished
+
+    fwd = SolverForward({"beta": 0.0}, RunOptions(h=12.0, t_end=0.006, dt0=0.002, dt_max=0.002), tmp_path)
+    times = {"p_inj": np.array([0.002, 0.004, 0.006])}
+    p1 = fwd.predict_one({"w_i": 50.0}, times)
+    rd = fwd.run_dir({"w_i": 50.0})
+    assert finished(rd)
+    # what an interrupted run leaves: the start-of-run summary and a truncated time series
+    (rd / "summary.json").write_text(json.dumps({"status": "running", "reason": None, "complete": False}))
+    ts = (rd / "timeseries.csv").read_text().splitlines()
+    (rd / "timeseries.csv").write_text("\n".join(ts[:2]) + "\n")
+    assert not finished(rd)
+    p2 = fwd.predict_one({"w_i": 50.0}, times)
+    assert fwd.n_runs == 2 and finished(rd)
+    np.testing.assert_array_equal(p2["p_inj"], p1["p_inj"])
+
+
 def test_cli_rejects_bad_data_before_any_run(tmp_path, capsys):
     from sweep.discrepancy.cli import main
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-__all__ = ["ForwardModel", "SolverForward", "fine_forwards", "params_hash", "observables_from_timeseries"]
+__all__ = ["ForwardModel", "SolverForward", "fine_forwards", "finished", "params_hash", "observables_from_timeseries"]
 
 
 class ForwardModel:
@@ -76,13 +76,32 @@ def observables_from_timeseries(ts: pd.DataFrame, times: dict, r_inner: float, t
     return out
 
 
+def finished(run_dir) -> bool:
+    """Is the cache entry ``run_dir`` a finished run ("ok" or "failed")?
+
+    A run writes ``summary.json`` with status "running" when it starts (solver.output); one that was
+    killed (machine lost, job cancelled) keeps it.  Such an entry is not a result: reading it would feed
+    the workflow a truncated curve (NaN residuals), so it is run again."""
+    f = Path(run_dir) / "summary.json"
+    if not f.is_file():
+        return False
+    try:
+        return json.loads(f.read_text()).get("status") in ("ok", "failed")
+    except (OSError, ValueError):
+        return False
+
+
 def _run_one(pdict: dict, odict: dict, run_dir: str, classify: bool) -> None:
-    """Run the solver into ``run_dir`` (a cache entry) unless it is already complete."""
+    """Run the solver into ``run_dir`` (a cache entry) unless it is already finished."""
+    import shutil
+
     from solver import Parameters, RunOptions, simulate
 
     rd = Path(run_dir)
-    if (rd / "summary.json").is_file():
+    if finished(rd):
         return
+    if rd.exists():
+        shutil.rmtree(rd)  # an interrupted run's partial files must not mix with the new run's
     simulate(Parameters.from_dict(pdict), RunOptions.from_dict(odict), out_dir=rd)
 
 
@@ -120,7 +139,7 @@ class SolverForward(ForwardModel):
         todo = {}
         for o, _ in jobs:
             rd = self.run_dir(o)
-            if not (rd / "summary.json").is_file():
+            if not finished(rd):
                 todo[str(rd)] = {k: v for k, v in self._pdict(o).items() if v is not None}
         if todo:
             self.n_runs += len(todo)
