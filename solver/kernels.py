@@ -3,10 +3,11 @@
 The element Jacobian of a weak-form term Σ_q w |e| F_ik(q) B_ak(q) is a contraction of the
 point-wise derivatives ∂F_ik/∂(input slot) with the P1 shape functions (see
 :func:`solver.fem.assemble_forms`).  In numpy that contraction needs broadcast temporaries per
-(term, field) and a dense copy of the sparse dual derivatives; compiled, it is one pass over
-the elements with a 3 x 3 accumulator, and the CSR scatter is a gather over the inverted slot map
-(:class:`SlotSum`), which can run on threads, instead of a ``bincount`` over 9 M weights.  Both give the same matrices to round-off (summation order differs);
-``tests/test_kernels.py`` checks that and the Taylor tests run on whichever path is active.
+(term, field) and a dense copy of the sparse dual derivatives; compiled, it is one pass over the
+elements that adds every term to the element's block while it sits in L1.  The CSR scatter
+becomes a gather over the inverted slot map (:class:`SlotSum`), which can run on threads, instead
+of a ``bincount`` over 9 M weights.  Both paths give the same matrices to round-off (summation
+order differs); ``tests/test_kernels.py`` checks that, and the Taylor tests run on both.
 
 Selection: ``DCHFRAC_KERNELS`` = ``auto`` (default: numba when importable), ``numba`` (error if
 it is not installed) or ``numpy``.  numba is an optional extra (``pip install dchfrac[fast]``);
@@ -51,53 +52,57 @@ def backend() -> str:
 def _forms_jacobian_py(Ke, wq, bary, G, dds, t_eq, t_k, t_off, s_field, s_l):  # pragma: no cover - compiled
     """Ke[e, i, f, a, b] += Σ_q wq[e,q] Σ_{slots s of (i, f)} dd[e,q,s] T_a^k(q) B_b^l(q).
 
-    Term t (coefficient F_ik, i = t_eq[t], k = t_k[t]) has derivatives dds[t] (M, nq, ns_t) with
-    respect to its slots t_off[t] ... t_off[t] + ns_t - 1 of s_field (the field) and s_l (l).  Test side T_a^0 = N_a(q), T_a^k = ∂N_a/∂x_{k-1} (constant on the
-    element); trial side B_b^0 = N_b(q), B_b^l = ∂N_b/∂x_{l-1}.  Whichever side is constant is pulled
-    out of the point sum.  All terms of one element are added before the next element, so its
-    block of Ke (neq nf 9 doubles) stays in L1.
+    Term t is the coefficient F_ik (i = t_eq[t], k = t_k[t]); dds[t] (M, nq, ns_t) are its
+    derivatives with respect to its slots, whose field and l are s_field and s_l at t_off[t] + s.
+    Test side T_a^0 = N_a(q), T_a^k = ∂N_a/∂x_{k-1} (constant on the element); trial side
+    B_b^0 = N_b(q), B_b^l = ∂N_b/∂x_{l-1}.  Whichever side is constant is pulled out of the point
+    sum.  All terms of one element are added before the next element, so its block of Ke
+    (neq nf 9 doubles) stays in L1.
     """
     M, nq = wq.shape
     wd = np.empty(nq)
     for e in range(M):
         for term in range(len(dds)):
-          dd = dds[term]
-          i = t_eq[term]
-          k = t_k[term]
-          for s in range(dd.shape[2]):
-            f = s_field[t_off[term] + s]
-            l = s_l[t_off[term] + s]
-            for q in range(nq):
-                wd[q] = wq[e, q] * dd[e, q, s]
-            if k == 0 and l == 0:
-                # Σ_q w D N_a N_b: the only case needing the point-wise product
-                for a in range(3):
-                    for b in range(3):
-                        acc = 0.0
-                        for q in range(nq):
-                            acc += wd[q] * bary[q, a] * bary[q, b]
-                        Ke[e, i, f, a, b] += acc
-            elif k == 0:
-                # (Σ_q w D N_a) ∂N_b/∂x_l
-                for a in range(3):
-                    h = 0.0
-                    for q in range(nq):
-                        h += wd[q] * bary[q, a]
-                    for b in range(3):
-                        Ke[e, i, f, a, b] += h * G[e, b, l - 1]
-            else:
-                # ∂N_a/∂x_k (Σ_q w D B_b)
+            _add_term(Ke, e, t_eq[term], t_k[term], dds[term], t_off[term], s_field, s_l, wq, bary, G, wd)
+
+
+def _add_term_py(Ke, e, i, k, dd, off, s_field, s_l, wq, bary, G, wd):  # pragma: no cover - compiled
+    """One term's contribution to element e (see :func:`_forms_jacobian_py`)."""
+    nq = wq.shape[1]
+    for s in range(dd.shape[2]):
+        f = s_field[off + s]
+        l = s_l[off + s]
+        for q in range(nq):
+            wd[q] = wq[e, q] * dd[e, q, s]
+        if k == 0 and l == 0:
+            # Σ_q w D N_a N_b: the only case needing the point-wise product
+            for a in range(3):
                 for b in range(3):
-                    t = 0.0
-                    if l == 0:
-                        for q in range(nq):
-                            t += wd[q] * bary[q, b]
-                    else:
-                        for q in range(nq):
-                            t += wd[q]
-                        t *= G[e, b, l - 1]
-                    for a in range(3):
-                        Ke[e, i, f, a, b] += G[e, a, k - 1] * t
+                    acc = 0.0
+                    for q in range(nq):
+                        acc += wd[q] * bary[q, a] * bary[q, b]
+                    Ke[e, i, f, a, b] += acc
+        elif k == 0:
+            # (Σ_q w D N_a) ∂N_b/∂x_l
+            for a in range(3):
+                h = 0.0
+                for q in range(nq):
+                    h += wd[q] * bary[q, a]
+                for b in range(3):
+                    Ke[e, i, f, a, b] += h * G[e, b, l - 1]
+        else:
+            # ∂N_a/∂x_k (Σ_q w D B_b)
+            for b in range(3):
+                t = 0.0
+                if l == 0:
+                    for q in range(nq):
+                        t += wd[q] * bary[q, b]
+                else:
+                    for q in range(nq):
+                        t += wd[q]
+                    t *= G[e, b, l - 1]
+                for a in range(3):
+                    Ke[e, i, f, a, b] += G[e, a, k - 1] * t
 
 
 def _qp_inputs_py(U_elem, bary, grads, out):  # pragma: no cover - compiled
@@ -134,6 +139,8 @@ def _compiled():
     import numba
 
     jit = numba.njit(cache=True, nogil=True, fastmath=False)
+    # the element loop calls the term kernel by its global name: bind the compiled one before compiling
+    globals()["_add_term"] = jit(_add_term_py)
     return jit(_forms_jacobian_py), jit(_gather_sum_py), jit(_qp_inputs_py)
 
 
