@@ -67,3 +67,27 @@ def test_pardiso_matches_superlu_reuses_its_analysis_and_refactorizes_stale_fact
     x1b = f1.solve(-R1)
     assert _rel_res(J1, x1b, -R1) < 1e-10
     assert linsolve.STATS["factorizations"] == n0 + 2
+
+
+def test_backend_discovery_does_not_import_pypardiso():
+    """Listing backends must not load MKL (pypardiso's import searches the file system for it)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from solver import linsolve; b = linsolve.available_backends(); "
+            "assert 'pypardiso' not in sys.modules, 'imported'; print(b)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "superlu" in out.stdout
+
+
+@pytest.mark.skipif("pypardiso" not in linsolve.available_backends(), reason="pypardiso not installed")
+def test_mkl_runtime_is_located_for_pypardiso(monkeypatch):
+    """The MKL runtime is handed to pypardiso (PYPARDISO_MKL_RT) so it skips its recursive search."""
+    import os
+
+    monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+    linsolve._locate_mkl_rt()
+    path = os.environ.get("PYPARDISO_MKL_RT")
+    if path is not None:  # a layout other than the pip wheel's falls back to pypardiso's own search
+        assert os.path.isfile(path) and "mkl_rt" in os.path.basename(path)
