@@ -396,6 +396,32 @@ def test_profile_interval_equals_wald_for_a_model_linear_in_the_strength(tmp_pat
     assert prob.fixed == {}                                   # the held value does not leak into later fits
 
 
+def test_profile_recentres_a_fit_that_stopped_short_of_the_minimum(tmp_path):
+    """A budget-limited joint fit (2 evaluations from β = 10, truth 40) leaves the profile a lower χ²
+    elsewhere; the re-centred fit must sit at the profile's minimum (no point below it) and be reported."""
+    from sweep.discrepancy.workflow import Problem, profile_interval, profile_recentred
+
+    data = _twin(tmp_path, {"beta": 40.0})
+    spec = _spec(cands=["damage_viscosity"], calibrate=("E",))
+    spec.workflow.update(max_nfev=2)
+    prob = Problem(data, spec, ToyForward({}, h=2.0))
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    train = ["a", "b", "c"]
+    short = prob.fit(params, [np.array([params[0].to_x(params[0].initial), 10.0])], train)
+    first = profile_interval(prob, short, 1, train)
+    assert min(q["delta_chi2"] for q in first["points"]) < -0.01 * first["threshold"]   # the premise
+    spec.workflow.update(max_nfev=50)
+    fit, pr = profile_recentred(prob, short, 1, train)
+    assert pr["recentred"] and pr["recentred"][0]["strength"] == pytest.approx(short.values()["effect:damage_viscosity"])
+    assert min(q["delta_chi2"] for q in pr["points"]) >= -0.01 * pr["threshold"]
+    beta = fit.values()["effect:damage_viscosity"]
+    assert pr["lower"] < beta < pr["upper"] and pr["lower"] < 40.0 < pr["upper"]
+    assert abs(beta - 40.0) < abs(short.values()["effect:damage_viscosity"] - 40.0)
+    # a converged fit is left alone
+    fit2, pr2 = profile_recentred(prob, fit, 1, train)
+    assert pr2["recentred"] == [] and np.array_equal(fit2.x, fit.x)
+
+
 def test_profile_interval_matches_a_brute_force_profile(tmp_path):
     from sweep.discrepancy.workflow import profile_interval
 

@@ -161,6 +161,9 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
               f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "
               f"the linearized (Wald) interval was {_f(pr['wald'])}.", "", "| strength | Δχ² |", "|---|---|"]
         L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
+        for h in pr.get("recentred", []):
+            L += ["", f"Re-centred: the profile found Δχ² = {h['min_delta_chi2']:.3g} at {h['at']:.4g} below the fit at "
+                      f"{h['strength']:.4g} (the joint fit had stopped short of the minimum); refitted from there."]
     L += ["", "## Held-out gap (RMS standardized residual)", "", "| observable | before | after |", "|---|---|---|"]
     for k, v in report["gap_before"].items():
         L.append(f"| {k} | {v:.4g} | {report['gap_after'].get(k, float('nan')):.4g} |")
