@@ -2,10 +2,10 @@
 
 The slow tests run campaigns/discrepancy_twins_ci.toml: data on h = 3 mm (perturbed mesh, mesh_seed = 11,
 dt_max = 0.005 s) plus noise; workflow on h = 4 mm (dt_max = 0.02 s) with a discretization correction
-estimated at h = 3 mm and re-estimated at the named model's fit (disc_refresh); 3 conditions
-(w_i = 35, 50, 65 mm/s, 50 held out), t_end = 0.3 s.  Measured cost: 35-40 minutes per twin on 2 cores
-shared with another campaign (results/discrepancy/twins_ci/summary.json records each twin's wall time and
-forward-run count) -- far above the issue's 10-minute CI budget, hence `slow`.
+estimated at h = 3 mm over three mesh realizations (mesh_seeds) and re-estimated at the named model's fit
+(disc_refresh); 3 conditions (w_i = 35, 50, 65 mm/s, 50 held out), t_end = 0.3 s.  Measured cost: 30-40 minutes
+of one core per twin (damage_viscosity: 441 forward runs, 2,314 s; results/discrepancy/twins_ci/summary.json
+records each twin's wall time and forward-run count) -- far above the issue's 10-minute CI budget, hence `slow`.
 """
 import json
 from pathlib import Path

@@ -87,6 +87,7 @@ def test_hidden_effect_is_named_with_its_strength(tmp_path, hidden, effect, trut
     rep = run_workflow(_twin(tmp_path, hidden), _spec(), ToyForward({}, h=8.0), out_dir=tmp_path / "out",
                        figures=(effect == "damage_viscosity"))
     assert rep["verdict"] == "named" and rep["named_effect"] == effect
+    assert rep["partial_explanation"] is None and not rep["residuals_systematic_after"]
     lo, hi = rep["strength_interval"]
     assert lo <= truth <= hi and lo > 0
     assert rep["gap_after"]["total"] <= 0.5 * rep["gap_before"]["total"]
@@ -111,6 +112,25 @@ def test_effect_outside_the_catalogue_is_unexplained(tmp_path):
     rep = run_workflow(_twin(tmp_path, {}, anomaly=1.0), _spec(), ToyForward({}, h=8.0))
     assert rep["verdict"] == "unexplained_discrepancy" and rep["named_effect"] is None
     assert rep["localization_before"]["systematic"]
+
+
+def test_catalogue_effect_plus_an_outside_effect_is_a_partial_explanation_not_a_name(tmp_path):
+    """Hidden β = 40 plus a small anomaly outside the catalogue (6 kPa sine): β passes every acceptance test,
+    but the model with it still misses systematically, so nothing is named (never a confident wrong name);
+    the report keeps β as a partial explanation.  With the rule switched off the same run names β."""
+    data = _twin(tmp_path, {"beta": 40.0}, anomaly=0.2)
+    rep = run_workflow(data, _spec(), ToyForward({}, h=8.0), out_dir=tmp_path / "out", figures=False)
+    assert rep["verdict"] == "unexplained_discrepancy" and rep["named_effect"] is None
+    pe = rep["partial_explanation"]
+    assert [a["effect"] for a in pe["effects"]] == ["damage_viscosity"]
+    assert pe["gap_after"]["total"] < 0.6 * rep["gap_before"]["total"]
+    assert any(v["systematic"] for v in pe["localization_after"]["series"].values())
+    assert "Partial explanation only" in (tmp_path / "out" / "report.md").read_text()
+    spec = _spec()
+    spec.workflow.update(named_needs_noise_level=False)
+    rep2 = run_workflow(data, spec, ToyForward({}, h=8.0))
+    assert rep2["verdict"] == "named" and rep2["named_effect"] == "damage_viscosity"
+    assert rep2["partial_explanation"] is None
 
 
 def test_confounded_with_a_baseline_parameter_is_not_identifiable(tmp_path):
@@ -320,6 +340,12 @@ def test_spec_rejects_bad_mesh_seeds(seeds):
     with pytest.raises(ValueError, match="mesh_seeds") as exc:
         spec_from_dict({**_DISC_SPEC, "discretization": {"h": 6.0, "mesh_seeds": seeds}})
     assert repr(seeds) in str(exc.value) and "integers >= 0" in str(exc.value)
+
+
+@pytest.mark.parametrize("value", ["yes", 1, None])
+def test_spec_rejects_a_non_boolean_noise_level_rule(value):
+    with pytest.raises(ValueError, match="named_needs_noise_level.*true or false"):
+        spec_from_dict({**_DISC_SPEC, "workflow": {"named_needs_noise_level": value}})
 
 
 def test_spec_rejects_mesh_seed_with_mesh_seeds():

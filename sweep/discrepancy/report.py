@@ -135,6 +135,13 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
                                                 f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
                                                 f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''})"
                                                 if report["named_effect"] else ""), ""]
+    pe = report.get("partial_explanation")
+    if pe:
+        eff = ", ".join(f"`{a['effect']}` {a['strength']:.4g} (95 % interval {_f(a['strength_interval'])})" for a in pe["effects"])
+        L += [f"Partial explanation only: {eff} passed every acceptance test and cut the held-out gap from "
+              f"{report['gap_before']['total']:.3g} to {pe['gap_after']['total']:.3g} RMS σ, but the model with it still "
+              f"misses systematically (series: {[k for k, v in pe['localization_after']['series'].items() if v['systematic']]}), "
+              f"so no effect is named: the cause may lie outside the catalogue.", ""]
     if report["tie"]:
         L += [f"Tie between {report['tie']}: the data cannot tell them apart; add a discriminating condition.", ""]
     if report["not_identifiable"]:

@@ -40,6 +40,7 @@ Example (units mm, s, kPa)::
     disc_error_fraction = 0.5; disc_refresh = 1
     interval = "profile"             # the named strength's interval: "profile" (likelihood) or "wald"
     profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
+    named_needs_noise_level = true   # name an effect only if the named model's residuals are at noise level
 """
 from __future__ import annotations
 
@@ -55,7 +56,8 @@ SCALINGS = ("none", "sqrt_cement")
 _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
-                    disc_error_fraction=0.5, disc_refresh=1, interval="profile", profile_expand=3)
+                    disc_error_fraction=0.5, disc_refresh=1, interval="profile", profile_expand=3,
+                    named_needs_noise_level=True)
 
 
 @dataclass(frozen=True)
@@ -240,6 +242,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
         _bad("workflow", unknown, f"keys among {sorted(_WF_DEFAULTS)}")
     if wf.get("interval", "profile") not in ("profile", "wald"):
         _bad("workflow.interval", wf["interval"], '"profile" or "wald"')
+    nn = wf.get("named_needs_noise_level", True)
+    if not isinstance(nn, bool):
+        _bad("workflow.named_needs_noise_level", nn, "true or false")
     pe = wf.get("profile_expand", 3)
     if not isinstance(pe, int) or isinstance(pe, bool) or not 0 <= pe <= 10:
         _bad("workflow.profile_expand", pe, "an integer in [0, 10]")
