@@ -84,14 +84,15 @@ class Dual:
 
     # -- construction -----------------------------------------------------
     @staticmethod
-    def variables(values: np.ndarray) -> list["Dual"]:
-        """Independent variables from ``values`` of shape ``S + (nvar,)``.
+    def variables(values) -> list["Dual"]:
+        """Independent variables from ``values`` of shape ``S + (nvar,)``, or a list of ``nvar`` arrays
+        (each its own shape, broadcastable against the others: e.g. per-element and per-point inputs).
 
         Returns ``nvar`` Duals; the k-th has unit derivative in slot k.
         """
-        nvar = values.shape[-1]
-        one = np.broadcast_to(np.ones(1), values.shape[:-1] + (1,))
-        return [Dual(values[..., k], one, (k,), nvar) for k in range(nvar)]
+        cols = [values[..., k] for k in range(values.shape[-1])] if isinstance(values, np.ndarray) else list(values)
+        one = np.ones((1,) * (np.ndim(cols[0]) + 1))
+        return [Dual(v, np.broadcast_to(one, np.shape(v) + (1,)), (k,), len(cols)) for k, v in enumerate(cols)]
 
     def _new(self, v, dd, idx=None):
         return Dual(v, dd, self.idx if idx is None else idx, self.nv)

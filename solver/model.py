@@ -245,10 +245,7 @@ def _variables(U_elem: np.ndarray, geom: fem.Geometry, quad: fem.Quadrature, dua
     # values, so every quantity made of gradients only (strains, spectral split, Korteweg stress) is
     # computed once per element instead of once per point
     cols = [flat[:, :, k] if k % 3 == 0 else flat[:, :1, k] for k in range(n)]
-    if not dual:
-        return cols
-    one = np.ones((1, 1, 1))
-    return [Dual(v, np.broadcast_to(one, v.shape + (1,)), (k,), n) for k, v in enumerate(cols)]
+    return Dual.variables(cols) if dual else cols
 
 
 def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepData, sl: slice, need_jacobian=True,

@@ -45,7 +45,7 @@ def cmd_run(args) -> int:
     jobs = args.jobs if args.jobs is not None else spec.wf("n_jobs")
     fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
     fine = fine_forwards(spec, cache, jobs)          # one per mesh realization ([discretization] mesh_seeds)
-    rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine or None)
+    rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
                                           f"{rep['strength_interval']}" if rep["named_effect"] else ""))
     print(f"held-out gap (total): before {rep['gap_before'].get('total', float('nan')):.3g}, after "

@@ -115,7 +115,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
         # one fine model per mesh realization ([spec.discretization] mesh_seeds): the data are one realization
         # (their own mesh_seed) the workflow cannot know; the cache key includes mesh_seed
         fine = fine_forwards(spec, cache / "workflow", n_jobs)
-        rep = run_workflow(load_measured(folder), spec, fwd, results / name, fine_forward=fine or None)
+        rep = run_workflow(load_measured(folder), spec, fwd, results / name, fine_forward=fine)
         summary[name] = {"hidden": twin.get("hidden", {}), "expect": twin["expect"], "verdict": rep["verdict"],
                          "named_effect": rep["named_effect"], "strength": rep["strength"],
                          "strength_interval": rep["strength_interval"], "tie": rep["tie"],

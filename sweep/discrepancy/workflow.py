@@ -596,10 +596,12 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
             profiles[a["effect"]] = pr
             a["strength_interval_wald"] = a["strength_interval"]
             a["strength_interval"] = [pr["lower"], pr["upper"]]
-            if pr["recentred"]:   # the fit moved to the profile's minimum: report it there
-                a["strength_before_profile"] = a["strength"]
-                a["strength"] = float(current.params[j].from_x(current.x[j]))
         if any(pr["recentred"] for pr in profiles.values()):
+            # the fit moved to a profile's minimum: every accepted strength is reported at the final fit
+            final = current.values()
+            for a in accepted:
+                a["strength_before_profile"] = a["strength"]
+                a["strength"] = float(final["effect:" + a["effect"]])
             gap_cur = _gap(problem, current.params, current.x, holdout)
             loc = localize(problem, current, train)
         if any(a["strength_interval"][0] <= get_effect(a["effect"]).off for a in accepted):
