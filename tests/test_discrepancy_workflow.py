@@ -261,12 +261,21 @@ def _problem(tmp_path, spec=None):
     return Problem(_twin(tmp_path, {"beta": 40.0}), spec or _spec(), ToyForward({}, h=8.0))
 
 
-def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread(tmp_path):
+def _spec_with(workflow: dict, **kw):
+    spec = _spec(**kw)
+    return spec_from_dict({"baseline": {"effects_off": OFF},
+                           "calibrate": [{"name": p.name, "lower": p.lower, "upper": p.upper} for p in spec.calibrate],
+                           "candidates": {"effects": list(spec.candidates)}, "holdout": {"ids": ["d"]},
+                           "options": {"h": 8.0, "t_end": 1.0}, "workflow": workflow})
+
+
+@pytest.mark.parametrize("cov", ["diagonal", "correlated"])
+def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread(tmp_path, cov):
     import statistics
 
     from sweep.discrepancy.workflow import add_discretization_error
 
-    prob = _problem(tmp_path)
+    prob = _problem(tmp_path, _spec_with({"realization_covariance": cov}))
     y0, s0 = prob.y.copy(), prob.sig.copy()
     offsets = {"p_inj": [0.3, -0.1, 0.7], "front_radius_mean": [0.05, 0.0, 0.1], "crack_length": [0.0, 0.02, -0.02]}
     # realization k fails (NaN) after fail_after s in the conditions with these w_i: in a (w_i = 30) two are
@@ -283,10 +292,61 @@ def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread
         err = statistics.mean(used) if used else 0.0
         sd = statistics.stdev(used) if len(used) >= 2 else 0.0
         assert prob.y[n] == pytest.approx(y0[n] - err, rel=0, abs=1e-9)
-        assert prob.sig[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2 + sd**2), rel=1e-9)
+        if cov == "diagonal":
+            assert prob.sig[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2 + sd**2), rel=1e-9)
+        else:
+            # the predictive variance of one more realization about the k-sample mean: (1 + 1/k) s²
+            infl = 1.0 + 1.0 / len(used) if len(used) >= 2 else 0.0
+            assert prob.sig_diag[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2), rel=1e-9)
+            assert prob.sig[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2 + infl * sd**2), rel=1e-9)
         assert prob.realization_spread[n] == pytest.approx(sd, rel=1e-9, abs=1e-12)
     assert min(counts.values()) > 0                           # 0, 1, 2 and 3 finite realizations all occur
+    assert (prob.modes is None) == (cov == "diagonal")
     assert set(rms) == {"p_inj", "front_radius_mean", "crack_length"} and rms["p_inj"] > 0
+
+
+def test_correlated_realizations_give_the_generalized_least_squares_residual(tmp_path):
+    """r·r = dᵀ Σ⁻¹ d with the dense Σ = diag(σ_diag²) + U Uᵀ, on any subset of rows (training, held out)."""
+    from sweep.discrepancy.workflow import add_discretization_error
+
+    prob = _problem(tmp_path)
+    t = prob.t
+    # realizations differing by whole curves (a three-parameter family: rank k - 1 = 3 after centring)
+    # (kPa, kPa/s, mm): several times the measurement σ (2 kPa, 0.2 mm), as the solver's realizations are
+    devs = [(3.0, -2.0, 0.5), (-4.0, 5.0, 0.0), (1.0, 9.0, -1.5), (6.0, -1.0, 2.0)]
+
+    class _Curve(ToyForward):
+        def __init__(self, a, b, c):
+            super().__init__({}, h=8.0)
+            self.a, self.b, self.c = a, b, c
+
+        def predict_one(self, overrides, times):
+            out = super().predict_one(overrides, times)
+            out["p_inj"] = out["p_inj"] + self.a + self.b * np.asarray(times["p_inj"])
+            out["front_radius_mean"] = out["front_radius_mean"] + self.c
+            return out
+
+    add_discretization_error(prob, [_Curve(*d) for d in devs])
+    assert prob.modes.shape == (t.size, 4)
+    # the modes' rank: 3 (k - 1), and U Uᵀ is (1 + 1/k) times the sample covariance of the realizations
+    assert np.linalg.matrix_rank(prob.modes) == 3
+    rng = np.random.default_rng(5)
+    for ids in (["a", "b", "c"], ["d"], ["b"]):
+        m = prob.mask(ids)
+        d = rng.normal(size=int(m.sum()))
+        r = prob.standardize(d, m, 0.0)
+        cov = np.diag(prob.sig_diag[m] ** 2) + prob.modes[m] @ prob.modes[m].T
+        assert r @ r == pytest.approx(d @ np.linalg.solve(cov, d), rel=1e-9)
+        # a deviation along one realization's own curve: uᵀ Σ⁻¹ u < d_jᵀ S⁺ d_j / (k − 1) <= 1 (S the sample
+        # covariance), however many points it spans; per-point variances charge it Σ u²/σ², growing with n
+        u = prob.modes[m][:, 0]
+        ru = prob.standardize(u, m, 0.0)
+        assert ru @ ru < 1.0 < np.sum((u / prob.sig[m]) ** 2)
+        # and a deviation orthogonal (in σ_diag units) to every mode is unchanged
+        V = prob.modes[m] / prob.sig_diag[m][:, None]
+        e = rng.normal(size=int(m.sum()))
+        e -= V @ np.linalg.lstsq(V, e, rcond=None)[0]
+        assert np.allclose(prob.standardize(e * prob.sig_diag[m], m, 0.0), e, atol=1e-10)
 
 
 def test_one_forward_or_a_list_of_one_is_the_unchanged_correction(tmp_path):
@@ -329,7 +389,8 @@ def test_workflow_reports_the_realization_spread(tmp_path):
     for r in rep["discretization_refresh"]:
         assert r["realization_spread_rms"]["p_inj"] == pytest.approx(statistics.stdev([0.2, 0.5, 1.1]), rel=1e-9)
     md = (tmp_path / "out" / "report.md").read_text()
-    assert "3 fine mesh realization(s)" in md and "p_inj 0.458 kPa" in md
+    assert "3 fine mesh realization(s)" in md and "p_inj 0.458 kPa" in md and "a correlated covariance" in md
+    assert rep["realization_covariance"] == "correlated"
 
 
 _DISC_SPEC = {"baseline": {"effects_off": OFF}, "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0}}
@@ -468,3 +529,64 @@ def test_profile_interval_matches_a_brute_force_profile(tmp_path):
     # the profile's ends agree with the grid's to within one grid step (plus the bracket's linear interpolation)
     assert abs(inside.min() - pr["lower"]) <= 1.5 * step and abs(inside.max() - pr["upper"]) <= 1.5 * step
     assert pr["lower"] < fit.values()["effect:damage_viscosity"] < pr["upper"]
+
+
+class _Family(ToyForward):
+    """A "fine mesh realization" of the toy (h = 2) whose deviation is a whole curve in every condition:
+    a (kPa) times a rising transient in p_inj and c (mm) times a rate-dependent shift of the front (the
+    kind measured for the solver: one mesh and porosity field shifts a condition's front by ~1 mm over
+    its whole curve).  ``anomaly``: the out-of-catalogue sine of :class:`ToyForward`."""
+
+    def __init__(self, a, c, anomaly=0.0):
+        super().__init__({}, h=2.0, anomaly=anomaly)
+        self.a, self.c = a, c
+
+    def predict_one(self, overrides, times):
+        out = super().predict_one(overrides, times)
+        out["p_inj"] = out["p_inj"] + self.a * (1 - np.exp(-np.asarray(times["p_inj"]) / 0.1))
+        out["front_radius_mean"] = out["front_radius_mean"] + self.c * (1 + overrides["w_i"] / 50.0) / 2
+        return out
+
+
+_CHECKS = [(-1.5, -0.6), (0.5, -0.3), (1.5, 0.9)]     # three check realizations (a, c)
+_DATA_REAL = (2.5, 1.2)                               # the data's: 1.5 sample sd from their mean in a and c
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_realization_shaped_deviation_is_not_a_missing_effect(tmp_path, seed):
+    """The negative control of the solver twins in miniature: data from the baseline on another mesh
+    realization.  Per-point variances read its curve-wide front shift as systematic in every condition
+    (unexplained_discrepancy, the failure measured with the solver); the correlated covariance does not."""
+    fines = [_Family(a, c) for a, c in _CHECKS]
+    data = load_measured(make_twin(tmp_path / "data", _Family(*_DATA_REAL), CONDS, TIMES, DATA_BASE, seed=seed))
+    diag = run_workflow(data, _spec_with({"realization_covariance": "diagonal"}), ToyForward({}, h=8.0), fine_forward=fines)
+    assert diag["verdict"] == "unexplained_discrepancy"
+    assert all(diag["localization_before"]["series"][f"{c}/front_radius_mean"]["systematic"] for c in "abc")
+    corr = run_workflow(data, _spec_with({}), ToyForward({}, h=8.0), fine_forward=fines)
+    assert corr["verdict"] == "no_missing_effect" and corr["named_effect"] is None
+    assert not corr["localization_before"]["systematic"]
+
+
+@pytest.mark.parametrize("hidden, effect, truth", [({"beta": 40.0}, "damage_viscosity", 40.0),
+                                                   ({"outer_compliance": 0.02}, "compliant_boundary", 0.02)])
+def test_correlated_realizations_still_name_a_hidden_effect(tmp_path, hidden, effect, truth):
+    """Whitening for the realizations does not hide an effect whose signature is not realization-shaped."""
+    fines = [_Family(a, c) for a, c in _CHECKS]
+    data = load_measured(make_twin(tmp_path / "data", _Family(*_DATA_REAL), CONDS, TIMES, {**DATA_BASE, **hidden}, seed=1))
+    rep = run_workflow(data, _spec_with({}), ToyForward({}, h=8.0), fine_forward=fines)
+    assert rep["verdict"] == "named" and rep["named_effect"] == effect
+    lo, hi = rep["strength_interval"]
+    assert lo <= truth <= hi and lo > 0
+    assert rep["gap_after"]["total"] <= 0.5 * rep["gap_before"]["total"]
+
+
+def test_correlated_realizations_leave_an_out_of_catalogue_effect_unexplained(tmp_path):
+    fines = [_Family(a, c) for a, c in _CHECKS]
+    data = load_measured(make_twin(tmp_path / "data", _Family(*_DATA_REAL, anomaly=0.2), CONDS, TIMES, DATA_BASE, seed=1))
+    rep = run_workflow(data, _spec_with({}), ToyForward({}, h=8.0), fine_forward=fines)
+    assert rep["verdict"] == "unexplained_discrepancy" and rep["named_effect"] is None
+
+
+def test_spec_rejects_a_bad_realization_covariance():
+    with pytest.raises(ValueError, match="realization_covariance='full'"):
+        spec_from_dict({**_DISC_SPEC, "workflow": {"realization_covariance": "full"}})

@@ -41,6 +41,9 @@ Example (units mm, s, kPa)::
     interval = "profile"             # the named strength's interval: "profile" (likelihood) or "wald"
     profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
     named_needs_noise_level = true   # name an effect only if the named model's residuals are at noise level
+    realization_covariance = "correlated"   # how mesh realizations' deviations enter the residuals: "correlated"
+                                     # (low-rank covariance of their deviation curves, residuals whitened) or
+                                     # "diagonal" (the simplification: per-point sample std in quadrature)
 """
 from __future__ import annotations
 
@@ -57,7 +60,7 @@ _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_ex
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
                     disc_error_fraction=0.5, disc_refresh=1, interval="profile", profile_expand=3,
-                    named_needs_noise_level=True)
+                    named_needs_noise_level=True, realization_covariance="correlated")
 
 
 @dataclass(frozen=True)
@@ -245,6 +248,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     nn = wf.get("named_needs_noise_level", True)
     if not isinstance(nn, bool):
         _bad("workflow.named_needs_noise_level", nn, "true or false")
+    rc = wf.get("realization_covariance", "correlated")
+    if rc not in ("correlated", "diagonal"):
+        _bad("workflow.realization_covariance", rc, '"correlated" or "diagonal"')
     pe = wf.get("profile_expand", 3)
     if not isinstance(pe, int) or isinstance(pe, bool) or not 0 <= pe <= 10:
         _bad("workflow.profile_expand", pe, "an integer in [0, 10]")

@@ -13,7 +13,8 @@ import math
 import numpy as np
 
 __all__ = ["lag1_autocorrelation", "series_weights", "effective_chi2", "bic", "systematic_test",
-           "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times"]
+           "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times", "lowrank_whitener",
+           "whiten"]
 
 PHASES = ("before_initiation", "peak", "propagation", "late")
 
@@ -77,6 +78,30 @@ def systematic_test(r, series, z_crit: float = 3.0, rho_crit: float = 0.3) -> di
         any_sys |= sys_
         out[str(s)] = {"n": n, "rho1": rho, "chi2_excess_z": z, "mean_z": zmean, "systematic": sys_}
     return {"systematic": any_sys, "series": out}
+
+
+def lowrank_whitener(V) -> tuple[np.ndarray, np.ndarray]:
+    """Symmetric whitening for the covariance I + V Vᵀ of standardized residuals (V: n × k).
+
+    Returns (Z, c): Z (n × r) orthonormal, c (r,) = (1 + λ)^(−1/2) − 1 for the non-zero eigenvalues λ
+    of V Vᵀ, so that W = I + Z diag(c) Zᵀ is the symmetric inverse square root of I + V Vᵀ
+    (Wᵀ W = (I + V Vᵀ)⁻¹).  Symmetric, not Cholesky: a residual orthogonal to the columns of V is
+    left unchanged, so whitened residuals stay attached to their points (the per-series statistics
+    still mean something).  Cost O(n k²)."""
+    V = np.asarray(V, float)
+    n = V.shape[0]
+    if V.size == 0:
+        return np.zeros((n, 0)), np.zeros(0)
+    Q, R = np.linalg.qr(V)
+    lam, P = np.linalg.eigh(R @ R.T)
+    keep = lam > 1e-12 * max(1.0, float(lam.max()))
+    return Q @ P[:, keep], 1.0 / np.sqrt(1.0 + lam[keep]) - 1.0
+
+
+def whiten(e, Z: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """W e = e + Z (c ⊙ Zᵀ e) for the whitener (Z, c) of :func:`lowrank_whitener`."""
+    e = np.asarray(e, float)
+    return e + Z @ (c * (Z.T @ e)) if c.size else e
 
 
 def project_out(J, s) -> np.ndarray:

@@ -70,6 +70,11 @@ class Problem:
             overlap = set(data.condition_params(cid)) & ({p.name for p in spec.calibrate})
             if overlap:
                 raise ValueError(f"condition {cid!r} sets calibrated parameter(s) {sorted(overlap)}")
+        # σ of each point without the mesh-realization term and, with "correlated" realization covariance,
+        # the realizations' deviation curves (n, k) whose outer product is that term (add_discretization_error)
+        self.sig_diag = self.sig
+        self.modes = None
+        self._whiteners = {}
         self._cache = {}
         self.fixed = {}   # values held fixed while others are fitted (profile likelihood), e.g. {"effect:x": 3.0}
 
@@ -119,14 +124,25 @@ class Problem:
                 m[[pos[r] for r in sel]] = [vv[r] for r in sel]
         return m
 
+    def standardize(self, diff: np.ndarray, mask: np.ndarray, nan_value: float) -> np.ndarray:
+        """Standardized residuals of differences ``diff`` (data − model, kPa / mm) on the rows of ``mask``.
+
+        e = diff/σ_diag (non-finite entries set to ``nan_value``), whitened for the mesh-realization
+        covariance when it is correlated: Σ = diag(σ_diag²) + U Uᵀ with U the realizations' deviation
+        curves (``self.modes``), so r·r = diffᵀ Σ⁻¹ diff (generalized least squares).  Without modes
+        this is e itself."""
+        e = diff / self.sig_diag[mask]
+        e = np.where(np.isfinite(e), e, nan_value)
+        if self.modes is None:
+            return e
+        key = mask.tobytes()
+        if key not in self._whiteners:
+            self._whiteners[key] = stats.lowrank_whitener(self.modes[mask] / self.sig_diag[mask][:, None])
+        return stats.whiten(e, *self._whiteners[key])
+
     def residuals_for(self, preds: list, mask: np.ndarray) -> list:
         nanr = self.spec.wf("nan_residual")
-        out = []
-        for pred in preds:
-            m = self.model_vector(pred, mask)
-            r = (self.y[mask] - m) / self.sig[mask]
-            out.append(np.where(np.isfinite(r), r, nanr))
-        return out
+        return [self.standardize(self.y[mask] - self.model_vector(pred, mask), mask, nanr) for pred in preds]
 
     # ----------------------------------------------------------------- fitting
     def mask(self, ids) -> np.ndarray:
@@ -252,7 +268,9 @@ def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
     preds = problem.predict(vlist, ids)
     m = problem.mask(ids)
     ms = [problem.model_vector(p, m) for p in preds]
-    sigs = {c: (ms[i + 1] - ms[0]) / problem.sig[m] for i, c in enumerate(candidates)}
+    # the same standardization as the residuals (a signature is a difference of model curves; a point
+    # where either run failed carries none)
+    sigs = {c: problem.standardize(ms[i + 1] - ms[0], m, 0.0) for i, c in enumerate(candidates)}
     w = stats.series_weights(fit.r, problem.series[m])
     free = free_columns(fit)
     return stats.signature_table(fit.r, w, -fit.J[:, free], sigs, min_ratio=problem.spec.wf("min_ratio"),
@@ -325,6 +343,25 @@ def realizations(fine_forward) -> list:
     return list(fine_forward) if isinstance(fine_forward, (list, tuple)) else [fine_forward]
 
 
+def realization_modes(fines: np.ndarray) -> np.ndarray:
+    """Deviation curves of the realizations, columns of U (n, k), scaled so that U Uᵀ is the covariance
+    of the data's deviation from the realizations' mean (kPa, mm).
+
+    The data are one more realization: its deviation from the k-sample mean has covariance
+    (1 + 1/k) Σ, Σ estimated by the sample covariance (1/(k − 1)) Σ_j d_j d_jᵀ, so
+    U = (f_j − mean) √((1 + 1/k)/(k − 1)).  k counts the finite realizations per point (0 where
+    fewer than 2 are: no information there), so diag(U Uᵀ) = (1 + 1/k) s² with s the sample std of
+    :func:`realization_mean_spread`."""
+    fines = np.atleast_2d(np.asarray(fines, float))
+    mean, _ = realization_mean_spread(fines)
+    ok = np.isfinite(fines)
+    cnt = ok.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(cnt >= 2, np.sqrt((1.0 + 1.0 / cnt) / (cnt - 1.0)), 0.0)
+    dev = np.where(ok & (cnt >= 2), fines - np.where(np.isfinite(mean), mean, 0.0), 0.0)
+    return (dev * scale).T
+
+
 def realization_mean_spread(fines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-point mean and sample standard deviation (ddof = 1) over realizations, rows of ``fines`` (k, n).
 
@@ -360,7 +397,11 @@ def add_discretization_error(problem: Problem, fine_forward, values: dict | None
     realization's own deviation (1.5 kPa in p_inj for the solver at h = 3 mm), which no same-mesh
     fine/coarse difference sees.  Then err = mean_k(fine_k) − coarse (the mean is the better correction)
     and the realizations' sample std s (ddof = 1; kPa, mm) is an uncertainty of the comparison:
-    σ² = σ_measured² + (disc_error_fraction·err)² + s².  Non-finite values are left out per point (s = 0
+    σ² = σ_measured² + (disc_error_fraction·err)² + s² with ``realization_covariance = "diagonal"``.  By
+    default ("correlated") the realization term is the low-rank covariance U Uᵀ of the realizations'
+    deviation curves (:func:`realization_modes`; its diagonal is (1 + 1/k) s²) and the residuals are
+    whitened with it (:meth:`Problem.standardize`): a deviation shaped like a mesh realization's costs
+    what its likelihood says, not n independent misfits.  Non-finite values are left out per point (s = 0
     where fewer than 2 realizations are finite, err = 0 where none is or the coarse model is not).  With
     one model s = 0 and the result is that of the single model.  The per-point s is kept in
     ``problem.realization_spread``.  Returns the RMS of err per observable."""
@@ -381,8 +422,21 @@ def add_discretization_error(problem: Problem, fine_forward, values: dict | None
     frac = problem.spec.wf("disc_error_fraction")
     problem.y = problem.y_measured - err              # compare the coarse model with mesh-corrected data
     # the correction itself is uncertain (frac·err), and so is which mesh realization the data are (spread)
-    problem.sig = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2 + spread**2)
+    sig_diag = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2)
+    if problem.spec.wf("realization_covariance") == "correlated" and len(fines) >= 2:
+        # A realization's deviation is a whole curve, in every condition at once (one mesh and porosity
+        # field for all): measured in the solver twins, the data's front radius sat ~1.2 mm above the
+        # realizations' mean over the whole w65 curve (lag-1 autocorrelation 0.77), which per-point
+        # variances read as a systematic misfit.  Its covariance is low rank: U Uᵀ from the k deviation
+        # curves, and the residuals are whitened with diag(σ_diag²) + U Uᵀ.
+        problem.modes = realization_modes(np.vstack(fines))
+        problem.sig_diag = sig_diag
+        problem.sig = np.sqrt(sig_diag**2 + np.sum(problem.modes**2, axis=1))   # marginal σ (figures)
+    else:
+        problem.modes = None
+        problem.sig = problem.sig_diag = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2 + spread**2)
     problem.realization_spread = spread
+    problem._whiteners.clear()
     problem._cache.clear()                            # cached residuals refer to the previous correction
     return _rms_per_observable(problem, err)
 
@@ -641,6 +695,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "discretization_error_rms": disc_err,
         "realization_spread_rms": spread_rms,
         "discretization_realizations": len(fine_forward) if fine_forward is not None else 0,
+        "realization_covariance": ("correlated" if problem.modes is not None else "diagonal") if fine_forward is not None else None,
         "discretization_refresh": refresh,
         "profiles": profiles,
         "partial_explanation": partial,
