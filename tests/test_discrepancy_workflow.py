@@ -590,3 +590,52 @@ def test_correlated_realizations_leave_an_out_of_catalogue_effect_unexplained(tm
 def test_spec_rejects_a_bad_realization_covariance():
     with pytest.raises(ValueError, match="realization_covariance='full'"):
         spec_from_dict({**_DISC_SPEC, "workflow": {"realization_covariance": "full"}})
+
+
+def test_a_profile_reaching_off_reports_the_effect_not_identifiable(tmp_path, monkeypatch):
+    """An effect accepted on ΔBIC and the held-out gap whose profile interval reaches "off" (the calibrated
+    parameters make up for it: β against E at one rate) is not named and is listed as not identifiable,
+    with the profile point nearest off and the parameters refitted there."""
+    from sweep.discrepancy import workflow
+
+    real = workflow.profile_recentred
+
+    def flat_profile(problem, fit, j, ids, max_passes=2):
+        fit, pr = real(problem, fit, j, ids, max_passes)
+        pr["points"].append({"value": 0.0, "delta_chi2": 1.5, "others": {"kbar": 0.0012, "E": 420.0}})
+        pr["points"].sort(key=lambda q: q["value"])
+        return fit, {**pr, "lower": 0.0}
+
+    monkeypatch.setattr(workflow, "profile_recentred", flat_profile)
+    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), _spec(), ToyForward({}, h=8.0), out_dir=tmp_path / "out",
+                       figures=False)
+    assert rep["named_effect"] is None and rep["verdict"] in ("no_missing_effect", "unexplained_discrepancy")
+    assert "damage_viscosity" in rep["not_identifiable"]
+    u = rep["profile_not_identifiable"][0]
+    assert u["effect"] == "damage_viscosity" and u["interval"][0] == 0.0
+    assert u["nearest_off"] == {"strength": 0.0, "delta_chi2": 1.5, "others": {"kbar": 0.0012, "E": 420.0}}
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "damage_viscosity: improved the joint fit" in md and "reaches off" in md
+
+
+def test_confounded_twin_pass_rule_and_condition_subsets():
+    from sweep.discrepancy.twins import hidden_effects, twin_conditions, twin_passed
+
+    tw = {"name": "one_rate", "expect": "not_identifiable", "hidden": {"beta": 60.0}, "conditions": ["w50", "w65"]}
+    assert hidden_effects(tw) == ["damage_viscosity"]
+    base = {"verdict": "no_missing_effect", "not_identifiable": [], "tie": []}
+    assert twin_passed(tw, {**base, "not_identifiable": ["damage_viscosity"]})
+    assert twin_passed(tw, {**base, "verdict": "tie", "tie": ["damage_viscosity", "volumetric_coupling"]})
+    assert not twin_passed(tw, base)                                                  # silently absent: fails
+    assert not twin_passed(tw, {**base, "verdict": "named", "not_identifiable": ["damage_viscosity"]})
+    assert not twin_passed({**tw, "hidden": {}}, {**base, "not_identifiable": ["damage_viscosity"]})
+    camp = {"conditions": {"w35": {"w_i": 35.0}, "w50": {"w_i": 50.0}, "w65": {"w_i": 65.0}}}
+    spec = spec_from_dict({**_DISC_SPEC, "holdout": {"ids": ["w50"]}})
+    assert twin_conditions(camp, tw, spec) == {"w50": {"w_i": 50.0}, "w65": {"w_i": 65.0}}
+    assert list(twin_conditions(camp, {"name": "all"}, spec)) == ["w35", "w50", "w65"]
+    with pytest.raises(ValueError, match="w80"):
+        twin_conditions(camp, {**tw, "conditions": ["w50", "w80"]}, spec)
+    with pytest.raises(ValueError, match="held-out and training"):
+        twin_conditions(camp, {**tw, "conditions": ["w50"]}, spec)
+    with pytest.raises(ValueError, match="holdout ids"):
+        twin_conditions(camp, {**tw, "conditions": ["w35", "w65"]}, spec)

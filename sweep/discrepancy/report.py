@@ -145,8 +145,14 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     if report["tie"]:
         L += [f"Tie between {report['tie']}: the data cannot tell them apart; add a discriminating condition.", ""]
     if report["not_identifiable"]:
-        L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null): "
-              f"{report['not_identifiable']}", ""]
+        L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null, "
+              f"or a profile interval reaching off): {report['not_identifiable']}", ""]
+    for u in report.get("profile_not_identifiable") or []:
+        n = u["nearest_off"]
+        L += [f"{u['effect']}: improved the joint fit, but its profile-likelihood interval {_f(u['interval'])} reaches "
+              f"off: at strength {_f(n['strength'])} the calibrated parameters ({_f(n['others'])}) refit to within "
+              f"Δχ² = {_f(n['delta_chi2'])}.  A discriminating condition (another injection rate, a later time) "
+              f"is needed to tell it from them.", ""]
     if report.get("discretization_error_rms") is not None:
         def units(d):
             return ", ".join(f"{o} {v:.3g} {UNITS.get(o, '')}" for o, v in (d or {}).items())

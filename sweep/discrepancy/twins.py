@@ -15,7 +15,11 @@ Campaign TOML::
     name = "damage_viscosity"; hidden = { beta = 60.0 }; expect = "damage_viscosity"
     # hidden = { beta = "law" } lets β follow 65.7 √C in the data; give the fitted strength's truth as
     # truth = 65.7 (with [spec.candidates] scaling = { damage_viscosity = "sqrt_cement" })
-    # expect: an effect name, "no_missing_effect", "unexplained_discrepancy" or "tie"
+    # expect: an effect name, "no_missing_effect", "unexplained_discrepancy", "tie" or "not_identifiable"
+    # (the hidden effect listed as not identifiable, or in a tie: a confounded case)
+    # conditions = ["w50", "w65"]: only these of [conditions] (default all; must contain the held-out ids);
+    # resolved_by = "damage_viscosity": the twin that adds the discriminating condition(s) to this confounded
+    # one (the summary records whether it passed)
 
 :func:`run_twins` writes ``<results>/<name>/{data/, report.json, report.md, figures}`` and
 ``<results>/summary.json`` (per twin: expected, verdict, named effect, hidden strength, interval,
@@ -42,12 +46,24 @@ def load_twin_campaign(path) -> dict:
     return d
 
 
+def hidden_effects(twin: dict) -> list:
+    """Catalogue effects whose strength parameter the twin's ``hidden`` sets."""
+    from solver.effects import EFFECTS
+
+    return [name for name, e in EFFECTS.items() if e.parameter in twin.get("hidden", {})]
+
+
 def twin_passed(twin: dict, rep: dict) -> bool:
     """The twin's requirement: hidden effect named with its strength inside the interval and the held-out
-    gap halved; or the expected verdict for controls."""
+    gap halved; the expected verdict for controls; for a confounded twin ("not_identifiable"), the hidden
+    effect reported as not identifiable or tied, never named."""
     exp = twin["expect"]
     if exp in ("no_missing_effect", "unexplained_discrepancy", "tie"):
         return rep["verdict"] == exp
+    if exp == "not_identifiable":
+        hid = hidden_effects(twin)
+        flagged = set(rep.get("not_identifiable") or []) | set(rep.get("tie") or [])
+        return bool(hid) and rep["verdict"] != "named" and all(h in flagged for h in hid)
     if rep["named_effect"] != exp:
         return False
     from solver.effects import get_effect
@@ -71,6 +87,22 @@ def check_data_realization(camp: dict, spec) -> None:
     if data_seed is not None and data_seed in seeds:
         raise ValueError(f"twin campaign: [data] mesh_seed={data_seed} is among [spec.discretization] "
                          f"mesh_seeds={list(seeds)}; the data's mesh realization must not be one the workflow checks")
+
+
+def twin_conditions(camp: dict, twin: dict, spec) -> dict:
+    """The twin's conditions ({id: overrides}): its ``conditions`` subset of the campaign's, or all of them."""
+    allc = camp["conditions"]
+    ids = twin.get("conditions")
+    if ids is None:
+        return dict(allc)
+    unknown = [i for i in ids if i not in allc]
+    if unknown or not ids:
+        raise ValueError(f"twin {twin['name']!r}: conditions={ids!r} must be a non-empty list of ids among {list(allc)}")
+    held = spec.holdout(list(ids))
+    if not held or len(held) == len(ids):
+        raise ValueError(f"twin {twin['name']!r}: conditions={ids!r} must contain held-out and training conditions "
+                         f"(held out: {held})")
+    return {i: allc[i] for i in ids}
 
 
 def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
@@ -108,7 +140,8 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
         gen_base = {k: v for k, v in spec.baseline_overrides().items() if k not in law}
         hidden = {k: v for k, v in hidden.items() if k not in law}
         gen = SolverForward(gen_base, data_opts, cache / "data", n_jobs=n_jobs)
-        folder = make_twin(results / name / "data", gen, camp["conditions"], times, hidden,
+        conds = twin_conditions(camp, twin, spec)
+        folder = make_twin(results / name / "data", gen, conds, times, hidden,
                            noise=dat.get("noise"), seed=int(dat.get("seed", 0)),
                            observables=tuple(dat.get("observables", ("p_inj", "front_radius_mean"))), regime=False)
         fwd = SolverForward(spec.baseline_overrides(), wf_opts, cache / "workflow", n_jobs=n_jobs)
@@ -123,7 +156,12 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
                          "gap_before": rep["gap_before"].get("total"), "gap_after": rep["gap_after"].get("total"),
                          "passed": twin_passed(twin, rep), "wall_time_s": round(time.time() - t0, 1),
                          "forward_runs": rep["forward_runs"], "data_runs": gen.n_runs,
-                         "realization_spread_rms": rep["realization_spread_rms"]}
+                         "realization_spread_rms": rep["realization_spread_rms"],
+                         "realization_covariance": rep.get("realization_covariance"), "conditions": list(conds)}
+        if twin.get("resolved_by"):
+            other = summary.get(twin["resolved_by"], {})
+            summary[name]["resolved_by"] = {"twin": twin["resolved_by"], "passed": other.get("passed"),
+                                            "verdict": other.get("verdict"), "conditions": other.get("conditions")}
         results.mkdir(parents=True, exist_ok=True)
         summary_path.write_text(json.dumps(summary, indent=1) + "\n")
     return summary

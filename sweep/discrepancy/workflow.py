@@ -640,7 +640,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         gap_before = _gap(problem, fit0.params, fit0.x, holdout)   # same (refreshed) data for both gaps
         gap_cur = _gap(problem, current.params, current.x, holdout)
         loc = localize(problem, current, train)
-    profiles = {}
+    profiles, profile_unidentified = {}, []
     if verdict == "named" and spec.wf("interval") == "profile":
         # the named strengths' intervals from the profile likelihood (the Wald ones screened candidates)
         names = [p.name for p in current.params]
@@ -658,9 +658,20 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
                 a["strength"] = float(final["effect:" + a["effect"]])
             gap_cur = _gap(problem, current.params, current.x, holdout)
             loc = localize(problem, current, train)
-        if any(a["strength_interval"][0] <= get_effect(a["effect"]).off for a in accepted):
-            # the acceptance rule (the interval excludes "off") fails once the interval is honest
+        reach_off = [a for a in accepted if a["strength_interval"][0] <= get_effect(a["effect"]).off]
+        if reach_off:
+            # the acceptance rule (the interval excludes "off") fails once the interval is honest.  The effect
+            # improved the joint fit (ΔBIC, held-out gap) but along its profile the calibrated parameters
+            # make up for it all the way to "off": with these conditions the data cannot tell the effect
+            # from the baseline parameters (β against E at one rate): not identifiable, not absent
             verdict = "unexplained_discrepancy" if loc0["systematic"] else "no_missing_effect"
+            for a in reach_off:
+                pr = profiles[a["effect"]]
+                at_off = min(pr["points"], key=lambda q: abs(q["value"] - get_effect(a["effect"]).off))
+                profile_unidentified.append({"effect": a["effect"], "interval": a["strength_interval"],
+                                             "nearest_off": {"strength": at_off["value"],
+                                                             "delta_chi2": at_off["delta_chi2"],
+                                                             "others": at_off.get("others", {})}})
     partial = None
     if verdict == "named" and loc["systematic"] and spec.wf("named_needs_noise_level"):
         # The named model still misses systematically.  The accepted effect explains part of the discrepancy
@@ -681,7 +692,10 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "accepted": accepted,
         "tie": tie,
         "candidates": first_candidates or [],
-        "not_identifiable": [c["effect"] for c in (first_candidates or []) if not c["identifiable"]],
+        # by the linear screen (signature inside the calibrated parameters' reach) or by the profile (see above)
+        "not_identifiable": [c["effect"] for c in (first_candidates or []) if not c["identifiable"]]
+                            + [u["effect"] for u in profile_unidentified],
+        "profile_not_identifiable": profile_unidentified,
         "gap_before": gap_before,
         "gap_after": gap_cur if verdict == "named" else gap_before,
         "calibrated_baseline": fit0.values(),
