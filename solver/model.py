@@ -32,12 +32,12 @@ the paper's dimensionless section writes 3γl_S/4, which is inconsistent with it
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import scipy.sparse as sp
 
-from . import ad, fem, physics
+from . import ad, codegen, fem, kernels, physics
 from .ad import Dual
 
 UX, UY, P, S, MU, GX, GY = range(7)
@@ -248,17 +248,46 @@ def _variables(U_elem: np.ndarray, geom: fem.Geometry, quad: fem.Quadrature, dua
     return Dual.variables(cols) if dual else cols
 
 
+def compiled_forms(params, n_fields: int, data: StepData) -> tuple:
+    """The compiled kernel of :func:`pointwise_forms` (and :func:`projection_forms`) and its constants.
+
+    The forms are traced on symbols (:mod:`solver.codegen`): per-element arrays (phi0 and the (M,) fields
+    of ``data``) and per-point arrays ((M, nq) fields) become inputs, parameters and ``data.dt`` become
+    constants; traced once per (params, n_fields, dt), compiled once per structure.
+    """
+    layout = tuple((f.name, np.ndim(getattr(data, f.name))) for f in fields(StepData) if f.name != "dt")
+
+    def build(tr):
+        step = StepData(dt=data.dt, **{name: tr.data(name, per_point=nd == 2) for name, nd in layout})
+        groups = [(pointwise_forms(tr.inputs(0, n_fields), params, tr.data("phi0", False), step, n_fields), fem.STRANG3)]
+        if n_fields == 7:
+            groups.append((projection_forms(tr.inputs(1, n_fields)), fem.VERTEX))
+        return groups
+
+    return codegen.forms_kernel((params, n_fields, float(data.dt), layout), build)
+
+
 def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepData, sl: slice, need_jacobian=True,
                       out: tuple | None = None):
     """Element residuals Fe (m, 3, nf) and field-major Jacobians Ke (m, nf, nf, 3, 3) of the elements ``sl``.
 
     ``out = (Fe, Ke)``: zeroed arrays of those shapes to accumulate into (``Ke`` None without the Jacobian).
+    With the numba kernels (:func:`solver.kernels.backend`) the point-wise forms are the compiled trace of
+    :func:`compiled_forms`, which writes the non-zero entries (the same values as the Dual path to round-off).
     """
     nf = disc.n_fields
     m = sl.stop - sl.start
     if out is None:
         out = (np.zeros((m, 3, nf)), np.zeros((m, nf, nf, 3, 3)) if need_jacobian else None)
     Fe, Ke = out
+    if kernels.backend() == "numba":
+        # the same forms, traced once and compiled (solver.codegen): point-wise physics, derivatives and
+        # contraction in one pass over the elements, without the GIL
+        kern, consts = compiled_forms(params, nf, data)
+        step = {f.name: getattr(data, f.name)[sl] for f in fields(StepData) if f.name != "dt"}
+        kern(consts, U, disc.triangles[sl], disc.geom.grads[sl], disc.geom.areas[sl], {"phi0": disc.phi0[sl], **step},
+             Fe, Ke if need_jacobian else None)
+        return Fe, Ke
     U_elem = U[disc.triangles[sl]]
     geom = fem.Geometry(disc.geom.areas[sl], disc.geom.grads[sl])
     X = _variables(U_elem, geom, fem.STRANG3, need_jacobian)
