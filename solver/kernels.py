@@ -9,6 +9,11 @@ becomes a gather over the inverted slot map (:class:`SlotSum`), which can run on
 of a ``bincount`` over 9 M weights.  Both paths give the same matrices to round-off (summation
 order differs); ``tests/test_kernels.py`` checks that, and the Taylor tests run on both.
 
+With numba, :func:`solver.model.element_residuals` does not call this contraction: the point-wise physics,
+its derivatives and the contraction are generated as one kernel from the traced forms
+(:mod:`solver.codegen`); :func:`forms_jacobian` still serves :func:`solver.fem.assemble_forms` for other forms
+(tests), :class:`SlotSum` the CSR gather of every Jacobian.
+
 Selection: ``DCHFRAC_KERNELS`` = ``auto`` (default: numba when importable), ``numba`` (error if
 it is not installed) or ``numpy``.  numba is an optional extra (``pip install dchfrac[fast]``);
 the code runs without it.  Kernels release the GIL (``nogil``), so the element chunks of
