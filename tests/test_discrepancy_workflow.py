@@ -294,59 +294,68 @@ def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread
         assert prob.y[n] == pytest.approx(y0[n] - err, rel=0, abs=1e-9)
         if cov == "diagonal":
             assert prob.sig[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2 + sd**2), rel=1e-9)
-        else:
-            # the predictive variance of one more realization about the k-sample mean: (1 + 1/k) s²
-            infl = 1.0 + 1.0 / len(used) if len(used) >= 2 else 0.0
+        else:   # the realization term is a covariance (see the GLS test below); σ_diag has the rest
             assert prob.sig_diag[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2), rel=1e-9)
-            assert prob.sig[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2 + infl * sd**2), rel=1e-9)
+            assert prob.sig[n] >= prob.sig_diag[n]
         assert prob.realization_spread[n] == pytest.approx(sd, rel=1e-9, abs=1e-12)
     assert min(counts.values()) > 0                           # 0, 1, 2 and 3 finite realizations all occur
-    assert (prob.modes is None) == (cov == "diagonal")
+    assert (prob.real_cov is None) == (cov == "diagonal")
     assert set(rms) == {"p_inj", "front_radius_mean", "crack_length"} and rms["p_inj"] > 0
 
 
+class _Wander(ToyForward):
+    """Toy (h = 8) plus a deviation per realization: a + b t in p_inj (smooth) and independent Gaussian
+    jitter of sd ``j`` mm per point in the front radius (no memory), from ``seed``."""
+
+    def __init__(self, a, b, j, seed):
+        super().__init__({}, h=8.0)
+        self.a, self.b, self.j, self.seed = a, b, j, seed
+
+    def predict_one(self, overrides, times):
+        out = super().predict_one(overrides, times)
+        rng = np.random.default_rng([self.seed, int(overrides["w_i"])])
+        out["p_inj"] = out["p_inj"] + self.a + self.b * np.asarray(times["p_inj"])
+        tf = np.asarray(times["front_radius_mean"])
+        out["front_radius_mean"] = out["front_radius_mean"] + self.j * rng.normal(size=tf.size)
+        return out
+
+
 def test_correlated_realizations_give_the_generalized_least_squares_residual(tmp_path):
-    """r·r = dᵀ Σ⁻¹ d with the dense Σ = diag(σ_diag²) + U Uᵀ, on any subset of rows (training, held out)."""
+    """r·r = dᵀ Σ⁻¹ d with the dense Σ = diag(σ_diag²) + C (per-series blocks), on any subset of conditions;
+    the correlation time comes out long for smooth deviations and zero for memoryless ones."""
     from sweep.discrepancy.workflow import add_discretization_error
 
     prob = _problem(tmp_path)
-    t = prob.t
-    # realizations differing by whole curves (a three-parameter family: rank k - 1 = 3 after centring)
-    # (kPa, kPa/s, mm): several times the measurement σ (2 kPa, 0.2 mm), as the solver's realizations are
-    devs = [(3.0, -2.0, 0.5), (-4.0, 5.0, 0.0), (1.0, 9.0, -1.5), (6.0, -1.0, 2.0)]
-
-    class _Curve(ToyForward):
-        def __init__(self, a, b, c):
-            super().__init__({}, h=8.0)
-            self.a, self.b, self.c = a, b, c
-
-        def predict_one(self, overrides, times):
-            out = super().predict_one(overrides, times)
-            out["p_inj"] = out["p_inj"] + self.a + self.b * np.asarray(times["p_inj"])
-            out["front_radius_mean"] = out["front_radius_mean"] + self.c
-            return out
-
-    add_discretization_error(prob, [_Curve(*d) for d in devs])
-    assert prob.modes.shape == (t.size, 4)
-    # the modes' rank: 3 (k - 1), and U Uᵀ is (1 + 1/k) times the sample covariance of the realizations
-    assert np.linalg.matrix_rank(prob.modes) == 3
+    devs = [(3.0, -2.0, 0.5, 1), (-4.0, 5.0, 0.5, 2), (1.0, 9.0, 0.5, 3), (6.0, -1.0, 0.5, 4)]
+    add_discretization_error(prob, [_Wander(*d) for d in devs])
+    rc = prob.real_cov
+    k = len(devs)
+    dt = TIMES[1] - TIMES[0]
+    assert rc.rho["p_inj"] > 0.9 and rc.tau["p_inj"] == pytest.approx(-dt / np.log(rc.rho["p_inj"]), rel=1e-12)
+    assert rc.rho["front_radius_mean"] < 0.2                               # jitter: 0 ± a few / √(k n)
+    # the per-point variance: (1 + 1/k) s², averaged over 5 neighbouring points of its series
+    fines = np.vstack([prob.model_vector({c: _Wander(*d).predict_one(prob.overrides(c, {p.name: p.initial for p in prob.spec.calibrate}), prob.times[c]) for c in prob.data.ids}, np.ones(prob.t.size, bool)) for d in devs])
+    var = (1 + 1 / k) * fines.var(axis=0, ddof=1)
+    for s in np.unique(prob.series):
+        rows = np.flatnonzero(prob.series == s)
+        rows = rows[np.argsort(prob.t[rows])]
+        v = np.array([var[rows[max(i - 2, 0): i + 3]].mean() for i in range(rows.size)])
+        assert np.allclose(prob.sig[rows] ** 2 - prob.sig_diag[rows] ** 2, v, rtol=1e-9, atol=1e-12)
     rng = np.random.default_rng(5)
     for ids in (["a", "b", "c"], ["d"], ["b"]):
         m = prob.mask(ids)
-        d = rng.normal(size=int(m.sum()))
+        rows = np.flatnonzero(m)
+        d = rng.normal(size=rows.size)
         r = prob.standardize(d, m, 0.0)
-        cov = np.diag(prob.sig_diag[m] ** 2) + prob.modes[m] @ prob.modes[m].T
+        cov = np.diag(prob.sig_diag[m] ** 2) + rc.dense(rows)
         assert r @ r == pytest.approx(d @ np.linalg.solve(cov, d), rel=1e-9)
-        # a deviation along one realization's own curve: uᵀ Σ⁻¹ u < d_jᵀ S⁺ d_j / (k − 1) <= 1 (S the sample
-        # covariance), however many points it spans; per-point variances charge it Σ u²/σ², growing with n
-        u = prob.modes[m][:, 0]
-        ru = prob.standardize(u, m, 0.0)
-        assert ru @ ru < 1.0 < np.sum((u / prob.sig[m]) ** 2)
-        # and a deviation orthogonal (in σ_diag units) to every mode is unchanged
-        V = prob.modes[m] / prob.sig_diag[m][:, None]
-        e = rng.normal(size=int(m.sum()))
-        e -= V @ np.linalg.lstsq(V, e, rcond=None)[0]
-        assert np.allclose(prob.standardize(e * prob.sig_diag[m], m, 0.0), e, atol=1e-10)
+    # a pressure curve off by the realizations' own spread over its whole length costs ~1, not ~n: it is
+    # one realization's smooth wander; the same size as independent point noise costs ~n
+    m = prob.mask(["b"])
+    pm = prob.obs[m] == "p_inj"
+    u = np.where(pm, np.sqrt(np.maximum(prob.sig[m] ** 2 - prob.sig_diag[m] ** 2, 0.0)), 0.0)
+    ru = prob.standardize(u, m, 0.0)
+    assert ru @ ru < 3.0 < 0.2 * pm.sum() < np.sum((u / prob.sig[m]) ** 2)
 
 
 def test_one_forward_or_a_list_of_one_is_the_unchanged_correction(tmp_path):
@@ -389,7 +398,7 @@ def test_workflow_reports_the_realization_spread(tmp_path):
     for r in rep["discretization_refresh"]:
         assert r["realization_spread_rms"]["p_inj"] == pytest.approx(statistics.stdev([0.2, 0.5, 1.1]), rel=1e-9)
     md = (tmp_path / "out" / "report.md").read_text()
-    assert "3 fine mesh realization(s)" in md and "p_inj 0.458 kPa" in md and "a correlated covariance" in md
+    assert "3 fine mesh realization(s)" in md and "p_inj 0.458 kPa" in md and "a covariance correlated in time" in md
     assert rep["realization_covariance"] == "correlated"
 
 

@@ -161,7 +161,8 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
               f"{units(report['discretization_error_rms'])}; spread over the "
               f"{report.get('discretization_realizations', 1)} fine mesh realization(s) (RMS of their sample std): "
               f"{units(report.get('realization_spread_rms'))}, "
-              + ("a correlated covariance (their deviation curves; residuals whitened)."
+              + (f"a covariance correlated in time (correlation time per observable, s: "
+                 f"{_f(report.get('realization_correlation_time'))}; residuals whitened)."
                  if report.get("realization_covariance") == "correlated" else "added in quadrature to σ."), ""]
     L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}.", "",
           "## Calibrated baseline", "", _f(report["calibrated_baseline"]), "",

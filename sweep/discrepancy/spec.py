@@ -42,8 +42,9 @@ Example (units mm, s, kPa)::
     profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
     named_needs_noise_level = true   # name an effect only if the named model's residuals are at noise level
     realization_covariance = "correlated"   # how mesh realizations' deviations enter the residuals: "correlated"
-                                     # (low-rank covariance of their deviation curves, residuals whitened) or
-                                     # "diagonal" (the simplification: per-point sample std in quadrature)
+                                     # (per series, correlated in time, estimated from the realizations;
+                                     # residuals whitened) or "diagonal" (the simplification: per-point
+                                     # sample std in quadrature)
 """
 from __future__ import annotations
 

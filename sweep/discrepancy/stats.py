@@ -13,8 +13,8 @@ import math
 import numpy as np
 
 __all__ = ["lag1_autocorrelation", "series_weights", "effective_chi2", "bic", "systematic_test",
-           "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times", "lowrank_whitener",
-           "whiten"]
+           "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times", "symmetric_whitener",
+           "moving_average", "pooled_lag1"]
 
 PHASES = ("before_initiation", "peak", "propagation", "late")
 
@@ -80,28 +80,31 @@ def systematic_test(r, series, z_crit: float = 3.0, rho_crit: float = 0.3) -> di
     return {"systematic": any_sys, "series": out}
 
 
-def lowrank_whitener(V) -> tuple[np.ndarray, np.ndarray]:
-    """Symmetric whitening for the covariance I + V Vᵀ of standardized residuals (V: n × k).
+def symmetric_whitener(R) -> np.ndarray:
+    """W = R^(−1/2), the symmetric inverse square root of a correlation-form covariance R (n × n, SPD).
 
-    Returns (Z, c): Z (n × r) orthonormal, c (r,) = (1 + λ)^(−1/2) − 1 for the non-zero eigenvalues λ
-    of V Vᵀ, so that W = I + Z diag(c) Zᵀ is the symmetric inverse square root of I + V Vᵀ
-    (Wᵀ W = (I + V Vᵀ)⁻¹).  Symmetric, not Cholesky: a residual orthogonal to the columns of V is
-    left unchanged, so whitened residuals stay attached to their points (the per-series statistics
-    still mean something).  Cost O(n k²)."""
-    V = np.asarray(V, float)
-    n = V.shape[0]
-    if V.size == 0:
-        return np.zeros((n, 0)), np.zeros(0)
-    Q, R = np.linalg.qr(V)
-    lam, P = np.linalg.eigh(R @ R.T)
-    keep = lam > 1e-12 * max(1.0, float(lam.max()))
-    return Q @ P[:, keep], 1.0 / np.sqrt(1.0 + lam[keep]) - 1.0
+    Symmetric, not Cholesky: W e stays attached to its points (W is close to the identity where R
+    is), so whitened residuals keep their meaning per point and per series.  Wᵀ W = R⁻¹."""
+    lam, V = np.linalg.eigh(np.asarray(R, float))
+    lam = np.maximum(lam, 1e-12 * max(1.0, float(lam.max())))
+    return (V / np.sqrt(lam)) @ V.T
 
 
-def whiten(e, Z: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """W e = e + Z (c ⊙ Zᵀ e) for the whitener (Z, c) of :func:`lowrank_whitener`."""
-    e = np.asarray(e, float)
-    return e + Z @ (c * (Z.T @ e)) if c.size else e
+def moving_average(v, window: int) -> np.ndarray:
+    """Centred moving average over ``window`` points (the mean over the points available at the ends)."""
+    v = np.asarray(v, float)
+    h = window // 2
+    c = np.concatenate([[0.0], np.cumsum(v)])
+    i = np.arange(v.size)
+    lo, hi = np.maximum(i - h, 0), np.minimum(i + h + 1, v.size)
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+def pooled_lag1(dev_series: list) -> float:
+    """Lag-1 autocorrelation pooled over curves (rows of each (k, n) array, about zero), clipped to [0, 0.99]."""
+    num = sum(float(np.sum(d[:, 1:] * d[:, :-1])) for d in dev_series)
+    den = sum(float(np.sum(d * d)) for d in dev_series)
+    return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
 
 
 def project_out(J, s) -> np.ndarray:

@@ -71,9 +71,9 @@ class Problem:
             if overlap:
                 raise ValueError(f"condition {cid!r} sets calibrated parameter(s) {sorted(overlap)}")
         # σ of each point without the mesh-realization term and, with "correlated" realization covariance,
-        # the realizations' deviation curves (n, k) whose outer product is that term (add_discretization_error)
+        # that term as a covariance per series (add_discretization_error)
         self.sig_diag = self.sig
-        self.modes = None
+        self.real_cov = None
         self._whiteners = {}
         self._cache = {}
         self.fixed = {}   # values held fixed while others are fitted (profile likelihood), e.g. {"effect:x": 3.0}
@@ -127,18 +127,21 @@ class Problem:
     def standardize(self, diff: np.ndarray, mask: np.ndarray, nan_value: float) -> np.ndarray:
         """Standardized residuals of differences ``diff`` (data − model, kPa / mm) on the rows of ``mask``.
 
-        e = diff/σ_diag (non-finite entries set to ``nan_value``), whitened for the mesh-realization
-        covariance when it is correlated: Σ = diag(σ_diag²) + U Uᵀ with U the realizations' deviation
-        curves (``self.modes``), so r·r = diffᵀ Σ⁻¹ diff (generalized least squares).  Without modes
-        this is e itself."""
+        e = diff/σ_diag (non-finite entries set to ``nan_value``), whitened per series for the
+        mesh-realization covariance when it is correlated (:class:`RealizationCovariance`): with
+        Σ_s = diag(σ_diag²) + C_s, r_s = (D^(−1/2) Σ_s D^(−1/2))^(−1/2) e_s, so r·r = diffᵀ Σ⁻¹ diff
+        (generalized least squares).  Without it this is e itself."""
         e = diff / self.sig_diag[mask]
         e = np.where(np.isfinite(e), e, nan_value)
-        if self.modes is None:
+        if self.real_cov is None:
             return e
         key = mask.tobytes()
         if key not in self._whiteners:
-            self._whiteners[key] = stats.lowrank_whitener(self.modes[mask] / self.sig_diag[mask][:, None])
-        return stats.whiten(e, *self._whiteners[key])
+            self._whiteners[key] = self.real_cov.whiteners(mask, self.sig_diag)
+        out = e.copy()
+        for pos, W in self._whiteners[key]:
+            out[pos] = W @ e[pos]
+        return out
 
     def residuals_for(self, preds: list, mask: np.ndarray) -> list:
         nanr = self.spec.wf("nan_residual")
@@ -210,11 +213,18 @@ class Problem:
 
 # ------------------------------------------------------------------------------------------------
 def _gap(problem: Problem, params, x, ids) -> dict:
-    """Held-out gap: RMS standardized residual per observable and in total (same metric before/after)."""
+    """Held-out gap: RMS standardized residual per observable and in total (same metric before/after).
+
+    Standardized by the marginal σ of each point (measurement, discretization and realization terms), not
+    whitened: a distance to read, in the same units with either realization covariance (whitening is for
+    the likelihood, where correlated points must not count as independent evidence)."""
     if not ids:
         return {}
-    r = problem.residual_batch(params, [x], ids)[0]
-    obs = problem.obs[problem.mask(ids)]
+    mask = problem.mask(ids)
+    m = problem.model_vector(problem.prediction(params, x, ids), mask)
+    r = (problem.y[mask] - m) / problem.sig[mask]
+    r = np.where(np.isfinite(r), r, problem.spec.wf("nan_residual"))
+    obs = problem.obs[mask]
     g = {o: float(np.sqrt(np.mean(r[obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(obs == o)}
     g["total"] = float(np.sqrt(np.mean(r**2)))
     return g
@@ -343,23 +353,93 @@ def realizations(fine_forward) -> list:
     return list(fine_forward) if isinstance(fine_forward, (list, tuple)) else [fine_forward]
 
 
-def realization_modes(fines: np.ndarray) -> np.ndarray:
-    """Deviation curves of the realizations, columns of U (n, k), scaled so that U Uᵀ is the covariance
-    of the data's deviation from the realizations' mean (kPa, mm).
+@dataclass
+class RealizationCovariance:
+    """Covariance of the data's mesh-realization deviation, one block per series (condition × observable).
 
-    The data are one more realization: its deviation from the k-sample mean has covariance
-    (1 + 1/k) Σ, Σ estimated by the sample covariance (1/(k − 1)) Σ_j d_j d_jᵀ, so
-    U = (f_j − mean) √((1 + 1/k)/(k − 1)).  k counts the finite realizations per point (0 where
-    fewer than 2 are: no information there), so diag(U Uᵀ) = (1 + 1/k) s² with s the sample std of
-    :func:`realization_mean_spread`."""
-    fines = np.atleast_2d(np.asarray(fines, float))
-    mean, _ = realization_mean_spread(fines)
-    ok = np.isfinite(fines)
-    cnt = ok.sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(cnt >= 2, np.sqrt((1.0 + 1.0 / cnt) / (cnt - 1.0)), 0.0)
-    dev = np.where(ok & (cnt >= 2), fines - np.where(np.isfinite(mean), mean, 0.0), 0.0)
-    return (dev * scale).T
+    The data are one realization of mesh and porosity field; its deviation from the k check realizations'
+    mean is a random curve.  Measured with the solver (twins, h = 3 mm): the front radius of a realization
+    wanders from the others by ~1 mm, with jumps where fingers connect, over stretches of several
+    observation times; per-point variances read such a stretch as a systematic misfit, and k = 3 curves
+    are far too few to estimate its covariance freely (their rank-2 sample covariance gives no variance
+    at all to a deviation outside their span: tried, the solver negative control got worse, χ² excess
+    z 11 -> 27).  So a model with few parameters, estimated from the k curves:
+
+        C_s[i, j] = √(v_i v_j) exp(−|t_i − t_j| / τ_o),
+
+    v_i = (1 + 1/k) s_i² averaged over ``window`` neighbouring points of the series (s_i the sample std of
+    the realizations at that point; 1 + 1/k: one more realization about a k-sample mean), τ_o per
+    observable from the lag-1 autocorrelation ρ of the realizations' deviation curves pooled over
+    conditions, τ = −Δt/ln ρ (Δt the median time step; ρ clipped to [0, 0.99]; ρ = 0: C diagonal).
+    Series are taken as independent of one another.  Units: v in kPa², mm²; τ in s.
+    """
+
+    blocks: dict        # series -> (rows in time order, C (n_s, n_s))
+    tau: dict           # observable -> correlation time, s
+    rho: dict           # observable -> pooled lag-1 autocorrelation of the deviations
+
+    @classmethod
+    def estimate(cls, fines: np.ndarray, problem: "Problem", window: int = 5) -> "RealizationCovariance":
+        """From the realizations' predictions ``fines`` (k, n) on the rows of ``problem``."""
+        fines = np.atleast_2d(np.asarray(fines, float))
+        ok = np.isfinite(fines)
+        cnt = ok.sum(axis=0)
+        mean, spread = realization_mean_spread(fines)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            var = np.where(cnt >= 2, (1.0 + 1.0 / cnt) * spread**2, 0.0)
+        dev = np.where(ok & (cnt >= 2), fines - np.where(np.isfinite(mean), mean, 0.0), 0.0)
+        series_rows = {}
+        for s in np.unique(problem.series):
+            rows = np.flatnonzero(problem.series == s)
+            series_rows[int(s)] = rows[np.argsort(problem.t[rows], kind="stable")]
+        tau, rho = {}, {}
+        for o in np.unique(problem.obs):
+            rs = [r for r in series_rows.values() if problem.obs[r[0]] == o]
+            rho[str(o)] = stats.pooled_lag1([dev[:, r] for r in rs])
+            steps = np.concatenate([np.diff(problem.t[r]) for r in rs])
+            dt = float(np.median(steps)) if steps.size else 0.0
+            tau[str(o)] = -dt / math.log(rho[str(o)]) if rho[str(o)] > 0 and dt > 0 else 0.0
+        blocks = {}
+        for s, rows in series_rows.items():
+            v = stats.moving_average(var[rows], window)
+            ta = tau[str(problem.obs[rows[0]])]
+            lag = np.abs(problem.t[rows][:, None] - problem.t[rows][None, :])
+            corr = np.exp(-lag / ta) if ta > 0 else np.eye(rows.size)
+            blocks[s] = (rows, np.sqrt(np.outer(v, v)) * corr)
+        return cls(blocks, tau, rho)
+
+    def variance(self, n: int) -> np.ndarray:
+        """Per-point realization variance (the blocks' diagonals) on n rows, kPa² / mm²."""
+        out = np.zeros(n)
+        for rows, C in self.blocks.values():
+            out[rows] = np.diag(C)
+        return out
+
+    def dense(self, sel: np.ndarray) -> np.ndarray:
+        """The covariance on the rows ``sel`` (sorted global indices) as a dense matrix."""
+        out = np.zeros((sel.size, sel.size))
+        for rows, C in self.blocks.values():
+            keep = np.isin(rows, sel)
+            if keep.any():
+                ix = np.searchsorted(sel, rows[keep])
+                out[np.ix_(ix, ix)] = C[np.ix_(keep, keep)]
+        return out
+
+    def whiteners(self, mask: np.ndarray, sig_diag: np.ndarray) -> list:
+        """[(positions in the masked vector, W)] per series with rows in ``mask``: W = R^(−1/2),
+        R = I + D^(−1/2) C D^(−1/2) (D = σ_diag²) on those rows (a subset's marginal covariance is the
+        sub-block)."""
+        rows_m = np.flatnonzero(mask)
+        out = []
+        for rows, C in self.blocks.values():
+            keep = mask[rows]
+            if not keep.any():
+                continue
+            r = rows[keep]
+            d = sig_diag[r]
+            R = np.eye(r.size) + C[np.ix_(keep, keep)] / np.outer(d, d)
+            out.append((np.searchsorted(rows_m, r), stats.symmetric_whitener(R)))
+        return out
 
 
 def realization_mean_spread(fines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -398,10 +478,10 @@ def add_discretization_error(problem: Problem, fine_forward, values: dict | None
     fine/coarse difference sees.  Then err = mean_k(fine_k) − coarse (the mean is the better correction)
     and the realizations' sample std s (ddof = 1; kPa, mm) is an uncertainty of the comparison:
     σ² = σ_measured² + (disc_error_fraction·err)² + s² with ``realization_covariance = "diagonal"``.  By
-    default ("correlated") the realization term is the low-rank covariance U Uᵀ of the realizations'
-    deviation curves (:func:`realization_modes`; its diagonal is (1 + 1/k) s²) and the residuals are
-    whitened with it (:meth:`Problem.standardize`): a deviation shaped like a mesh realization's costs
-    what its likelihood says, not n independent misfits.  Non-finite values are left out per point (s = 0
+    default ("correlated") the realization term is a covariance per series, correlated in time
+    (:class:`RealizationCovariance`; its diagonal is the smoothed (1 + 1/k) s²) and the residuals are
+    whitened with it (:meth:`Problem.standardize`): a stretch of a curve off by a realization's typical
+    wander costs what its likelihood says, not that of independent misfits.  Non-finite values are left out per point (s = 0
     where fewer than 2 realizations are finite, err = 0 where none is or the coarse model is not).  With
     one model s = 0 and the result is that of the single model.  The per-point s is kept in
     ``problem.realization_spread``.  Returns the RMS of err per observable."""
@@ -424,16 +504,15 @@ def add_discretization_error(problem: Problem, fine_forward, values: dict | None
     # the correction itself is uncertain (frac·err), and so is which mesh realization the data are (spread)
     sig_diag = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2)
     if problem.spec.wf("realization_covariance") == "correlated" and len(fines) >= 2:
-        # A realization's deviation is a whole curve, in every condition at once (one mesh and porosity
-        # field for all): measured in the solver twins, the data's front radius sat ~1.2 mm above the
-        # realizations' mean over the whole w65 curve (lag-1 autocorrelation 0.77), which per-point
-        # variances read as a systematic misfit.  Its covariance is low rank: U Uᵀ from the k deviation
-        # curves, and the residuals are whitened with diag(σ_diag²) + U Uᵀ.
-        problem.modes = realization_modes(np.vstack(fines))
+        # A realization's deviation is a curve, not independent points: measured in the solver twins, the
+        # data's front radius at w65 stayed 1.5–1.9 mm below the realizations' mean over 4 observation
+        # times and ended 1.3 mm above (lag-1 autocorrelation 0.75), which per-point variances read as
+        # a systematic misfit.  See RealizationCovariance for the model and why it has few parameters.
+        problem.real_cov = RealizationCovariance.estimate(np.vstack(fines), problem)
         problem.sig_diag = sig_diag
-        problem.sig = np.sqrt(sig_diag**2 + np.sum(problem.modes**2, axis=1))   # marginal σ (figures)
+        problem.sig = np.sqrt(sig_diag**2 + problem.real_cov.variance(sig_diag.size))   # marginal σ (figures)
     else:
-        problem.modes = None
+        problem.real_cov = None
         problem.sig = problem.sig_diag = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2 + spread**2)
     problem.realization_spread = spread
     problem._whiteners.clear()
@@ -709,7 +788,9 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "discretization_error_rms": disc_err,
         "realization_spread_rms": spread_rms,
         "discretization_realizations": len(fine_forward) if fine_forward is not None else 0,
-        "realization_covariance": ("correlated" if problem.modes is not None else "diagonal") if fine_forward is not None else None,
+        "realization_covariance": ("correlated" if problem.real_cov is not None else "diagonal") if fine_forward is not None else None,
+        "realization_correlation_time": problem.real_cov.tau if problem.real_cov is not None else None,
+        "realization_lag1": problem.real_cov.rho if problem.real_cov is not None else None,
         "discretization_refresh": refresh,
         "profiles": profiles,
         "partial_explanation": partial,
