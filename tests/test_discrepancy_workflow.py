@@ -648,3 +648,29 @@ def test_confounded_twin_pass_rule_and_condition_subsets():
         twin_conditions(camp, {**tw, "conditions": ["w50"]}, spec)
     with pytest.raises(ValueError, match="holdout ids"):
         twin_conditions(camp, {**tw, "conditions": ["w35", "w65"]}, spec)
+
+
+@pytest.mark.parametrize("interval", ["profile", "wald"])
+def test_off_is_excluded_by_the_likelihood_ratio_with_profile_intervals(tmp_path, monkeypatch, interval):
+    """With profile intervals "the interval excludes off" is the profile at off (the baseline fit: the
+    calibrated parameters refitted without the effect) against 3.84 × scale, not the Wald bound, which a
+    curved valley makes wrong either way.  A Wald sd made 100x too wide does not stop the profile rule."""
+    from sweep.discrepancy import stats as st
+
+    real = st.wald_interval
+
+    def wide(J, r, w, index, x_hat, level_z=1.96, min_ratio=0.02):
+        lo, hi, sd = real(J, r, w, index, x_hat, level_z, min_ratio)
+        return x_hat - 100 * (x_hat - lo), x_hat + 100 * (hi - x_hat), 100 * sd
+
+    monkeypatch.setattr(st, "wald_interval", wide)
+    spec = _spec_with({"interval": interval})
+    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), spec, ToyForward({}, h=8.0))
+    row = {c["effect"]: c for c in rep["candidates"]}["damage_viscosity"]
+    assert row["lr_off"] > 100.0
+    if interval == "profile":
+        assert row["excludes_off"] and rep["named_effect"] == "damage_viscosity"
+        lo, hi = rep["strength_interval"]
+        assert lo <= 40.0 <= hi
+    else:
+        assert not row["excludes_off"] and rep["named_effect"] is None

@@ -338,11 +338,26 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
     gap = _gap(problem, params, f.x, holdout)
     e = get_effect(cand)
     gap_ok = bool(holdout) and gap["total"] <= (1 - spec.wf("min_gap_reduction")) * gap_base["total"]
-    passed = bool(b1 - b0 <= spec.wf("delta_bic") and lo > e.off and gap_ok and explained >= spec.wf("min_explained"))
+    # Does the interval exclude "off"?  With profile intervals, ask the profile itself at off: the strength
+    # held at off with the calibrated parameters refitted is the baseline fit, so the likelihood-ratio
+    # statistic χ²(off) − χ²(fit) against 3.84 × the misfit scale costs no run.  The Wald bound linearizes
+    # at the fit and is wrong both ways in a curved valley (measured, solver β twin: Wald [0, 43.6] around
+    # β = 20.3 while χ² at β = 0 was 870 higher).
+    k1 = len(params)
+    scale = max(1.0, c1 / max(n_eff - k1, 1.0))
+    lr_off = float(c0 - c1)
+    if spec.wf("interval") == "profile":
+        # ... and the strength must be determined at all: on an exact ridge with a calibrated parameter the
+        # Wald sd is infinite (stats.wald_interval), and a χ² drop at off says nothing about the strength
+        excludes_off = bool(lr_off > 3.841 * scale and math.isfinite(sd))
+    else:
+        excludes_off = bool(lo > e.off)
+    passed = bool(b1 - b0 <= spec.wf("delta_bic") and excludes_off and gap_ok and explained >= spec.wf("min_explained"))
     return {"effect": cand, "fit": f, "delta_bic": float(b1 - b0), "strength": float(f.x[-1]),
             "strength_interval": [lo, hi], "strength_sd": sd,
             "explained_fraction": float(explained), "gap": gap, "gap_ok": gap_ok,
-            "interval_excludes_off": bool(lo > e.off), "passed": passed,
+            "interval_excludes_off": excludes_off, "lr_off": lr_off, "lr_threshold": 3.841 * scale,
+            "passed": passed,
             "values": f.values()}
 
 
@@ -554,7 +569,7 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     parameter j held at trial values, and the interval is where the weighted χ² (the same per-series
     weights n_eff/n and misfit scale as the Wald interval) rises by less than ``level``·scale (3.84: 95 %
     for one parameter).  Each side starts at the Wald bound and doubles its distance from the fit
-    (``profile_expand`` times) until the criterion is crossed, then interpolates linearly; a side that
+    (``profile_expand`` times) until the criterion is crossed, then interpolates √Δχ² linearly; a side that
     never crosses ends at the parameter's bound.  Returns lower/upper (parameter units) and the points.
     """
     params, x_hat = fit.params, np.asarray(fit.x, float)
@@ -588,8 +603,12 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
             if xt == x_in:
                 return bound
             d = dchi2(xt)
-            if d >= thr:   # crossed: linear interpolation of Δχ² between the last inside point and this one
-                return x_in + (thr - d_in) / (d - d_in) * (xt - x_in)
+            if d >= thr:
+                # crossed: interpolate √Δχ² linearly between the last inside point and this one (exact for
+                # a quadratic profile; linear in Δχ² would put the bound too close to the fit whenever the
+                # bracket is wide, i.e. whenever the Wald sd overestimates)
+                a, b = math.sqrt(max(d_in, 0.0)), math.sqrt(d)
+                return x_in + (math.sqrt(thr) - a) / (b - a) * (xt - x_in)
             x_in, d_in = xt, d
             if xt == bound:
                 return bound
@@ -685,6 +704,8 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
                          "strength": rf["strength"] if rf else None,
                          "strength_interval": rf["strength_interval"] if rf else None,
                          "explained_fraction": rf["explained_fraction"] if rf else None,
+                         "excludes_off": rf["interval_excludes_off"] if rf else None,
+                         "lr_off": rf["lr_off"] if rf else None,
                          "heldout_gap": rf["gap"] if rf else None})
         if first_candidates is None:
             first_candidates = rows
