@@ -88,3 +88,48 @@ def test_real_solver_twin(tmp_path, name):
 
     s = run_twins(ROOT / "campaigns" / "discrepancy_twins_ci.toml", tmp_path / "res", tmp_path / "cache", only=[name])
     assert s[name]["passed"], json.dumps(s[name], indent=1)
+
+
+def test_reference_check_runs_the_three_models_against_the_paper(tmp_path):
+    """[reference_check]: truth, calibrated baseline and named model at the reference conditions, each
+    compared with paper_reported.toml by sweep.reference; gaps are |model - paper| of the same rows, and the
+    named model's beta follows its sqrt(C) scaling at the reference cement ratio."""
+    from sweep.discrepancy.reference_check import GAP_QUANTITIES, load_reference_check, reference_models, run_reference_check
+    from sweep.discrepancy.spec import spec_from_dict
+    from sweep.reference import paper_reported
+
+    try:
+        paper = paper_reported()["reference_experiment"]
+    except FileNotFoundError:
+        pytest.skip("shared/data/paper_reported.toml not beside the project")
+    chk = load_reference_check({"conditions": {"cement": 1.44, "w_i": 50.0}, "h": 12.0, "t_end": 0.006})
+    spec = spec_from_dict({"baseline": {"effects_off": ["damage_viscosity", "compliant_boundary"]},
+                           "calibrate": [{"name": "E", "lower": 200.0, "upper": 550.0}],
+                           "candidates": {"effects": ["damage_viscosity"], "scaling": {"damage_viscosity": "sqrt_cement"}},
+                           "holdout": {"ids": ["a"]}, "options": {"h": 12.0, "t_end": 0.006}})
+    rep = {"verdict": "named", "calibrated_baseline": {"E": 400.0},
+           "final_values": {"E": 330.0, "effect:damage_viscosity": 50.0}}
+    models = reference_models(spec, rep, {"outer_compliance": 0.0}, chk.conditions)
+    assert models["baseline_fit"]["beta"] == 0.0 and models["baseline_fit"]["E"] == 400.0
+    assert models["named_fit"]["beta"] == pytest.approx(50.0 * 1.2) and models["named_fit"]["E"] == 330.0
+    assert "beta" not in models["truth"] and models["truth"]["cement"] == 1.44    # beta follows its law of C
+    res = run_reference_check(chk, models, tmp_path / "ref", tmp_path / "cache")
+    assert res["status"] == {"truth": "ok", "baseline_fit": "ok", "named_fit": "ok"}
+    peak = "peak injection pressure (kPa)"
+    assert res["quantities"][peak]["paper"] == paper["peak_injection_pressure"]
+    for label in models:
+        ts = pd.read_csv(tmp_path / "ref" / label / "timeseries.csv")
+        assert res["quantities"][peak][label] == pytest.approx(ts["p_inj"].max())
+        assert res["gap_to_paper"][label][peak] == pytest.approx(abs(ts["p_inj"].max() - paper["peak_injection_pressure"]))
+        assert set(res["gap_to_paper"][label]) == set(GAP_QUANTITIES)
+    assert json.loads((tmp_path / "ref" / "reference_check.json").read_text())["status"] == res["status"]
+    assert "| peak injection pressure (kPa) | 470 |" in (tmp_path / "ref" / "reference_check.md").read_text()
+
+
+@pytest.mark.parametrize("table, key", [({"h": -1.0}, "h"), ({"t_end": float("nan")}, "t_end"), ({"dt": 0.1}, "unknown"),
+                                         ({"conditions": {"cement": -2.0}}, "cement")])
+def test_reference_check_rejects_bad_tables(table, key):
+    from sweep.discrepancy.reference_check import load_reference_check
+
+    with pytest.raises(ValueError, match=key):
+        load_reference_check(table)

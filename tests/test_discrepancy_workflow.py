@@ -650,6 +650,25 @@ def test_confounded_twin_pass_rule_and_condition_subsets():
         twin_conditions(camp, {**tw, "conditions": ["w35", "w65"]}, spec)
 
 
+def test_twin_observable_subsets_and_summary_merge(tmp_path):
+    """A twin may 'measure' a subset of the campaign's observables (a confounded design: injection pressure
+    only); the summary is merged entry by entry, so twins run by separate processes keep each other's rows."""
+    from sweep.discrepancy.twins import _write_summary_entry, twin_observables
+
+    camp = {"data": {"observables": ["p_inj", "front_radius_mean"]}}
+    assert twin_observables(camp, {"name": "a"}) == ("p_inj", "front_radius_mean")
+    assert twin_observables(camp, {"name": "a", "observables": ["p_inj"]}) == ("p_inj",)
+    for bad in (["crack_length"], [], ["p_inj", "p_inj"]):
+        with pytest.raises(ValueError, match="observables"):
+            twin_observables(camp, {"name": "a", "observables": bad})
+    f = tmp_path / "res" / "summary.json"
+    _write_summary_entry(f, "one", {"passed": True})
+    _write_summary_entry(f, "two", {"passed": False})
+    _write_summary_entry(f, "one", {"passed": False})
+    assert json.loads(f.read_text()) == {"one": {"passed": False}, "two": {"passed": False}}
+    assert not list(f.parent.glob(".summary.json.*.tmp"))
+
+
 @pytest.mark.parametrize("interval", ["profile", "wald"])
 def test_off_is_excluded_by_the_likelihood_ratio_with_profile_intervals(tmp_path, monkeypatch, interval):
     """With profile intervals "the interval excludes off" is the profile at off (the baseline fit: the

@@ -18,6 +18,10 @@ Campaign TOML::
     # expect: an effect name, "no_missing_effect", "unexplained_discrepancy", "tie" or "not_identifiable"
     # (the hidden effect listed as not identifiable, or in a tie: a confounded case)
     # conditions = ["w50", "w65"]: only these of [conditions] (default all; must contain the held-out ids);
+    # observables = ["p_inj"]: only these of [data] observables are "measured" in this twin (default all)
+    [reference_check]           # optional: the workflow's models on the paper's reference experiment
+    conditions = { cement = 1.2, eta_o = 0.29, kbar = 0.0015, w_i = 50.0 }; h = 2.0; t_end = 2.0
+    # (sweep.discrepancy.reference_check: truth, baseline fit and named fit against paper_reported.toml)
     # resolved_by = "damage_viscosity": the twin that adds the discriminating condition(s) to this confounded
     # one (the summary records whether it passed)
 
@@ -33,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["load_twin_campaign", "run_twins", "twin_passed"]
+__all__ = ["load_twin_campaign", "run_twins", "twin_passed", "twin_conditions", "twin_observables"]
 
 
 def load_twin_campaign(path) -> dict:
@@ -105,6 +109,34 @@ def twin_conditions(camp: dict, twin: dict, spec) -> dict:
     return {i: allc[i] for i in ids}
 
 
+def twin_observables(camp: dict, twin: dict) -> tuple:
+    """The twin's measured observables: its ``observables`` subset of ``[data] observables``, or all of them."""
+    allo = tuple(camp["data"].get("observables", ("p_inj", "front_radius_mean")))
+    obs = twin.get("observables")
+    if obs is None:
+        return allo
+    if not obs or any(o not in allo for o in obs) or len(set(obs)) != len(obs):
+        raise ValueError(f"twin {twin['name']!r}: observables={obs!r} must be a non-empty list of distinct "
+                         f"observables among [data] observables {list(allo)}")
+    return tuple(obs)
+
+
+def _write_summary_entry(path: Path, name: str, entry: dict) -> None:
+    """Merge one twin's entry into ``summary.json`` under an exclusive lock, written atomically: several twin
+    processes may share a results folder, and a killed one must never leave a truncated summary."""
+    import fcntl
+    import os
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path.with_suffix(".lock"), "w") as lk:
+        fcntl.flock(lk, fcntl.LOCK_EX)
+        summary = json.loads(path.read_text()) if path.is_file() else {}
+        summary[name] = entry
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(summary, indent=1) + "\n")
+        os.replace(tmp, path)
+
+
 def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
     """Run the twin experiments of ``campaign`` (path or dict); returns the summary dict.
 
@@ -130,6 +162,17 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
     wf_opts = RunOptions.from_dict(spec.options)
     summary_path = results / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    ref = None
+    if "reference_check" in camp:    # validated, and the paper's figures found, before any run starts
+        from sweep.reference import paper_reported
+
+        from .reference_check import load_reference_check
+        ref = load_reference_check(camp["reference_check"])
+        paper_reported()
+    for twin in camp["twin"]:       # validate every selected twin before any run starts
+        if not only or twin["name"] in only:
+            twin_conditions(camp, twin, spec)
+            twin_observables(camp, twin)
     for twin in camp["twin"]:
         name = twin["name"]
         if only and name not in only:
@@ -143,7 +186,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
         conds = twin_conditions(camp, twin, spec)
         folder = make_twin(results / name / "data", gen, conds, times, hidden,
                            noise=dat.get("noise"), seed=int(dat.get("seed", 0)),
-                           observables=tuple(dat.get("observables", ("p_inj", "front_radius_mean"))), regime=False)
+                           observables=twin_observables(camp, twin), regime=False)
         fwd = SolverForward(spec.baseline_overrides(), wf_opts, cache / "workflow", n_jobs=n_jobs)
         # one fine model per mesh realization ([spec.discretization] mesh_seeds): the data are one realization
         # (their own mesh_seed) the workflow cannot know; the cache key includes mesh_seed
@@ -157,14 +200,24 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
                          "passed": twin_passed(twin, rep), "wall_time_s": round(time.time() - t0, 1),
                          "forward_runs": rep["forward_runs"], "data_runs": gen.n_runs,
                          "realization_spread_rms": rep["realization_spread_rms"],
-                         "realization_covariance": rep.get("realization_covariance"), "conditions": list(conds)}
+                         "realization_covariance": rep.get("realization_covariance"), "conditions": list(conds),
+                         "observables": list(twin_observables(camp, twin))}
+        if ref is not None:
+            from .reference_check import reference_models, run_reference_check
+
+            truth = {**gen_base, **hidden}
+            rc = run_reference_check(ref, reference_models(spec, rep, truth, ref.conditions),
+                                     results / name / "reference_check", cache / "reference", n_jobs)
+            summary[name]["reference_check"] = {"status": rc["status"], "gap_to_paper": rc["gap_to_paper"],
+                                                "quantities": {q: rc["quantities"].get(q) for q in rc["gap_to_paper"]["truth"]}}
         if twin.get("resolved_by"):
-            other = summary.get(twin["resolved_by"], {})
+            cur = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+            other = cur.get(twin["resolved_by"], summary.get(twin["resolved_by"], {}))
             summary[name]["resolved_by"] = {"twin": twin["resolved_by"], "passed": other.get("passed"),
-                                            "verdict": other.get("verdict"), "conditions": other.get("conditions")}
-        results.mkdir(parents=True, exist_ok=True)
-        summary_path.write_text(json.dumps(summary, indent=1) + "\n")
-    return summary
+                                            "verdict": other.get("verdict"), "conditions": other.get("conditions"),
+                                            "observables": other.get("observables")}
+        _write_summary_entry(summary_path, name, summary[name])
+    return json.loads(summary_path.read_text()) if summary_path.is_file() else summary
 
 
 def main(argv=None) -> int:

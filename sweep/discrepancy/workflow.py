@@ -42,6 +42,27 @@ class Fit:
         return {p.name: p.from_x(xi) for p, xi in zip(self.params, self.x)}
 
 
+def values_to_overrides(spec: DiscrepancySpec, base: dict, condition: dict, values: dict) -> dict:
+    """solver.Parameters overrides of one condition for fitted ``values``.
+
+    base : the baseline overrides (effects off); condition : the condition's parameters (they win);
+    values : calibrated parameters by name and effect strengths as 'effect:<name>' (strength in the effect's
+    units, times √C for an effect with scaling "sqrt_cement", C in %: β = c √C, Sec. 3.6).
+    """
+    o = dict(base)
+    for k, v in values.items():
+        if k.startswith("effect:"):
+            name = k[7:]
+            e = get_effect(name)
+            sc = spec.scaling.get(name, "none")
+            cem = condition.get("cement", base.get("cement", 1.2))
+            o[e.parameter] = v * math.sqrt(cem) if sc == "sqrt_cement" else v
+        else:
+            o[k] = v
+    o.update(condition)
+    return o
+
+
 class Problem:
     """Residual assembly for a set of conditions, with an in-memory cache over x."""
 
@@ -82,19 +103,7 @@ class Problem:
     # ----------------------------------------------------------------- overrides
     def overrides(self, cid: str, values: dict) -> dict:
         """Full parameter overrides of condition ``cid`` for fitted ``values`` (effects as 'effect:<name>')."""
-        o = dict(self.base)
-        cp = self.data.condition_params(cid)
-        for k, v in values.items():
-            if k.startswith("effect:"):
-                name = k[7:]
-                e = get_effect(name)
-                sc = self.spec.scaling.get(name, "none")
-                cem = cp.get("cement", self.base.get("cement", 1.2))
-                o[e.parameter] = v * math.sqrt(cem) if sc == "sqrt_cement" else v
-            else:
-                o[k] = v
-        o.update(cp)
-        return o
+        return values_to_overrides(self.spec, self.base, self.data.condition_params(cid), values)
 
     def predict(self, values_list: list, ids: list) -> list:
         """Predictions [{cid: {obs: array, 'regime': label}}] for each values dict (one batch)."""
