@@ -103,12 +103,14 @@ class RunWriter:
     def write_timeseries(self, df) -> None:
         atomic_write_text(self.dir / "timeseries.csv", df.to_csv(index=False))
 
-    def finish(self, df, status, reason, wall, t_reached, rejected, factorizations) -> None:
+    def finish(self, df, status, reason, wall, t_reached, rejected, factorizations, xdmf: bool = True) -> None:
+        """Final time series, XDMF (when ``xdmf``: RunOptions.write_xdmf) and the summary, which comes last."""
         self.write_timeseries(df)
-        try:
-            write_xdmf(self.dir)
-        except Exception as exc:  # ParaView output is a convenience, never a failure
-            self.log(f"XDMF not written: {exc}")
+        if xdmf:
+            try:
+                write_xdmf(self.dir)
+            except Exception as exc:  # ParaView output is a convenience, never a failure
+                self.log(f"XDMF not written: {exc}")
         self._summary({
             "status": status, "reason": reason, "complete": status == "ok",
             "wall_time_s": wall, "t_reached": t_reached, "accepted_steps": int(len(df)),

@@ -216,7 +216,7 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     wall = time.perf_counter() - t_wall
     nfact = linsolve.STATS["factorizations"] - fact0
     if writer:
-        writer.finish(ts, status, reason, wall, rows[-1]["t"] if rows else 0.0, rejected, nfact)
+        writer.finish(ts, status, reason, wall, rows[-1]["t"] if rows else 0.0, rejected, nfact, xdmf=options.write_xdmf)
     if progress:
         print(file=sys.stderr)
     return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact)

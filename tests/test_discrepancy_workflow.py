@@ -235,6 +235,44 @@ def test_discretization_correction_is_refreshed_at_the_named_model(tmp_path):
     assert reps[2]["accepted"][0]["strength_before_refresh"] == pytest.approx(reps[0]["strength"], rel=1e-9)
 
 
+def test_discretization_refresh_iterates_to_its_fixed_point(tmp_path):
+    """The refresh is a fixed-point iteration (correct at the fit, refit): with a strongly β-dependent mesh
+    error (toy: β → β (1 + 0.1 h): the coarse h = 8 model is 1.8/1.2 = 1.5x more sensitive to β than the fine
+    h = 2 one, so each pass leaves ~1 − 1.2/1.8 = 1/3 of the distance to the fixed point β = 40) it stops once the strength moves by <= disc_refresh_tol, reports the trajectory and convergence, and a
+    single pass is reported as not converged."""
+    fwd = ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1)
+    d = load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"beta": 40.0}, seed=1,
+                                observables=("p_inj", "front_radius_mean", "crack_length")))
+    reps = {}
+    for n in (1, 12):
+        spec = spec_from_dict({"baseline": {"effects_off": OFF}, "candidates": {"effects": OFF},
+                               "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
+                               "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
+                                             {"name": "E", "lower": 150.0, "upper": 700.0}],
+                               "workflow": {"disc_refresh": n, "disc_refresh_tol": 0.01}})
+        reps[n] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.1),
+                               fine_forward=ToyForward({}, h=2.0, beta_mesh=0.1))
+        assert reps[n]["named_effect"] == "damage_viscosity"
+    one, many = reps[1]["accepted"][0], reps[12]["accepted"][0]
+    assert one["refresh_converged"] is False and len(reps[1]["discretization_refresh"]) == 1
+    assert many["refresh_converged"] is True and 2 <= len(reps[12]["discretization_refresh"]) < 12
+    traj = many["refresh_trajectory"]
+    assert traj[0] == pytest.approx(many["strength_before_refresh"]) and len(traj) == len(reps[12]["discretization_refresh"]) + 1
+    steps = np.abs(np.diff(traj))
+    assert np.all(steps[1:] < steps[:-1])                      # contracting
+    last = reps[12]["discretization_refresh"][-1]
+    assert last["converged"] and last["relative_change"]["effect:damage_viscosity"] <= 0.01
+    lo, hi = reps[12]["strength_interval"]
+    assert lo <= 40.0 <= hi and abs(reps[12]["strength"] - 40.0) < abs(one["strength"] - 40.0)
+
+
+@pytest.mark.parametrize("key, value", [("disc_refresh", -1), ("disc_refresh", 2.5), ("disc_refresh", True),
+                                        ("disc_refresh_tol", 0.0), ("disc_refresh_tol", 1.5), ("disc_refresh_tol", "x")])
+def test_spec_rejects_bad_refresh_settings(key, value):
+    with pytest.raises(ValueError, match=f"workflow.{key}"):
+        spec_from_dict({**_DISC_SPEC, "workflow": {key: value}})
+
+
 # ----------------------------------------------------------------------------- mesh realizations
 class _Offset(ToyForward):
     """The toy model plus constant offsets {observable: value} (kPa, mm): a "fine mesh realization" whose

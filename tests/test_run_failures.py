@@ -34,3 +34,15 @@ def test_step_below_dt_min_fails_with_reason(tmp_path):
     assert res.status == "failed" and "dt_min" in res.reason
     log = (tmp_path / "r" / "log.txt").read_text()
     assert "rejected step" in log
+
+
+def test_write_xdmf_option_is_honoured(tmp_path):
+    """RunOptions.write_xdmf = False writes no ParaView file (campaign and discrepancy caches run thousands of
+    runs); the NPZ snapshots and the summary are written either way."""
+    for flag in (True, False):
+        out = tmp_path / str(flag)
+        res = simulate(Parameters(), RunOptions(h=12.0, t_end=0.004, dt0=0.002, dt_max=0.002, snapshot_times=[0.004],
+                                                write_xdmf=flag), out_dir=out)
+        assert res.status == "ok"
+        assert (out / "fields.xdmf").exists() is flag
+        assert list((out / "snapshots").glob("snap_*.npz")) and json.loads((out / "summary.json").read_text())["status"] == "ok"

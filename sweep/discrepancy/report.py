@@ -117,7 +117,9 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     """Write report.json, report.md and (optionally) the figures into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    from sweep.store import write_text_atomic   # a killed run never leaves a truncated report
+
+    write_text_atomic(out / "report.json", json.dumps(report, indent=1) + "\n")
     figs = []
     if figures:
         try:
@@ -147,6 +149,13 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     if report["not_identifiable"]:
         L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null, "
               f"or a profile interval reaching off): {report['not_identifiable']}", ""]
+    for a in report.get("accepted") or []:
+        if "refresh_converged" in a:
+            traj = " → ".join(f"{v:.4g}" for v in a["refresh_trajectory"])
+            L += [f"{a['effect']}: discretization correction re-estimated at the fit, strength {traj}: "
+                  + ("converged." if a["refresh_converged"] else
+                     "NOT converged (the corrected model is not yet the fine model at the fitted values): the strength "
+                     "and its interval are not reliable; raise workflow.disc_refresh."), ""]
     for u in report.get("profile_not_identifiable") or []:
         n = u["nearest_off"]
         L += [f"{u['effect']}: improved the joint fit, but its profile-likelihood interval {_f(u['interval'])} reaches "
@@ -199,5 +208,5 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
           "least the required fraction of the excess χ², and it shrinks the held-out gap; candidates whose signature "
           "lies in the span of the calibrated parameters' sensitivities are not identifiable; candidates with "
           "collinear projected signatures, or passing refits within the tie threshold in ΔBIC, are ties.", ""]
-    (out / "report.md").write_text("\n".join(L) + "\n")
+    write_text_atomic(out / "report.md", "\n".join(L) + "\n")
     return out

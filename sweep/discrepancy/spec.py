@@ -37,7 +37,8 @@ Example (units mm, s, kPa)::
     delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5
     min_ratio = 0.15; tie_cos = 0.95; max_rounds = 3; max_refits = 2; starts = 1
     loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; n_jobs = 1; seed = 0
-    disc_error_fraction = 0.5; disc_refresh = 1
+    disc_error_fraction = 0.5; disc_refresh = 1   # at most this many refresh passes (0: none) ...
+    disc_refresh_tol = 0.05          # ... stopping once every named strength moves by <= this (relative) in a pass
     interval = "profile"             # the named strength's interval: "profile" (likelihood) or "wald"
     profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
     named_needs_noise_level = true   # name an effect only if the named model's residuals are at noise level
@@ -60,7 +61,7 @@ SCALINGS = ("none", "sqrt_cement")
 _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
-                    disc_error_fraction=0.5, disc_refresh=1, interval="profile", profile_expand=3,
+                    disc_error_fraction=0.5, disc_refresh=1, disc_refresh_tol=0.05, interval="profile", profile_expand=3,
                     named_needs_noise_level=True, realization_covariance="correlated")
 
 
@@ -255,6 +256,12 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     pe = wf.get("profile_expand", 3)
     if not isinstance(pe, int) or isinstance(pe, bool) or not 0 <= pe <= 10:
         _bad("workflow.profile_expand", pe, "an integer in [0, 10]")
+    dr = wf.get("disc_refresh", 1)
+    if not isinstance(dr, int) or isinstance(dr, bool) or not 0 <= dr <= 20:
+        _bad("workflow.disc_refresh", dr, "an integer in [0, 20] (refresh passes at most)")
+    dt = wf.get("disc_refresh_tol", 0.05)
+    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < 1:
+        _bad("workflow.disc_refresh_tol", dt, "a number in (0, 1) (relative change of a named strength)")
     return DiscrepancySpec(base, off, tuple(cal), names, scaling, upper, probe,
                            tuple(ids) if ids is not None else None, every, opts, wf,
                            dict(disc) if disc is not None else None)
