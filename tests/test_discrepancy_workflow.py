@@ -264,6 +264,13 @@ def test_discretization_refresh_iterates_to_its_fixed_point(tmp_path):
     assert last["converged"] and last["relative_change"]["effect:damage_viscosity"] <= 0.01
     lo, hi = reps[12]["strength_interval"]
     assert lo <= 40.0 <= hi and abs(reps[12]["strength"] - 40.0) < abs(one["strength"] - 40.0)
+    # the cost ledger books every computed run to a stage; more refresh passes cost fine and coarse runs there
+    for r in reps.values():
+        st = r["forward_runs_by_stage"]
+        assert sum(v["coarse"] for v in st.values()) == r["forward_runs"]
+        assert st["discretization_refresh"]["fine"] > 0 and st["baseline_calibration"]["fine"] == 0
+    assert (reps[12]["forward_runs_by_stage"]["discretization_refresh"]["fine"]
+            > reps[1]["forward_runs_by_stage"]["discretization_refresh"]["fine"])
 
 
 @pytest.mark.parametrize("key, value", [("disc_refresh", -1), ("disc_refresh", 2.5), ("disc_refresh", True),

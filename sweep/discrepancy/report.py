@@ -173,7 +173,10 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
               + (f"a covariance correlated in time (correlation time per observable, s: "
                  f"{_f(report.get('realization_correlation_time'))}; residuals whitened)."
                  if report.get("realization_covariance") == "correlated" else "added in quadrature to σ."), ""]
-    L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}.", "",
+    by_stage = "; ".join(f"{k} {v['coarse']}" + (f" + {v['fine']} fine" if v.get("fine") else "")
+                         for k, v in (report.get("forward_runs_by_stage") or {}).items() if v["coarse"] or v.get("fine"))
+    L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}"
+          + (f" (by stage: {by_stage})" if by_stage else "") + ".", "",
           "## Calibrated baseline", "", _f(report["calibrated_baseline"]), "",
           "## Candidates (first round)", "",
           "| effect | score | ΔBIC | identifiable | tied with | strength | interval | explained | passed |",

@@ -198,7 +198,8 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
                          "not_identifiable": rep["not_identifiable"],
                          "gap_before": rep["gap_before"].get("total"), "gap_after": rep["gap_after"].get("total"),
                          "passed": twin_passed(twin, rep), "wall_time_s": round(time.time() - t0, 1),
-                         "forward_runs": rep["forward_runs"], "data_runs": gen.n_runs,
+                         "forward_runs": rep["forward_runs"], "forward_runs_by_stage": rep.get("forward_runs_by_stage"),
+                         "data_runs": gen.n_runs,
                          "realization_spread_rms": rep["realization_spread_rms"],
                          "realization_covariance": rep.get("realization_covariance"), "conditions": list(conds),
                          "observables": list(twin_observables(camp, twin))}

@@ -42,6 +42,26 @@ class Fit:
         return {p.name: p.from_x(xi) for p, xi in zip(self.params, self.x)}
 
 
+class _RunLedger:
+    """Forward runs actually computed (not served from a cache) per stage of the workflow, coarse and fine
+    models apart: where a campaign's cost goes.  ``mark(stage)`` books the runs since the previous mark."""
+
+    def __init__(self, forward, fine: list):
+        self.models = {"coarse": [forward], "fine": list(fine)}
+        self.last = self._now()
+        self.stages: dict = {}
+
+    def _now(self) -> dict:
+        return {k: sum(int(getattr(m, "n_runs", 0)) for m in ms) for k, ms in self.models.items()}
+
+    def mark(self, stage: str) -> None:
+        now = self._now()
+        row = self.stages.setdefault(stage, {k: 0 for k in now})
+        for k in now:
+            row[k] += now[k] - self.last[k]
+        self.last = now
+
+
 def values_to_overrides(spec: DiscrepancySpec, base: dict, condition: dict, values: dict) -> dict:
     """solver.Parameters overrides of one condition for fitted ``values``.
 
@@ -575,7 +595,9 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     """
     problem = Problem(data, spec, forward)
     fine_forward = realizations(fine_forward) or None
+    ledger = _RunLedger(forward, fine_forward or [])
     disc_err = add_discretization_error(problem, fine_forward) if fine_forward is not None else None
+    ledger.mark("discretization_correction")
     spread_rms = _rms_per_observable(problem, problem.realization_spread) if fine_forward is not None else None
     ids = data.ids
     holdout = spec.holdout(ids)
@@ -594,6 +616,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     fit0 = problem.fit(base_params, starts, train)
     gap_before = _gap(problem, fit0.params, fit0.x, holdout)
     loc0 = localize(problem, fit0, train)
+    ledger.mark("baseline_calibration")
     current, gap_cur, loc = fit0, gap_before, loc0
     remaining = list(spec.candidates)
     accepted, rounds, verdict, tie = [], [], None, []
@@ -609,7 +632,9 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
             for cc in [c] + scr[c]["tied_with"]:
                 if cc not in chosen and cc in order:
                     chosen.append(cc)
+        ledger.mark("screening")
         refits = {c: refit(problem, current, c, scr[c], train, holdout, gap_cur) for c in chosen}
+        ledger.mark("refits")
         rows = []
         for c in remaining:
             rf = refits.get(c)
@@ -655,6 +680,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         gap_before = _gap(problem, fit0.params, fit0.x, holdout)   # same (refreshed) data for both gaps
         gap_cur = _gap(problem, current.params, current.x, holdout)
         loc = localize(problem, current, train)
+        ledger.mark("discretization_refresh")
     profiles, profile_unidentified = {}, []
     if verdict == "named" and spec.wf("interval") == "profile":
         # the named strengths' intervals from the profile likelihood (the Wald ones screened candidates)
@@ -673,6 +699,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
                 a["strength"] = float(final["effect:" + a["effect"]])
             gap_cur = _gap(problem, current.params, current.x, holdout)
             loc = localize(problem, current, train)
+        ledger.mark("profile_likelihood")
         reach_off = [a for a in accepted if a["strength_interval"][0] <= get_effect(a["effect"]).off]
         if reach_off:
             # the acceptance rule (the interval excludes "off") fails once the interval is honest.  The effect
@@ -698,6 +725,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
                    "localization_after": loc}
         verdict = "unexplained_discrepancy"
     named = accepted[0] if accepted and verdict == "named" else None
+    ledger.mark("gaps_and_localization")    # whatever the stages above left (held-out gaps, residual maps)
     report = {
         "verdict": verdict,
         "named_effect": named["effect"] if named else None,
@@ -721,6 +749,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "residuals_systematic_after": bool(loc["systematic"]) if verdict == "named" else bool(loc0["systematic"]),
         "rounds": _jsonable(rounds),
         "forward_runs": int(getattr(forward, "n_runs", 0)),
+        "forward_runs_by_stage": ledger.stages,
         "discretization_error_rms": disc_err,
         "realization_spread_rms": spread_rms,
         "discretization_realizations": len(fine_forward) if fine_forward is not None else 0,
