@@ -711,6 +711,12 @@ def test_twin_observable_subsets_and_summary_merge(tmp_path):
     _write_summary_entry(f, "two", {"passed": False})
     _write_summary_entry(f, "one", {"passed": False})
     assert json.loads(f.read_text()) == {"one": {"passed": False}, "two": {"passed": False}}
+    # a confounded twin's resolution is linked whichever of the two finishes last
+    _write_summary_entry(f, "conf", {"passed": True, "resolved_by": {"twin": "res"}})
+    assert json.loads(f.read_text())["conf"]["resolved_by"]["passed"] is None
+    _write_summary_entry(f, "res", {"passed": True, "verdict": "named", "conditions": ["a"], "observables": ["p_inj"]})
+    assert json.loads(f.read_text())["conf"]["resolved_by"] == {"twin": "res", "passed": True, "verdict": "named",
+                                                               "conditions": ["a"], "observables": ["p_inj"]}
     assert not list(f.parent.glob(".summary.json.*.tmp"))
 
 

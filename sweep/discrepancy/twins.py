@@ -132,9 +132,20 @@ def _write_summary_entry(path: Path, name: str, entry: dict) -> None:
         fcntl.flock(lk, fcntl.LOCK_EX)
         summary = json.loads(path.read_text()) if path.is_file() else {}
         summary[name] = entry
+        _link_resolutions(summary)
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
         tmp.write_text(json.dumps(summary, indent=1) + "\n")
         os.replace(tmp, path)
+
+
+def _link_resolutions(summary: dict) -> None:
+    """Fill each confounded twin's ``resolved_by`` record from its resolving twin's entry, whichever of the
+    two finished last (they may run as separate processes, in any order)."""
+    for e in summary.values():
+        rb = e.get("resolved_by")
+        if isinstance(rb, dict) and rb.get("twin"):
+            other = summary.get(rb["twin"], {})
+            rb.update({k: other.get(k) for k in ("passed", "verdict", "conditions", "observables")})
 
 
 def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
@@ -212,11 +223,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
             summary[name]["reference_check"] = {"status": rc["status"], "gap_to_paper": rc["gap_to_paper"],
                                                 "quantities": {q: rc["quantities"].get(q) for q in rc["gap_to_paper"]["truth"]}}
         if twin.get("resolved_by"):
-            cur = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
-            other = cur.get(twin["resolved_by"], summary.get(twin["resolved_by"], {}))
-            summary[name]["resolved_by"] = {"twin": twin["resolved_by"], "passed": other.get("passed"),
-                                            "verdict": other.get("verdict"), "conditions": other.get("conditions"),
-                                            "observables": other.get("observables")}
+            summary[name]["resolved_by"] = {"twin": twin["resolved_by"]}    # filled in by _link_resolutions
         _write_summary_entry(summary_path, name, summary[name])
     return json.loads(summary_path.read_text()) if summary_path.is_file() else summary
 
