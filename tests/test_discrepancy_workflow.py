@@ -221,7 +221,7 @@ def test_discretization_correction_is_refreshed_at_the_named_model(tmp_path):
                                   "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
                                   "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
                                                 {"name": "E", "lower": 150.0, "upper": 700.0}]},
-                               "workflow": {"disc_refresh": n}})
+                               "workflow": {"disc_refresh": n, "profile_fine": False}})
         reps[n] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.05),
                                fine_forward=ToyForward({}, h=2.0, beta_mesh=0.05))
         assert reps[n]["named_effect"] == "damage_viscosity"
@@ -233,6 +233,33 @@ def test_discretization_correction_is_refreshed_at_the_named_model(tmp_path):
     assert lo <= 40.0 <= hi and abs(reps[2]["strength"] - 40.0) < 0.3 * abs(reps[0]["strength"] - 40.0)
     assert len(reps[2]["discretization_refresh"]) == 2
     assert reps[2]["accepted"][0]["strength_before_refresh"] == pytest.approx(reps[0]["strength"], rel=1e-9)
+
+
+def test_profile_points_corrected_where_they_are(tmp_path):
+    """The correction is a constant vector estimated at one point, so a profile computed with it has the
+    coarse model's shape away from that point: here (no refresh) its interval misses the truth.  With
+    profile_fine each profile point is corrected at its own parameters: the points' Δχ² are those of the fine
+    model, the profile's minimum moves to the truth (re-centring) and the interval contains it."""
+    fwd = ToyForward(DATA_BASE, h=2.0, beta_mesh=0.05)
+    d = load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"beta": 40.0}, seed=1,
+                                observables=("p_inj", "front_radius_mean", "crack_length")))
+    reps = {}
+    for pf in (False, True):
+        spec = spec_from_dict({"baseline": {"effects_off": OFF}, "candidates": {"effects": OFF},
+                               "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
+                               "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
+                                             {"name": "E", "lower": 150.0, "upper": 700.0}],
+                               "workflow": {"disc_refresh": 0, "profile_fine": pf}})
+        reps[pf] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.05),
+                                fine_forward=ToyForward({}, h=2.0, beta_mesh=0.05))
+        assert reps[pf]["named_effect"] == "damage_viscosity"
+    lo, hi = reps[False]["strength_interval"]
+    assert not lo <= 40.0 <= hi
+    lo, hi = reps[True]["strength_interval"]
+    assert lo <= 40.0 <= hi and abs(reps[True]["strength"] - 40.0) < 0.2 * abs(reps[False]["strength"] - 40.0)
+    pts = reps[True]["profiles"]["damage_viscosity"]["points"]
+    corrected = [q for q in pts if "delta_chi2_fit_correction" in q]
+    assert corrected and all(q["delta_chi2"] <= q["delta_chi2_fit_correction"] + 1e-9 for q in corrected)
 
 
 def test_discretization_refresh_iterates_to_its_fixed_point(tmp_path):
@@ -654,8 +681,8 @@ def test_a_profile_reaching_off_reports_the_effect_not_identifiable(tmp_path, mo
 
     real = workflow.profile_recentred
 
-    def flat_profile(problem, fit, j, ids, max_passes=2):
-        fit, pr = real(problem, fit, j, ids, max_passes)
+    def flat_profile(problem, fit, j, ids, max_passes=2, fine_forward=None):
+        fit, pr = real(problem, fit, j, ids, max_passes, fine_forward=fine_forward)
         pr["points"].append({"value": 0.0, "delta_chi2": 1.5, "others": {"kbar": 0.0012, "E": 420.0}})
         pr["points"].sort(key=lambda q: q["value"])
         return fit, {**pr, "lower": 0.0}

@@ -41,6 +41,8 @@ Example (units mm, s, kPa)::
     disc_refresh_tol = 0.05          # ... stopping once every named strength moves by <= this (relative) in a pass
     interval = "profile"             # the named strength's interval: "profile" (likelihood) or "wald"
     profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
+    profile_fine = true              # with [discretization]: correct each profile point where it is (the
+                                     # correction is a constant vector; false keeps the fit's along the profile)
     named_needs_noise_level = true   # name an effect only if the named model's residuals are at noise level
     realization_covariance = "correlated"   # how mesh realizations' deviations enter the residuals: "correlated"
                                      # (per series, correlated in time, estimated from the realizations;
@@ -61,7 +63,7 @@ SCALINGS = ("none", "sqrt_cement")
 _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
-                    disc_error_fraction=0.5, disc_refresh=1, disc_refresh_tol=0.05, interval="profile", profile_expand=3,
+                    disc_error_fraction=0.5, disc_refresh=1, disc_refresh_tol=0.05, profile_fine=True, interval="profile", profile_expand=3,
                     named_needs_noise_level=True, realization_covariance="correlated")
 
 
@@ -247,6 +249,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
         _bad("workflow", unknown, f"keys among {sorted(_WF_DEFAULTS)}")
     if wf.get("interval", "profile") not in ("profile", "wald"):
         _bad("workflow.interval", wf["interval"], '"profile" or "wald"')
+    for key in ("profile_fine",):
+        if not isinstance(wf.get(key, True), bool):
+            _bad(f"workflow.{key}", wf[key], "true or false")
     nn = wf.get("named_needs_noise_level", True)
     if not isinstance(nn, bool):
         _bad("workflow.named_needs_noise_level", nn, "true or false")
