@@ -14,7 +14,7 @@ import numpy as np
 
 from . import stats
 
-__all__ = ["realizations", "realization_mean_spread", "RealizationCovariance"]
+__all__ = ["realizations", "realization_mean_spread", "RealizationCovariance", "SeriesNull"]
 
 
 def realizations(fine_forward) -> list:
@@ -48,6 +48,9 @@ class RealizationCovariance:
     blocks: dict        # series -> (rows in time order, C (n_s, n_s))
     tau: dict           # observable -> correlation time, s
     rho: dict           # observable -> pooled lag-1 autocorrelation of the deviations
+    k: int = 0          # number of realizations the covariance was estimated from
+    t: np.ndarray | None = None     # time of each row (s) and its observable: the series' correlation
+    obs: np.ndarray | None = None   # structure, for the scale's degrees of freedom (scale_dof)
 
     @classmethod
     def estimate(cls, fines: np.ndarray, problem, window: int = 5) -> "RealizationCovariance":
@@ -78,7 +81,7 @@ class RealizationCovariance:
             lag = np.abs(problem.t[rows][:, None] - problem.t[rows][None, :])
             corr = np.exp(-lag / ta) if ta > 0 else np.eye(rows.size)
             blocks[s] = (rows, np.sqrt(np.outer(v, v)) * corr)
-        return cls(blocks, tau, rho)
+        return cls(blocks, tau, rho, int(fines.shape[0]), np.asarray(problem.t, float), np.asarray(problem.obs))
 
     def variance(self, n: int) -> np.ndarray:
         """Per-point realization variance (the blocks' diagonals) on n rows, kPa² / mm²."""
@@ -112,6 +115,92 @@ class RealizationCovariance:
             R = np.eye(r.size) + C[np.ix_(keep, keep)] / np.outer(d, d)
             out.append((np.searchsorted(rows_m, r), stats.symmetric_whitener(R)))
         return out
+
+
+    def scale_dof(self, rows: np.ndarray, window: int = 5) -> float:
+        """Degrees of freedom ν of the series' realization-variance scale (the mean of its smoothed v).
+
+        Each point's v is a sample variance over the k realizations (k − 1 degrees of freedom), averaged
+        over ``window`` neighbours; neighbours are correlated (ρ_ij = exp(−|t_i − t_j|/τ)), so the series'
+        mean v̄ = Σ c_j s_j² (c_j the share of point j in it) has Var(v̄)/E(v̄)² = 2 Σ c_i c_j ρ_ij² / (k − 1)
+        (Isserlis), i.e. ν = (k − 1) / Σ c_i c_j ρ_ij² (Satterthwaite): k − 1 for a fully correlated series,
+        up to (k − 1) n for independent points.  ``rows``: the series' rows in time order."""
+        n = rows.size
+        h = window // 2
+        c = np.zeros(n)
+        for i in range(n):                 # the moving average's weights (n <= a few hundred, once per test)
+            lo, hi = max(i - h, 0), min(i + h + 1, n)
+            c[lo:hi] += 1.0 / (hi - lo)
+        c /= c.sum()
+        ta = self.tau.get(str(self.obs[rows[0]]), 0.0) if self.obs is not None else 0.0
+        lag = np.abs(self.t[rows][:, None] - self.t[rows][None, :]) if self.t is not None else None
+        rho2 = np.exp(-2.0 * lag / ta) if (ta > 0 and lag is not None) else np.eye(n)
+        return float((self.k - 1) / (c @ rho2 @ c))
+
+    def null_calibration(self, mask: np.ndarray, sig_diag: np.ndarray, n_draws: int = 4000, seed: int = 0) -> dict:
+        """Null distributions of the per-series residual statistics when the whitening covariance is estimated.
+
+        The realization covariance is estimated from k realizations: its scale is a sample variance, with
+        ν degrees of freedom per series (:meth:`scale_dof`: k − 1 to (k − 1) n).  Under the null (the model
+        right, the data one more realization plus noise) the data's true realization covariance is λ C with
+        λ = v_true / v_est ~ ν/χ²_ν (mean ν/(ν − 2): a sample variance underestimates 1/v), so the whitened
+        residuals are not N(0, I) but a scale mixture with heavier tails, common to the whole series.
+        Treated as known, a series whose realization variance came out too small reads as systematic
+        (χ² excess z > 3) more often than z_crit says.
+
+        For each series with rows in ``mask``: R = I + D^(−1/2) C D^(−1/2) = U diag(1 + a) Uᵀ (D = σ_diag²),
+        the whitened residuals under the null are r = U diag(√((1 + λ a)/(1 + a))) Uᵀ ξ, ξ ~ N(0, I) (λ = 1:
+        r = ξ, the known-covariance null).  ``n_draws`` common draws of ξ (and of λ) give both distributions
+        of (χ² excess z, mean z) (:func:`stats.series_statistics`); returns {str(series): SeriesNull} whose
+        ``adjust`` maps an observed statistic to the known-covariance value of the same tail probability.
+        Deterministic (``seed``).  Empty when k < 2."""
+        if self.k < 2:
+            return {}
+        rng = np.random.default_rng(seed)
+        rows_m = np.flatnonzero(mask)
+        out = {}
+        for s, (rows, C) in self.blocks.items():
+            keep = mask[rows]
+            if not keep.any():
+                continue
+            r = rows[keep]
+            d = sig_diag[r]
+            a, U = np.linalg.eigh(C[np.ix_(keep, keep)] / np.outer(d, d))
+            a = np.maximum(a, 0.0)
+            nu = self.scale_dof(rows)
+            lam = nu / rng.chisquare(nu, size=n_draws)
+            order = np.argsort(np.searchsorted(rows_m, r), kind="stable")   # the residual vector's order
+            xi = rng.standard_normal((n_draws, r.size))
+            mix = ((xi @ U) * np.sqrt((1.0 + lam[:, None] * a) / (1.0 + a))) @ U.T
+            _, z0, m0 = stats.series_statistics(xi[:, order])
+            _, z1, m1 = stats.series_statistics(mix[:, order])
+            out[str(s)] = SeriesNull(np.sort(z0), np.sort(z1), np.sort(m0), np.sort(m1), nu)
+        return out
+
+
+@dataclass
+class SeriesNull:
+    """Sorted null draws of a series' (χ² excess z, mean z): under a known covariance (``*_known``) and
+    under the estimated one (``*_mixture``), from common random numbers."""
+
+    z_known: np.ndarray
+    z_mixture: np.ndarray
+    mean_known: np.ndarray
+    mean_mixture: np.ndarray
+    dof: float = math.inf      # ν of the series' realization-variance scale
+
+    @staticmethod
+    def _qq(x: float, mixture: np.ndarray, known: np.ndarray) -> float:
+        """Quantile map mixture -> known (linear between order statistics, shifted beyond the extremes)."""
+        if x > mixture[-1]:
+            return float(known[-1] + (x - mixture[-1]))
+        if x < mixture[0]:
+            return float(known[0] + (x - mixture[0]))
+        return float(np.interp(x, mixture, known))
+
+    def adjust(self, z: float, mean_z: float) -> tuple[float, float]:
+        """(z, mean z) mapped to the values with the same tail probability under a known covariance."""
+        return self._qq(z, self.z_mixture, self.z_known), self._qq(mean_z, self.mean_mixture, self.mean_known)
 
 
 def realization_mean_spread(fines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

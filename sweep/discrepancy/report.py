@@ -200,7 +200,12 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
           f"Residuals systematic: {lb['systematic']}; regime misclassifications: {lb['regime_misclassified']}", ""]
     L += _table(lb["per_observable"], ["rms", "mean", "n"]) + [""]
     L += _table(lb["per_phase"], ["rms", "mean", "n"]) + [""]
-    L += _table(lb["series"], ["n", "rho1", "chi2_excess_z", "mean_z", "systematic"]) + [""]
+    cal = any("chi2_excess_z_raw" in v for v in lb["series"].values())
+    L += _table(lb["series"], ["n", "rho1", "chi2_excess_z", "mean_z", "systematic"]
+                + (["chi2_excess_z_raw", "mean_z_raw"] if cal else [])) + [""]
+    if cal:
+        L += ["Series statistics calibrated for the estimated mesh-realization covariance (its scale has few "
+              "degrees of freedom; `_raw`: taken as known; `workflow.systematic_null`).", ""]
     for cap, f in figs:
         L += [f"![{cap}]({f})" if f else cap, ""]
     L += ["## Method", "",

@@ -48,6 +48,10 @@ Example (units mm, s, kPa)::
                                      # (per series, correlated in time, estimated from the realizations;
                                      # residuals whitened) or "diagonal" (the simplification: per-point
                                      # sample std in quadrature)
+    systematic_null = "estimated_covariance"   # the residual test's null with a correlated realization
+                                     # covariance: "estimated_covariance" (its scale has k − 1 degrees of
+                                     # freedom: statistics mapped to the known-covariance scale by simulation)
+                                     # or "known_covariance" (the simplification: the estimate taken as exact)
 """
 from __future__ import annotations
 
@@ -64,7 +68,8 @@ _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_ex
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
                     disc_error_fraction=0.5, disc_refresh=1, disc_refresh_tol=0.05, profile_fine=True, interval="profile", profile_expand=3,
-                    named_needs_noise_level=True, realization_covariance="correlated")
+                    named_needs_noise_level=True, realization_covariance="correlated",
+                    systematic_null="estimated_covariance")
 
 
 @dataclass(frozen=True)
@@ -258,6 +263,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     rc = wf.get("realization_covariance", "correlated")
     if rc not in ("correlated", "diagonal"):
         _bad("workflow.realization_covariance", rc, '"correlated" or "diagonal"')
+    sn = wf.get("systematic_null", "estimated_covariance")
+    if sn not in ("estimated_covariance", "known_covariance"):
+        _bad("workflow.systematic_null", sn, '"estimated_covariance" or "known_covariance"')
     pe = wf.get("profile_expand", 3)
     if not isinstance(pe, int) or isinstance(pe, bool) or not 0 <= pe <= 10:
         _bad("workflow.profile_expand", pe, "an integer in [0, 10]")

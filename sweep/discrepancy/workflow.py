@@ -309,7 +309,11 @@ def localize(problem: Problem, fit: Fit, ids) -> dict:
     for cid in ids:
         s = cond == cid
         out["per_condition"][cid] = {o: float(np.mean(r[s & (obs == o)])) for o in CURVE_OBSERVABLES if np.any(s & (obs == o))}
-    sys_ = stats.systematic_test(r, ser, problem.spec.wf("z_crit"), problem.spec.wf("rho_crit"))
+    # with an estimated realization covariance the series statistics are calibrated for its k − 1 degrees of
+    # freedom (RealizationCovariance.null_calibration); "known_covariance" is the simplification
+    null = (problem.real_cov.null_calibration(m, problem.sig_diag, seed=problem.spec.wf("seed"))
+            if problem.real_cov is not None and problem.spec.wf("systematic_null") == "estimated_covariance" else None)
+    sys_ = stats.systematic_test(r, ser, problem.spec.wf("z_crit"), problem.spec.wf("rho_crit"), null=null)
     names = problem.series_names
     out["series"] = {names[int(k)]: v for k, v in sys_["series"].items()}
     out["systematic"] = sys_["systematic"]
