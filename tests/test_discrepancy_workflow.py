@@ -870,3 +870,47 @@ def test_six_realizations_leave_an_out_of_catalogue_effect_unexplained_with_the_
 def test_spec_rejects_a_bad_systematic_null():
     with pytest.raises(ValueError, match="systematic_null='exact'"):
         _spec_with({"systematic_null": "exact"})
+
+
+def test_profile_bounds_are_refined_to_the_threshold():
+    """A bound interpolated from one bracketing point assumes a quadratic profile.  On a profile that is not,
+    Δχ²(β) = u² (1 + u²) with u = β − 10 (exact 95 % bounds 10 ± 1.2338; Wald sd 1, so the bracket closes at
+    u = 1.96 where Δχ² = 18.6 and the √-interpolation alone gives u = 0.891), two regula-falsi evaluations bring
+    each bound to within 0.03 of the exact one."""
+    from sweep.discrepancy.spec import CalibParam
+    from sweep.discrepancy.workflow import Fit, profile_interval
+
+    cp = CalibParam("effect:damage_viscosity", 0.0, 100.0, 10.0, scale="linear")
+
+    class Profile1D:
+        """Just what profile_interval asks of a Problem: one residual whose square is the profile."""
+        series = np.zeros(1, int)
+        fixed: dict = {}
+
+        def __init__(self, spec):
+            self.spec = spec
+
+        def mask(self, ids):
+            return np.ones(1, bool)
+
+        def fit(self, params, x0s, ids):
+            u = self.fixed[cp.name] - 10.0
+            return Fit(params, np.zeros(0), np.array([u * np.sqrt(1 + u * u)]), np.zeros((1, 0)), 0.0, 1)
+
+    exact = np.sqrt((-1 + np.sqrt(1 + 4 * 3.841)) / 2)
+    at_fit = Fit((cp,), np.array([10.0]), np.array([0.0]), np.array([[1.0]]), 0.0, 1)
+    got = {}
+    for refine in (0, 2):
+        prob = Profile1D(_spec_with({"profile_refine": refine}))
+        pr = profile_interval(prob, at_fit, 0, ["a"])
+        got[refine] = (pr["lower"], pr["upper"])
+    assert got[0][1] - 10.0 == pytest.approx(1.96 * 1.96 / np.sqrt(1.96**2 * (1 + 1.96**2)), abs=1e-3)   # 0.891
+    assert abs(got[2][1] - 10.0 - exact) < 0.03 and abs(10.0 - got[2][0] - exact) < 0.03
+    assert abs(got[0][1] - 10.0 - exact) > 0.3
+
+
+@pytest.mark.parametrize("key, value", [("profile_refine", -1), ("profile_refine", 1.5), ("profile_refine_tol", 0.0),
+                                        ("profile_refine_tol", 1.0)])
+def test_spec_rejects_bad_profile_refinement(key, value):
+    with pytest.raises(ValueError, match=f"workflow.{key}"):
+        _spec_with({key: value})

@@ -529,8 +529,9 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     parameter j held at trial values, and the interval is where the weighted χ² (the same per-series
     weights n_eff/n and misfit scale as the Wald interval) rises by less than ``level``·scale (3.84: 95 %
     for one parameter).  Each side starts at the Wald bound and doubles its distance from the fit
-    (``profile_expand`` times) until the criterion is crossed, then interpolates √Δχ² linearly; a side that
-    never crosses ends at the parameter's bound.  Returns lower/upper (parameter units) and the points.
+    (``profile_expand`` times) until the criterion is crossed, then interpolates √Δχ² linearly and refines
+    the bound by regula falsi (``profile_refine`` evaluations at most, until Δχ² is within
+    ``profile_refine_tol``·threshold of it); a side that never crosses ends at the parameter's bound.  Returns lower/upper (parameter units) and the points.
 
     ``fine_forward`` (the fine check models): the discretization correction is a constant vector estimated
     at the fit, so without it the profile has the *coarse* model's shape away from the fit.  Measured on the
@@ -575,6 +576,30 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
         points.append(row)
         return d
 
+    def cross(x_in: float, d_in: float, x_out: float, d_out: float) -> float:
+        # interpolate √Δχ² linearly between the last inside point and the first outside one (exact for a
+        # quadratic profile; linear in Δχ² would put the bound too close to the fit whenever the bracket is
+        # wide, i.e. whenever the Wald sd overestimates)
+        a, b = math.sqrt(max(d_in, 0.0)), math.sqrt(d_out)
+        return x_in + (math.sqrt(thr) - a) / (b - a) * (x_out - x_in)
+
+    def refine(x_in: float, d_in: float, x_out: float, d_out: float) -> float:
+        # A bracket closed by a point far outside (Δχ² several times the threshold) leaves the bound to the
+        # quadratic assumption: measured on the solver compliance twin, one point at Δχ² = 10.8 set the lower
+        # bound.  Evaluate the profile at the interpolated bound and re-bracket (regula falsi in √Δχ²) until
+        # Δχ² there is within ``profile_refine_tol`` of the threshold, at most ``profile_refine`` times.
+        xb = cross(x_in, d_in, x_out, d_out)
+        for _ in range(problem.spec.wf("profile_refine")):
+            db = dchi2(xb)
+            if abs(db - thr) <= problem.spec.wf("profile_refine_tol") * thr:
+                break
+            if db >= thr:
+                x_out, d_out = xb, db
+            else:
+                x_in, d_in = xb, db
+            xb = cross(x_in, d_in, x_out, d_out)
+        return xb
+
     def side(sign: int) -> float:
         bound = x_hi if sign > 0 else x_lo
         step = max(abs(p.to_x(hi_w if sign > 0 else lo_w) - x_hat[j]), 1e-6 * (x_hi - x_lo))
@@ -585,11 +610,7 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
                 return bound
             d = dchi2(xt)
             if d >= thr:
-                # crossed: interpolate √Δχ² linearly between the last inside point and this one (exact for
-                # a quadratic profile; linear in Δχ² would put the bound too close to the fit whenever the
-                # bracket is wide, i.e. whenever the Wald sd overestimates)
-                a, b = math.sqrt(max(d_in, 0.0)), math.sqrt(d)
-                return x_in + (math.sqrt(thr) - a) / (b - a) * (xt - x_in)
+                return refine(x_in, d_in, xt, d)
             x_in, d_in = xt, d
             if xt == bound:
                 return bound
