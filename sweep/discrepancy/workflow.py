@@ -591,13 +591,13 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
         xb = cross(x_in, d_in, x_out, d_out)
         for _ in range(problem.spec.wf("profile_refine")):
             db = dchi2(xb)
-            if abs(db - thr) <= problem.spec.wf("profile_refine_tol") * thr:
-                break
             if db >= thr:
                 x_out, d_out = xb, db
             else:
                 x_in, d_in = xb, db
-            xb = cross(x_in, d_in, x_out, d_out)
+            xb = cross(x_in, d_in, x_out, d_out)     # the bound from the tightest bracket, also when stopping
+            if abs(db - thr) <= problem.spec.wf("profile_refine_tol") * thr:
+                break
         return xb
 
     def side(sign: int) -> float:
