@@ -51,6 +51,7 @@ class RealizationCovariance:
     k: int = 0          # number of realizations the covariance was estimated from
     t: np.ndarray | None = None     # time of each row (s) and its observable: the series' correlation
     obs: np.ndarray | None = None   # structure, for the scale's degrees of freedom (scale_dof)
+    window: int = 5                 # points the per-point variance was averaged over
 
     @classmethod
     def estimate(cls, fines: np.ndarray, problem, window: int = 5) -> "RealizationCovariance":
@@ -81,7 +82,7 @@ class RealizationCovariance:
             lag = np.abs(problem.t[rows][:, None] - problem.t[rows][None, :])
             corr = np.exp(-lag / ta) if ta > 0 else np.eye(rows.size)
             blocks[s] = (rows, np.sqrt(np.outer(v, v)) * corr)
-        return cls(blocks, tau, rho, int(fines.shape[0]), np.asarray(problem.t, float), np.asarray(problem.obs))
+        return cls(blocks, tau, rho, int(fines.shape[0]), np.asarray(problem.t, float), np.asarray(problem.obs), window)
 
     def variance(self, n: int) -> np.ndarray:
         """Per-point realization variance (the blocks' diagonals) on n rows, kPa² / mm²."""
@@ -116,22 +117,18 @@ class RealizationCovariance:
             out.append((np.searchsorted(rows_m, r), stats.symmetric_whitener(R)))
         return out
 
-
-    def scale_dof(self, rows: np.ndarray, window: int = 5) -> float:
+    def scale_dof(self, rows: np.ndarray) -> float:
         """Degrees of freedom ν of the series' realization-variance scale (the mean of its smoothed v).
 
         Each point's v is a sample variance over the k realizations (k − 1 degrees of freedom), averaged
-        over ``window`` neighbours; neighbours are correlated (ρ_ij = exp(−|t_i − t_j|/τ)), so the series'
+        over ``window`` neighbours (the estimate's); neighbours are correlated (ρ_ij = exp(−|t_i − t_j|/τ)), so the series'
         mean v̄ = Σ c_j s_j² (c_j the share of point j in it) has Var(v̄)/E(v̄)² = 2 Σ c_i c_j ρ_ij² / (k − 1)
         (Isserlis), i.e. ν = (k − 1) / Σ c_i c_j ρ_ij² (Satterthwaite): k − 1 for a fully correlated series,
         up to (k − 1) n for independent points.  ``rows``: the series' rows in time order."""
         n = rows.size
-        h = window // 2
-        c = np.zeros(n)
-        for i in range(n):                 # the moving average's weights (n <= a few hundred, once per test)
-            lo, hi = max(i - h, 0), min(i + h + 1, n)
-            c[lo:hi] += 1.0 / (hi - lo)
-        c /= c.sum()
+        # the share of each point in the series' mean of the smoothed variances: column sums of the
+        # moving-average matrix (stats.moving_average applied to the unit vectors)
+        c = np.apply_along_axis(stats.moving_average, 0, np.eye(n), self.window).sum(axis=0) / n
         ta = self.tau.get(str(self.obs[rows[0]]), 0.0) if self.obs is not None else 0.0
         lag = np.abs(self.t[rows][:, None] - self.t[rows][None, :]) if self.t is not None else None
         rho2 = np.exp(-2.0 * lag / ta) if (ta > 0 and lag is not None) else np.eye(n)
@@ -174,7 +171,7 @@ class RealizationCovariance:
             mix = ((xi @ U) * np.sqrt((1.0 + lam[:, None] * a) / (1.0 + a))) @ U.T
             _, z0, m0 = stats.series_statistics(xi[:, order])
             _, z1, m1 = stats.series_statistics(mix[:, order])
-            out[str(s)] = SeriesNull(np.sort(z0), np.sort(z1), np.sort(m0), np.sort(m1), nu)
+            out[str(s)] = SeriesNull(np.sort(z0), np.sort(z1), np.sort(m0), np.sort(m1))
         return out
 
 
@@ -187,7 +184,6 @@ class SeriesNull:
     z_mixture: np.ndarray
     mean_known: np.ndarray
     mean_mixture: np.ndarray
-    dof: float = math.inf      # ν of the series' realization-variance scale
 
     @staticmethod
     def _qq(x: float, mixture: np.ndarray, known: np.ndarray) -> float:
