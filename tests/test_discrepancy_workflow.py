@@ -521,6 +521,41 @@ def test_twins_ci_campaign_has_fine_realizations_other_than_the_datas():
     assert camp["data"]["mesh_seed"] not in [o["mesh_seed"] for o in opts]
 
 
+@pytest.mark.parametrize("campaign", ["discrepancy_twins_ci.toml", "discrepancy_twins_ci_k6.toml",
+                                      "discrepancy_twins_confounded.toml", "discrepancy_twins_tie.toml",
+                                      "discrepancy_twins_full.toml", "discrepancy_worked_example.toml"])
+def test_every_twin_campaign_is_valid_before_any_run(campaign):
+    """The committed twin campaigns (hours of solver time each) validate without a run: the spec, the data's mesh
+    realization outside the fine check's, each twin's conditions (held-out and training ones) and observables,
+    hidden parameters that are Parameters fields, an expected verdict or catalogue effect, and a ``resolved_by``
+    naming another twin of the campaign whose data add conditions or observables to the confounded one's."""
+    import dataclasses
+    from pathlib import Path
+
+    from solver import Parameters
+    from solver.effects import EFFECTS
+    from sweep.discrepancy.twins import check_data_realization, load_twin_campaign, twin_conditions, twin_observables
+
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / campaign)
+    spec = spec_from_dict(camp["spec"])
+    check_data_realization(camp, spec)
+    fields = {f.name for f in dataclasses.fields(Parameters)}
+    twins = {t["name"]: t for t in camp["twin"]}
+    assert len(twins) == len(camp["twin"])
+    for t in camp["twin"]:
+        conds, obs = twin_conditions(camp, t, spec), twin_observables(camp, t)
+        assert set(t.get("hidden", {})) <= fields, t["name"]
+        assert t["expect"] in ("no_missing_effect", "unexplained_discrepancy", "tie", "not_identifiable", *EFFECTS)
+        if t["expect"] in EFFECTS:
+            assert t["expect"] in spec.candidates, t["name"]
+        if t.get("resolved_by"):
+            r = twins[t["resolved_by"]]
+            conds_r, obs_r = twin_conditions(camp, r, spec), twin_observables(camp, r)
+            assert r["hidden"] == t["hidden"] and r["expect"] in EFFECTS
+            assert set(conds) <= set(conds_r) and set(obs) <= set(obs_r)
+            assert set(conds) < set(conds_r) or set(obs) < set(obs_r), "the resolving twin adds nothing"
+
+
 def test_twins_refuse_data_on_a_checked_mesh_realization(tmp_path):
     """A twin whose data come from one of the fine check meshes would test an easier problem: refused first."""
     import copy
@@ -562,6 +597,53 @@ def test_profile_interval_equals_wald_for_a_model_linear_in_the_strength(tmp_pat
     assert pr["lower"] == pytest.approx(lo_w, abs=tol) and pr["upper"] == pytest.approx(hi_w, abs=tol)
     assert lo_w < 40.0 < hi_w
     assert prob.fixed == {}                                   # the held value does not leak into later fits
+
+
+def test_profile_roughness_measures_a_fall_away_from_the_fit():
+    """0 for a profile monotone on each side; the largest drop met walking outward otherwise (the points of
+    results/discrepancy/twins_tie/coupling_vs_compliance_front: 16.3 -> 13.1 on the left, 16.9 -> 16.5 on the
+    right)."""
+    v = np.array([1.152, 1.168, 1.181, 1.199, 1.214, 1.226, 1.245])
+    d = np.array([13.1, 16.3, 7.72, 0.0, 5.38, 16.9, 16.5])
+    assert stats.profile_roughness(v, d, 1.199) == pytest.approx(3.2)
+    assert stats.profile_roughness(v, (v - 1.199) ** 2 * 1e4, 1.199) == 0.0
+    assert stats.profile_roughness(v, d, 1.25) == pytest.approx(16.9 - 0.0)    # every point on one side
+
+
+class _JitteryToy(ToyForward):
+    """The toy with an injection pressure that jitters with β (period 3 kPa·s, amplitude 2 kPa): a stand-in for
+    a coarse model whose outputs are not smooth in the strength."""
+
+    def predict_one(self, overrides, times):
+        from solver import Parameters
+
+        out = super().predict_one(overrides, times)
+        beta = Parameters.from_dict({**self.base, **overrides}).damage_viscosity
+        if "p_inj" in out:
+            out["p_inj"] = out["p_inj"] + 2.0 * np.sin(2 * np.pi * beta / 3.0)
+        return out
+
+
+@pytest.mark.parametrize("jittery", [False, True])
+def test_profile_interval_flags_a_rough_profile(tmp_path, jittery):
+    """The profile of a smooth model is monotone away from its minimum (roughness 0, not flagged); with the
+    output jittering in the strength it falls away from the fit by more than profile_rough_tol of its
+    threshold, and the flag says so."""
+    from sweep.discrepancy.workflow import Problem, profile_interval
+
+    data = _twin(tmp_path, {"beta": 40.0}, observables=("p_inj",))
+    spec = _spec(cands=["damage_viscosity"], calibrate=("E",))
+    spec.workflow.update(max_nfev=50)
+    fwd = _JitteryToy({}, h=2.0) if jittery else ToyForward({}, h=2.0)
+    prob = Problem(data, spec, fwd)
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    train = ["a", "b", "c"]
+    fit = prob.fit(params, [np.array([params[0].to_x(params[0].initial), 40.0])], train)
+    pr = profile_interval(prob, fit, 1, train)
+    if jittery:
+        assert pr["rough"] and pr["roughness"] > 0.25 * pr["threshold"]
+    else:
+        assert not pr["rough"] and pr["roughness"] <= 1e-3 * pr["threshold"]
 
 
 def test_profile_recentres_a_fit_that_stopped_short_of_the_minimum(tmp_path):
@@ -910,7 +992,8 @@ def test_profile_bounds_are_refined_to_the_threshold():
 
 
 @pytest.mark.parametrize("key, value", [("profile_refine", -1), ("profile_refine", 1.5), ("profile_refine_tol", 0.0),
-                                        ("profile_refine_tol", 1.0)])
+                                        ("profile_refine_tol", 1.0), ("profile_rough_tol", 0.0),
+                                        ("profile_rough_tol", "0.25")])
 def test_spec_rejects_bad_profile_refinement(key, value):
     with pytest.raises(ValueError, match=f"workflow.{key}"):
         _spec_with({key: value})

@@ -47,7 +47,10 @@ def cmd_run(args) -> int:
     fine = fine_forwards(spec, cache, jobs)          # one per mesh realization ([discretization] mesh_seeds)
     rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
-                                          f"{rep['strength_interval']}" if rep["named_effect"] else ""))
+                                          f"{rep['strength_interval']}"
+                                          + (" (rough profile: a lower bound on the uncertainty)"
+                                             if rep.get("strength_interval_rough") else "")
+                                          if rep["named_effect"] else ""))
     print(f"held-out gap (total): before {rep['gap_before'].get('total', float('nan')):.3g}, after "
           f"{rep['gap_after'].get('total', float('nan')):.3g}; report in {out / 'report.md'}")
     return 0

@@ -135,7 +135,8 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     L = ["# Discrepancy report", "",
          f"**Verdict: {report['verdict']}**" + (f" — named effect `{report['named_effect']}`, strength "
                                                 f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
-                                                f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''})"
+                                                f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''}"
+                                                f"{'; rough profile: a lower bound on the uncertainty' if report.get('strength_interval_rough') else ''})"
                                                 if report["named_effect"] else ""), ""]
     pe = report.get("partial_explanation")
     if pe:
@@ -189,6 +190,12 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
               f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "
               f"the linearized (Wald) interval was {_f(pr['wald'])}.", "", "| strength | Δχ² |", "|---|---|"]
         L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
+        if pr.get("rough"):
+            L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
+                      f"(more than `profile_rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
+                      "monotonically; this one jitters with the strength (the coarse model's outputs, typically the "
+                      "front radius, are not smooth in it), so the bounds are set by that jitter: read the interval "
+                      "as a lower bound on the uncertainty."]
         for h in pr.get("recentred", []):
             L += ["", f"Re-centred: the profile found Δχ² = {h['min_delta_chi2']:.3g} at {h['at']:.4g} below the fit at "
                       f"{h['strength']:.4g} (the joint fit had stopped short of the minimum); refitted from there."]

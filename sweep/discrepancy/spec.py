@@ -43,6 +43,8 @@ Example (units mm, s, kPa)::
     profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
     profile_refine = 2               # evaluations refining each bound (regula falsi in √Δχ²) ...
     profile_refine_tol = 0.15        # ... until Δχ² there is within this fraction of the threshold
+    profile_rough_tol = 0.25         # flag the interval when the profile falls by more than this fraction of
+                                     # its threshold walking away from the fit (a jagged coarse model)
     profile_fine = true              # with [discretization]: correct each profile point where it is (the
                                      # correction is a constant vector; false keeps the fit's along the profile)
     named_needs_noise_level = true   # name an effect only if the named model's residuals are at noise level
@@ -70,7 +72,7 @@ _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_ex
                     tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
                     max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
                     disc_error_fraction=0.5, disc_refresh=1, disc_refresh_tol=0.05, profile_fine=True, interval="profile", profile_expand=3,
-                    profile_refine=2, profile_refine_tol=0.15,
+                    profile_refine=2, profile_refine_tol=0.15, profile_rough_tol=0.25,
                     named_needs_noise_level=True, realization_covariance="correlated",
                     systematic_null="estimated_covariance")
 
@@ -275,6 +277,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     prt = wf.get("profile_refine_tol", 0.15)
     if not isinstance(prt, (int, float)) or isinstance(prt, bool) or not 0 < prt < 1:
         _bad("workflow.profile_refine_tol", prt, "a number in (0, 1)")
+    prr = wf.get("profile_rough_tol", 0.25)
+    if not isinstance(prr, (int, float)) or isinstance(prr, bool) or not 0 < prr <= 10:
+        _bad("workflow.profile_rough_tol", prr, "a number in (0, 10]")
     pe = wf.get("profile_expand", 3)
     if not isinstance(pe, int) or isinstance(pe, bool) or not 0 <= pe <= 10:
         _bad("workflow.profile_expand", pe, "an integer in [0, 10]")

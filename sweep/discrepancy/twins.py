@@ -205,7 +205,8 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
         rep = run_workflow(load_measured(folder), spec, fwd, results / name, fine_forward=fine)
         summary[name] = {"hidden": twin.get("hidden", {}), "expect": twin["expect"], "verdict": rep["verdict"],
                          "named_effect": rep["named_effect"], "strength": rep["strength"],
-                         "strength_interval": rep["strength_interval"], "tie": rep["tie"],
+                         "strength_interval": rep["strength_interval"],
+                         "strength_interval_rough": rep.get("strength_interval_rough"), "tie": rep["tie"],
                          "not_identifiable": rep["not_identifiable"],
                          "gap_before": rep["gap_before"].get("total"), "gap_after": rep["gap_after"].get("total"),
                          "passed": twin_passed(twin, rep), "wall_time_s": round(time.time() - t0, 1),

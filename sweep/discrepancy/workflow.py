@@ -619,8 +619,12 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
 
     lo, hi = side(-1), side(+1)
     points.sort(key=lambda q: q["value"])
+    # a jagged profile (Δχ² falling away from the fit) has its crossings set by the forward model's jitter
+    rough = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
+                                    p.from_x(x_hat[j]))
     return {"lower": float(p.from_x(lo)), "upper": float(p.from_x(hi)), "threshold": float(thr),
-            "wald": [lo_w, hi_w],
+            "wald": [lo_w, hi_w], "roughness": rough,
+            "rough": bool(rough > problem.spec.wf("profile_rough_tol") * thr),
             "points": points}
 
 
@@ -764,6 +768,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
             profiles[a["effect"]] = pr
             a["strength_interval_wald"] = a["strength_interval"]
             a["strength_interval"] = [pr["lower"], pr["upper"]]
+            a["strength_interval_rough"] = pr["rough"]
         if any(pr["recentred"] for pr in profiles.values()):
             # the fit moved to a profile's minimum: every accepted strength is reported at the final fit
             final = current.values()
@@ -804,6 +809,9 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "named_effect": named["effect"] if named else None,
         "strength": named["strength"] if named else None,
         "strength_interval": named["strength_interval"] if named else None,
+        # the profile fell away from the fit by more than profile_rough_tol of its threshold: the interval's
+        # width reflects the coarse model's jitter in the strength, not the data (a lower bound on the uncertainty)
+        "strength_interval_rough": bool(named.get("strength_interval_rough", False)) if named else None,
         "strength_scaling": named["scaling"] if named else None,
         "accepted": accepted,
         "tie": tie,
