@@ -5,6 +5,7 @@ statistics (calibration, screening, identifiability, acceptance, verdicts), not 
 twin data are generated with a smaller "mesh error" (h = 2 vs 8 in the workflow) and Gaussian noise.
 """
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -521,9 +522,10 @@ def test_twins_ci_campaign_has_fine_realizations_other_than_the_datas():
     assert camp["data"]["mesh_seed"] not in [o["mesh_seed"] for o in opts]
 
 
-@pytest.mark.parametrize("campaign", ["discrepancy_twins_ci.toml", "discrepancy_twins_ci_k6.toml",
-                                      "discrepancy_twins_confounded.toml", "discrepancy_twins_tie.toml",
-                                      "discrepancy_twins_full.toml", "discrepancy_worked_example.toml"])
+_TWIN_CAMPAIGNS = sorted(p.name for p in (Path(__file__).resolve().parents[1] / "campaigns").glob("discrepancy_*.toml"))
+
+
+@pytest.mark.parametrize("campaign", _TWIN_CAMPAIGNS)
 def test_every_twin_campaign_is_valid_before_any_run(campaign):
     """The committed twin campaigns (hours of solver time each) validate without a run: the spec, the data's mesh
     realization outside the fine check's, each twin's conditions (held-out and training ones) and observables,

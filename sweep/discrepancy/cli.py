@@ -31,6 +31,7 @@ def cmd_run(args) -> int:
 
     from .data import load_measured
     from .forward import SolverForward, fine_forwards
+    from .report import ROUGH_NOTE
     from .spec import load_spec
     from .workflow import run_workflow
 
@@ -48,8 +49,7 @@ def cmd_run(args) -> int:
     rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
                                           f"{rep['strength_interval']}"
-                                          + (" (rough profile: a lower bound on the uncertainty)"
-                                             if rep.get("strength_interval_rough") else "")
+                                          + (f" ({ROUGH_NOTE})" if rep.get("strength_interval_rough") else "")
                                           if rep["named_effect"] else ""))
     print(f"held-out gap (total): before {rep['gap_before'].get('total', float('nan')):.3g}, after "
           f"{rep['gap_after'].get('total', float('nan')):.3g}; report in {out / 'report.md'}")

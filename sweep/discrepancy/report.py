@@ -9,7 +9,10 @@ import numpy as np
 from . import stats
 from .data import CURVE_OBSERVABLES, UNITS
 
-__all__ = ["write_report"]
+__all__ = ["write_report", "ROUGH_NOTE"]
+
+# what a rough profile means for the named strength's interval (report.md verdict line, CLI)
+ROUGH_NOTE = "rough profile: a lower bound on the uncertainty"
 
 
 def _fig_curves(problem, fit_before, fit_after, path):
@@ -136,7 +139,7 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
          f"**Verdict: {report['verdict']}**" + (f" — named effect `{report['named_effect']}`, strength "
                                                 f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
                                                 f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''}"
-                                                f"{'; rough profile: a lower bound on the uncertainty' if report.get('strength_interval_rough') else ''})"
+                                                f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''})"
                                                 if report["named_effect"] else ""), ""]
     pe = report.get("partial_explanation")
     if pe:
