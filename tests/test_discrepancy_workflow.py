@@ -527,35 +527,42 @@ _TWIN_CAMPAIGNS = sorted(p.name for p in (Path(__file__).resolve().parents[1] / 
 
 @pytest.mark.parametrize("campaign", _TWIN_CAMPAIGNS)
 def test_every_twin_campaign_is_valid_before_any_run(campaign):
-    """The committed twin campaigns (hours of solver time each) validate without a run: the spec, the data's mesh
-    realization outside the fine check's, each twin's conditions (held-out and training ones) and observables,
-    hidden parameters that are Parameters fields, an expected verdict or catalogue effect, and a ``resolved_by``
-    naming another twin of the campaign whose data add conditions or observables to the confounded one's."""
-    import dataclasses
+    """The committed twin campaigns (hours of solver time each) validate without a run
+    (twins.validate_twin_campaign, which run_twins calls first)."""
     from pathlib import Path
 
-    from solver import Parameters
-    from solver.effects import EFFECTS
-    from sweep.discrepancy.twins import check_data_realization, load_twin_campaign, twin_conditions, twin_observables
+    from sweep.discrepancy.twins import load_twin_campaign, validate_twin_campaign
 
     camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / campaign)
-    spec = spec_from_dict(camp["spec"])
-    check_data_realization(camp, spec)
-    fields = {f.name for f in dataclasses.fields(Parameters)}
-    twins = {t["name"]: t for t in camp["twin"]}
-    assert len(twins) == len(camp["twin"])
-    for t in camp["twin"]:
-        conds, obs = twin_conditions(camp, t, spec), twin_observables(camp, t)
-        assert set(t.get("hidden", {})) <= fields, t["name"]
-        assert t["expect"] in ("no_missing_effect", "unexplained_discrepancy", "tie", "not_identifiable", *EFFECTS)
-        if t["expect"] in EFFECTS:
-            assert t["expect"] in spec.candidates, t["name"]
-        if t.get("resolved_by"):
-            r = twins[t["resolved_by"]]
-            conds_r, obs_r = twin_conditions(camp, r, spec), twin_observables(camp, r)
-            assert r["hidden"] == t["hidden"] and r["expect"] in EFFECTS
-            assert set(conds) <= set(conds_r) and set(obs) <= set(obs_r)
-            assert set(conds) < set(conds_r) or set(obs) < set(obs_r), "the resolving twin adds nothing"
+    validate_twin_campaign(camp, spec_from_dict(camp["spec"]))
+
+
+@pytest.mark.parametrize("edit,msg", [
+    (lambda c: c["twin"].append(dict(c["twin"][0])), "distinct non-empty name"),
+    (lambda c: c["twin"][0].update(hidden={"not_a_field": 1.0}), r"hidden=\['not_a_field'\]"),
+    (lambda c: c["twin"][0].update(expect="named"), "expect='named' must be one of"),
+    (lambda c: c["twin"][1].update(expect="korteweg_stress"), "not among the spec's candidates"),
+    (lambda c: c["twin"][0].update(resolved_by="nope"), "resolved_by='nope' must name another twin"),
+    (lambda c: c["twin"][0].update(resolved_by=c["twin"][0]["name"]), "must name another twin"),
+    (lambda c: c["twin"][0].update(resolved_by="coupling_vs_compliance_rates", observables=["p_inj", "front_radius_mean"]),
+     "must keep its conditions"),
+    (lambda c: c["twin"][0].update(conditions=["w50"]), "held-out and training"),
+])
+def test_a_bad_twin_is_refused_before_any_run(tmp_path, edit, msg):
+    """Each check of validate_twin_campaign on the tie campaign with one field broken; run_twins refuses it
+    before generating any data (the results folder stays empty)."""
+    import copy
+    from pathlib import Path
+
+    from sweep.discrepancy.twins import load_twin_campaign, run_twins, validate_twin_campaign
+
+    camp = copy.deepcopy(load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_tie.toml"))
+    edit(camp)
+    with pytest.raises(ValueError, match=msg):
+        validate_twin_campaign(camp, spec_from_dict(camp["spec"]))
+    with pytest.raises(ValueError, match=msg):
+        run_twins(camp, tmp_path / "res", tmp_path / "cache")
+    assert not (tmp_path / "res").exists()
 
 
 def test_twins_refuse_data_on_a_checked_mesh_realization(tmp_path):

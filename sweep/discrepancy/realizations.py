@@ -8,7 +8,7 @@ correlated in time (:class:`RealizationCovariance`).  Units those of the observa
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -52,6 +52,31 @@ class RealizationCovariance:
     t: np.ndarray | None = None     # time of each row (s) and its observable: the series' correlation
     obs: np.ndarray | None = None   # structure, for the scale's degrees of freedom (scale_dof)
     window: int = 5                 # points the per-point variance was averaged over
+    # the coarse model's jitter in its parameters (sweep/discrepancy/jitter.py), series -> (rows, C_j): a known
+    # covariance added to the realizations' (not scaled by their estimate's uncertainty); None: not modelled
+    jitter: dict | None = None
+
+    @classmethod
+    def empty(cls, problem) -> "RealizationCovariance":
+        """No realization term (k = 0): zero blocks on the series of ``problem``, to carry a jitter term alone."""
+        blocks = {}
+        for s in np.unique(problem.series):
+            rows = np.flatnonzero(problem.series == s)
+            rows = rows[np.argsort(problem.t[rows], kind="stable")]
+            blocks[int(s)] = (rows, np.zeros((rows.size, rows.size)))
+        return cls(blocks, {}, {}, 0, np.asarray(problem.t, float), np.asarray(problem.obs))
+
+    def with_jitter(self, jitter_blocks: dict | None) -> "RealizationCovariance":
+        """This covariance plus the jitter term ``jitter_blocks`` (series -> (rows, C_j), the same rows)."""
+        for s, (rows, C) in (jitter_blocks or {}).items():
+            if s not in self.blocks or not np.array_equal(self.blocks[s][0], rows):
+                raise ValueError(f"with_jitter: series {s} rows differ from the realization covariance's")
+        return replace(self, jitter=jitter_blocks)
+
+    def total(self, s) -> np.ndarray:
+        """The covariance of series ``s``: realization term plus jitter term (kPa², mm²)."""
+        rows, C = self.blocks[s]
+        return C + self.jitter[s][1] if self.jitter and s in self.jitter else C
 
     @classmethod
     def estimate(cls, fines: np.ndarray, problem, window: int = 5) -> "RealizationCovariance":
@@ -87,14 +112,15 @@ class RealizationCovariance:
     def variance(self, n: int) -> np.ndarray:
         """Per-point realization variance (the blocks' diagonals) on n rows, kPa² / mm²."""
         out = np.zeros(n)
-        for rows, C in self.blocks.values():
-            out[rows] = np.diag(C)
+        for s, (rows, _) in self.blocks.items():
+            out[rows] = np.diag(self.total(s))
         return out
 
     def dense(self, sel: np.ndarray) -> np.ndarray:
         """The covariance on the rows ``sel`` (sorted global indices) as a dense matrix."""
         out = np.zeros((sel.size, sel.size))
-        for rows, C in self.blocks.values():
+        for s, (rows, _) in self.blocks.items():
+            C = self.total(s)
             keep = np.isin(rows, sel)
             if keep.any():
                 ix = np.searchsorted(sel, rows[keep])
@@ -107,7 +133,8 @@ class RealizationCovariance:
         sub-block)."""
         rows_m = np.flatnonzero(mask)
         out = []
-        for rows, C in self.blocks.values():
+        for s, (rows, _) in self.blocks.items():
+            C = self.total(s)
             keep = mask[rows]
             if not keep.any():
                 continue
@@ -168,11 +195,33 @@ class RealizationCovariance:
             lam = nu / rng.chisquare(nu, size=n_draws)
             order = np.argsort(np.searchsorted(rows_m, r), kind="stable")   # the residual vector's order
             xi = rng.standard_normal((n_draws, r.size))
-            mix = ((xi @ U) * np.sqrt((1.0 + lam[:, None] * a) / (1.0 + a))) @ U.T
+            if self.jitter and s in self.jitter:
+                mix = _mixture_with_jitter(xi, lam, C[np.ix_(keep, keep)] / np.outer(d, d),
+                                           self.jitter[s][1][np.ix_(keep, keep)] / np.outer(d, d))
+            else:
+                mix = ((xi @ U) * np.sqrt((1.0 + lam[:, None] * a) / (1.0 + a))) @ U.T
             _, z0, m0 = stats.series_statistics(xi[:, order])
             _, z1, m1 = stats.series_statistics(mix[:, order])
             out[str(s)] = SeriesNull(np.sort(z0), np.sort(z1), np.sort(m0), np.sort(m1))
         return out
+
+
+def _mixture_with_jitter(xi: np.ndarray, lam: np.ndarray, A: np.ndarray, J: np.ndarray, n_bins: int = 64) -> np.ndarray:
+    """Whitened null residuals when only the realization part A of R = I + A + J is scaled by λ (the jitter
+    term J is not estimated from the realizations): given λ, r ~ N(0, R^(−1/2) (I + λA + J) R^(−1/2)), drawn
+    as R^(−1/2) (I + λA + J)^(1/2) ξ with λ rounded to the mid-quantile of its bin (``n_bins`` equal-count
+    bins; A and J no longer commute, so each bin needs its own square root)."""
+    n = A.shape[0]
+    Winv = stats.symmetric_whitener(np.eye(n) + A + J)
+    order = np.argsort(lam, kind="stable")
+    out = np.empty_like(xi)
+    for idx in np.array_split(order, min(n_bins, lam.size)):
+        if idx.size == 0:
+            continue
+        w, V = np.linalg.eigh(np.eye(n) + float(np.median(lam[idx])) * A + J)
+        M = Winv @ (V * np.sqrt(np.maximum(w, 0.0))) @ V.T
+        out[idx] = xi[idx] @ M.T
+    return out
 
 
 @dataclass

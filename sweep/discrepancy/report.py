@@ -177,6 +177,12 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
               + (f"a covariance correlated in time (correlation time per observable, s: "
                  f"{_f(report.get('realization_correlation_time'))}; residuals whitened)."
                  if report.get("realization_covariance") == "correlated" else "added in quadrature to σ."), ""]
+    for where, mj in (report.get("model_jitter") or {}).items():
+        if mj:
+            L += [f"Coarse model's jitter in its parameters ({where}, estimated at {_f(mj['at'])} from "
+                  f"{len(next(iter(mj['steps'].values())))} runs per parameter of {sorted(mj['steps'])}; "
+                  f"sweep/discrepancy/jitter.py): RMS {_f(mj['rms'])} (kPa, mm), correlation time "
+                  f"{_f(mj['correlation_time'])} s; added to the covariance the residuals are whitened with.", ""]
     by_stage = "; ".join(f"{k} {v['coarse']}" + (f" + {v['fine']} fine" if v.get("fine") else "")
                          for k, v in (report.get("forward_runs_by_stage") or {}).items() if v["coarse"] or v.get("fine"))
     L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}"

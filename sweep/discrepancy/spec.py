@@ -56,6 +56,14 @@ Example (units mm, s, kPa)::
                                      # covariance: "estimated_covariance" (its scale has k − 1 degrees of
                                      # freedom: statistics mapped to the known-covariance scale by simulation)
                                      # or "known_covariance" (the simplification: the estimate taken as exact)
+    model_jitter = "none"            # the coarse model's jitter in its parameters as an error term
+                                     # (sweep/discrepancy/jitter.py): "estimated" (runs at model_jitter_steps
+                                     # values q (1 + model_jitter_rel_step j) of each free parameter, at the
+                                     # initial baseline and again at a named model's fit; the polynomial
+                                     # residuals' variance is added to the covariance the residuals are
+                                     # whitened with) or "none" (not modelled: right for a model smooth in its
+                                     # parameters; campaigns run before 2026-11-25's third sitting)
+    model_jitter_steps = 7; model_jitter_rel_step = 0.05
 """
 from __future__ import annotations
 
@@ -74,7 +82,8 @@ _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_ex
                     disc_error_fraction=0.5, disc_refresh=1, disc_refresh_tol=0.05, profile_fine=True, interval="profile", profile_expand=3,
                     profile_refine=2, profile_refine_tol=0.15, profile_rough_tol=0.25,
                     named_needs_noise_level=True, realization_covariance="correlated",
-                    systematic_null="estimated_covariance")
+                    systematic_null="estimated_covariance", model_jitter="none", model_jitter_steps=7,
+                    model_jitter_rel_step=0.05)
 
 
 @dataclass(frozen=True)
@@ -271,6 +280,15 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     sn = wf.get("systematic_null", "estimated_covariance")
     if sn not in ("estimated_covariance", "known_covariance"):
         _bad("workflow.systematic_null", sn, '"estimated_covariance" or "known_covariance"')
+    mj = wf.get("model_jitter", "none")
+    if mj not in ("none", "estimated"):
+        _bad("workflow.model_jitter", mj, '"none" or "estimated"')
+    ms = wf.get("model_jitter_steps", 7)
+    if not isinstance(ms, int) or isinstance(ms, bool) or ms < 5 or ms % 2 == 0 or ms > 21:
+        _bad("workflow.model_jitter_steps", ms, "an odd integer in [5, 21] (runs per stepped parameter)")
+    mr = wf.get("model_jitter_rel_step", 0.05)
+    if not isinstance(mr, (int, float)) or isinstance(mr, bool) or not 0 < mr < 0.5:
+        _bad("workflow.model_jitter_rel_step", mr, "a number in (0, 0.5) (relative step of a parameter)")
     pr = wf.get("profile_refine", 2)
     if not isinstance(pr, int) or isinstance(pr, bool) or not 0 <= pr <= 10:
         _bad("workflow.profile_refine", pr, "an integer in [0, 10]")

@@ -121,6 +121,57 @@ def twin_observables(camp: dict, twin: dict) -> tuple:
     return tuple(obs)
 
 
+VERDICTS = ("no_missing_effect", "unexplained_discrepancy", "tie", "not_identifiable")
+
+
+def validate_twin_campaign(camp: dict, spec) -> None:
+    """Every twin of ``camp`` checked before any run (hours of solver time hang on a typo): names distinct;
+    conditions (held-out and training ones) and observables (:func:`twin_conditions`, :func:`twin_observables`);
+    ``hidden`` keys are Parameters fields; ``expect`` is a verdict or a candidate effect of the spec; a
+    ``resolved_by`` names another twin with the same hidden effect, expecting a catalogue effect, whose
+    conditions and observables contain the confounded twin's and add at least one.  Raises ValueError naming
+    the twin, the key and the allowed values."""
+    import dataclasses
+
+    from solver import Parameters
+    from solver.effects import EFFECTS
+
+    check_data_realization(camp, spec)
+    fields = {f.name for f in dataclasses.fields(Parameters)}
+    twins = {}
+    for t in camp["twin"]:
+        name = t.get("name")
+        if not name or name in twins:
+            raise ValueError(f"twin name {name!r}: each [[twin]] needs a distinct non-empty name")
+        twins[name] = t
+    for t in camp["twin"]:
+        name = t["name"]
+        twin_conditions(camp, t, spec)
+        twin_observables(camp, t)
+        bad = sorted(set(t.get("hidden", {})) - fields)
+        if bad:
+            raise ValueError(f"twin {name!r}: hidden={bad} are not solver.Parameters fields")
+        exp = t.get("expect")
+        if exp not in VERDICTS and exp not in EFFECTS:
+            raise ValueError(f"twin {name!r}: expect={exp!r} must be one of {list(VERDICTS)} or an effect of "
+                             f"{sorted(EFFECTS)}")
+        if exp in EFFECTS and exp not in spec.candidates:
+            raise ValueError(f"twin {name!r}: expect={exp!r} is not among the spec's candidates {list(spec.candidates)}")
+        rb = t.get("resolved_by")
+        if rb:
+            r = twins.get(rb)
+            if r is None or rb == name:
+                raise ValueError(f"twin {name!r}: resolved_by={rb!r} must name another twin among {sorted(twins)}")
+            if r.get("hidden") != t.get("hidden") or r.get("expect") not in EFFECTS:
+                raise ValueError(f"twin {name!r}: resolved_by={rb!r} must hide the same effect ({t.get('hidden')}) "
+                                 f"and expect a catalogue effect (it has hidden={r.get('hidden')}, expect={r.get('expect')!r})")
+            c0, o0 = set(twin_conditions(camp, t, spec)), set(twin_observables(camp, t))
+            c1, o1 = set(twin_conditions(camp, r, spec)), set(twin_observables(camp, r))
+            if not (c0 <= c1 and o0 <= o1) or (c0 == c1 and o0 == o1):
+                raise ValueError(f"twin {name!r}: resolved_by={rb!r} must keep its conditions {sorted(c0)} and "
+                                 f"observables {sorted(o0)} and add to them (it has {sorted(c1)}, {sorted(o1)})")
+
+
 def _write_summary_entry(path: Path, name: str, entry: dict) -> None:
     """Merge one twin's entry into ``summary.json`` under an exclusive lock, written atomically: several twin
     processes may share a results folder, and a killed one must never leave a truncated summary."""
@@ -163,7 +214,6 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
 
     camp = load_twin_campaign(campaign) if not isinstance(campaign, dict) else campaign
     spec = spec_from_dict(camp["spec"])
-    check_data_realization(camp, spec)
     n_jobs = spec.wf("n_jobs") if n_jobs is None else int(n_jobs)
     dat = camp["data"]
     a, b, n = dat["times"]
@@ -180,10 +230,10 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
         from .reference_check import load_reference_check
         ref = load_reference_check(camp["reference_check"])
         paper_reported()
-    for twin in camp["twin"]:       # validate every selected twin before any run starts
-        if not only or twin["name"] in only:
-            twin_conditions(camp, twin, spec)
-            twin_observables(camp, twin)
+    validate_twin_campaign(camp, spec)     # every twin, before any run starts
+    unknown = sorted(set(only or ()) - {t["name"] for t in camp["twin"]})
+    if unknown:
+        raise ValueError(f"--only {unknown}: no such twin among {[t['name'] for t in camp['twin']]}")
     for twin in camp["twin"]:
         name = twin["name"]
         if only and name not in only:

@@ -19,6 +19,7 @@ from solver.effects import get_effect
 
 from . import stats
 from .data import CURVE_OBSERVABLES, MeasuredData
+from .jitter import estimate_model_jitter
 from .realizations import RealizationCovariance, realization_mean_spread, realizations
 from .spec import CalibParam, DiscrepancySpec
 
@@ -116,6 +117,7 @@ class Problem:
         # that term as a covariance per series (add_discretization_error)
         self.sig_diag = self.sig
         self.real_cov = None
+        self.jitter = None   # the coarse model's jitter in its parameters (jitter.ModelJitter), if modelled
         self._whiteners = {}
         self._cache = {}
         self.fixed = {}   # values held fixed while others are fitted (profile likelihood), e.g. {"effect:x": 3.0}
@@ -473,9 +475,36 @@ def add_discretization_error(problem: Problem, fine_forward, values: dict | None
         problem.real_cov = None
         problem.sig = problem.sig_diag = np.sqrt(problem.sig_measured**2 + (frac * err) ** 2 + spread**2)
     problem.realization_spread = spread
-    problem._whiteners.clear()
-    problem._cache.clear()                            # cached residuals refer to the previous correction
+    _attach_jitter(problem)                           # clears the whitener and residual caches
     return _rms_per_observable(problem, err)
+
+
+def _attach_jitter(problem: Problem) -> None:
+    """Add ``problem.jitter``'s covariance to the realization covariance (an empty one, k = 0, without
+    realizations) and set the marginal σ; without jitter leave the realization covariance alone.  Cached
+    whiteners and residuals refer to the previous covariance and are dropped."""
+    rc = problem.real_cov
+    if rc is not None and rc.k == 0:
+        rc = None                                     # a jitter-only covariance from an earlier call
+    if problem.jitter is not None:
+        rc = (rc if rc is not None else RealizationCovariance.empty(problem)).with_jitter(problem.jitter.blocks(problem))
+    elif rc is not None:
+        rc = rc.with_jitter(None)
+    problem.real_cov = rc
+    problem.sig = np.sqrt(problem.sig_diag**2 + rc.variance(problem.sig_diag.size)) if rc is not None else problem.sig_diag
+    problem._whiteners.clear()
+    problem._cache.clear()
+
+
+def add_model_jitter(problem: Problem, values: dict, params) -> dict | None:
+    """Estimate the coarse model's jitter at ``values`` in the directions of ``params`` (CalibParam; see
+    :mod:`.jitter`) and add it to the covariance the residuals are whitened with.  Returns its summary
+    (RMS per observable in kPa / mm, correlation times in s, runs spent), None when nothing could be stepped."""
+    spec = problem.spec
+    problem.jitter = estimate_model_jitter(problem, values, params, n_steps=spec.wf("model_jitter_steps"),
+                                           rel_step=spec.wf("model_jitter_rel_step"))
+    _attach_jitter(problem)
+    return _jsonable(problem.jitter.summary(problem)) if problem.jitter is not None else None
 
 
 def refresh_named_model(problem: Problem, fine_forward, fit: Fit, accepted: list, train) -> tuple:
@@ -674,6 +703,11 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     ledger = _RunLedger(forward, fine_forward or [])
     disc_err = add_discretization_error(problem, fine_forward) if fine_forward is not None else None
     ledger.mark("discretization_correction")
+    jitter = {}
+    if spec.wf("model_jitter") == "estimated":
+        # before the baseline is fitted: the baseline's χ² and every candidate's refit see the same jitter term
+        jitter["baseline"] = add_model_jitter(problem, {p.name: p.initial for p in spec.calibrate}, spec.calibrate)
+        ledger.mark("model_jitter")
     spread_rms = _rms_per_observable(problem, problem.realization_spread) if fine_forward is not None else None
     ids = data.ids
     holdout = spec.holdout(ids)
@@ -751,6 +785,15 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         else:
             verdict = "unexplained_discrepancy" if loc0["systematic"] else "no_missing_effect"
     refresh = []
+    if verdict == "named" and spec.wf("model_jitter") == "estimated":
+        # the jitter where the named model sits, in its strength too (at the baseline the effect was off)
+        jitter["named"] = add_model_jitter(problem, current.values(), current.params)
+        ledger.mark("model_jitter")
+        if not (fine_forward is not None and spec.wf("disc_refresh") > 0):
+            current = problem.fit(current.params, [current.x], train)
+            gap_before = _gap(problem, fit0.params, fit0.x, holdout)   # both gaps with the same σ
+            gap_cur = _gap(problem, current.params, current.x, holdout)
+            loc = localize(problem, current, train)
     if verdict == "named" and fine_forward is not None and spec.wf("disc_refresh") > 0:
         current, accepted, refresh = refresh_named_model(problem, fine_forward, current, accepted, train)
         gap_before = _gap(problem, fit0.params, fit0.x, holdout)   # same (refreshed) data for both gaps
@@ -804,6 +847,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         verdict = "unexplained_discrepancy"
     named = accepted[0] if accepted and verdict == "named" else None
     ledger.mark("gaps_and_localization")    # whatever the stages above left (held-out gaps, residual maps)
+    has_rc = problem.real_cov is not None and problem.real_cov.k >= 2
     report = {
         "verdict": verdict,
         "named_effect": named["effect"] if named else None,
@@ -834,9 +878,10 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         "discretization_error_rms": disc_err,
         "realization_spread_rms": spread_rms,
         "discretization_realizations": len(fine_forward) if fine_forward is not None else 0,
-        "realization_covariance": ("correlated" if problem.real_cov is not None else "diagonal") if fine_forward is not None else None,
-        "realization_correlation_time": problem.real_cov.tau if problem.real_cov is not None else None,
-        "realization_lag1": problem.real_cov.rho if problem.real_cov is not None else None,
+        "realization_covariance": ("correlated" if has_rc else "diagonal") if fine_forward is not None else None,
+        "realization_correlation_time": problem.real_cov.tau if has_rc else None,
+        "realization_lag1": problem.real_cov.rho if has_rc else None,
+        "model_jitter": jitter or None,
         "discretization_refresh": refresh,
         "profiles": profiles,
         "partial_explanation": partial,

@@ -1,0 +1,186 @@
+"""The coarse model's jitter in its parameters as an error term (sweep/discrepancy/jitter.py).
+
+Known answers: a forward model with a pseudo-random jitter of known variance in the strength gives that
+variance back (to its sampling error); a smooth one gives none (to the quadratic's remainder); the covariance
+with the jitter added whitens to the generalized least-squares χ²; the null-calibration mixture reduces to the
+closed form when the jitter term is absent; on the toy whose injection pressure jitters with β, the profile
+interval that excluded the truth contains it once the jitter is in the likelihood.
+"""
+import numpy as np
+import pytest
+
+from sweep.discrepancy import ToyForward, run_workflow, spec_from_dict, stats
+from sweep.discrepancy.jitter import estimate_model_jitter, step_values
+from sweep.discrepancy.realizations import RealizationCovariance, _mixture_with_jitter
+from test_discrepancy_workflow import OFF, _JitteryToy, _spec, _twin
+
+A = 1.5   # kPa: the sd of the pseudo-random jitter below
+
+
+class _NoisyToy(ToyForward):
+    """The toy plus a jitter in β of sd A kPa in p_inj: a deterministic pseudo-random draw per (β, w_i),
+    independent between β values however close (a correlation length below any step).  ``white``: a draw
+    per time point (τ = 0); otherwise one offset per (β, w_i) over the whole curve, as the solver's front
+    jumps persist (τ = ∞)."""
+
+    def __init__(self, *a, white=True, **kw):
+        super().__init__(*a, **kw)
+        self.white = white
+
+    def predict_one(self, overrides, times):
+        from solver import Parameters
+
+        out = super().predict_one(overrides, times)
+        p = Parameters.from_dict({**self.base, **overrides})
+        if "p_inj" in out:
+            rng = np.random.default_rng([int(round(p.damage_viscosity * 1e6)), int(round(p.w_i))])
+            n = np.size(out["p_inj"])
+            out["p_inj"] = out["p_inj"] + A * (rng.standard_normal(n) if self.white else rng.standard_normal() * np.ones(n))
+        return out
+
+
+def _problem(tmp_path, fwd, observables=("p_inj", "front_radius_mean")):
+    from sweep.discrepancy.workflow import Problem
+
+    data = _twin(tmp_path, {"beta": 40.0}, observables=observables)
+    spec = _spec(cands=["damage_viscosity"], calibrate=("E",))
+    spec.workflow.update(max_nfev=50)
+    prob = Problem(data, spec, fwd)
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    return prob, params
+
+
+def test_step_values_and_their_checks():
+    assert np.allclose(step_values(40.0, 5, 0.05), [36, 38, 40, 42, 44])
+    assert np.allclose(step_values(10.0, 5, 0.1, lower=9.0), [9, 10, 11, 12, 13])       # shifted inside
+    assert np.allclose(step_values(10.0, 5, 0.1, upper=11.0), [7, 8, 9, 10, 11])
+    with pytest.raises(ValueError, match="model_jitter_steps = 6"):
+        step_values(1.0, 6, 0.05)
+    with pytest.raises(ValueError, match="model_jitter_rel_step = 0.7"):
+        step_values(1.0, 7, 0.7)
+
+
+def test_jitter_of_known_variance_is_recovered(tmp_path):
+    """v = A² in p_inj to the estimate's sampling error: per point RSS/(m − 3) has m − 3 = 4 degrees of freedom;
+    over the 4 × 50 independent p_inj points the mean has relative sd √(2/(4·200)) = 0.05 (bound: 4 sd).
+    E moves nothing of the jitter (stepping E at fixed β leaves the draws the same): its direction gives the
+    smooth toy's remainder exactly, so the max over the two directions is β's; no jitter in the front radius;
+    τ = 0 within the lag-1's sampling error."""
+    prob, params = _problem(tmp_path, _NoisyToy({}, h=8.0))
+    vals = {"E": 331.0, "effect:damage_viscosity": 40.0}
+    mj = estimate_model_jitter(prob, vals, params)
+    p = prob.obs == "p_inj"
+    assert np.mean(mj.variance[p]) == pytest.approx(A**2, rel=4 * np.sqrt(2 / (4 * 200)))
+    smooth, _ = _problem(tmp_path / "smooth", ToyForward({}, h=8.0))
+    assert mj.per_parameter_rms["E"] == pytest.approx(
+        estimate_model_jitter(smooth, vals, params[:1]).per_parameter_rms["E"], rel=1e-9)
+    assert np.all(mj.variance[~p] < 1e-12)
+    assert mj.rho["p_inj"] < 4 / np.sqrt(4 * 200)
+    assert mj.steps["effect:damage_viscosity"] == pytest.approx([34, 36, 38, 40, 42, 44, 46])
+    assert mj.runs == 2 * 7 * 4            # 7 runs per condition and parameter (the toy caches nothing)
+    # an effect at its off value (0) is not stepped; nothing to step gives None
+    assert estimate_model_jitter(prob, {"E": 331.0, "effect:damage_viscosity": 0.0}, params[1:]) is None
+
+
+def test_smooth_model_has_only_the_quadratics_remainder(tmp_path):
+    """The closed-form toy is smooth in E and β: what the estimate sees is the quadratic's remainder, O(δ³) in
+    the step δ (halving δ divides its RMS by 8, ±10 % for the next order), below 0.05 of the measurement σ
+    (2 kPa) at δ = 0.05; p_inj is linear in β and the front radius depends on neither (rounding only)."""
+    prob, params = _problem(tmp_path, ToyForward({}, h=8.0))
+    vals = {"E": 331.0, "effect:damage_viscosity": 40.0}
+    r1 = estimate_model_jitter(prob, vals, params, rel_step=0.05).per_parameter_rms
+    r2 = estimate_model_jitter(prob, vals, params, rel_step=0.025).per_parameter_rms
+    assert r1["E"]["p_inj"] / r2["E"]["p_inj"] == pytest.approx(8.0, rel=0.1)
+    assert r1["E"]["p_inj"] < 0.05 * 2.0
+    assert r1["effect:damage_viscosity"]["p_inj"] < 1e-9 and r1["E"]["front_radius_mean"] < 1e-9
+
+
+def test_covariance_with_jitter_whitens_to_the_gls_chi2(tmp_path):
+    """r·r = diffᵀ (D + C_real + C_jitter)⁻¹ diff per series, D = σ_diag²; variance() is the sum's diagonal."""
+    from sweep.discrepancy.jitter import ModelJitter
+
+    prob, _ = _problem(tmp_path, ToyForward({}, h=8.0))
+    n = prob.y.size
+    rng = np.random.default_rng(5)
+    fines = prob.y[None, :] + rng.normal(scale=0.5, size=(4, n)).cumsum(axis=1) * 0.1
+    rc = RealizationCovariance.estimate(fines, prob)
+    mj = ModelJitter(variance=rng.uniform(0.5, 2.0, n), tau={"p_inj": 0.05, "front_radius_mean": 0.0},
+                     rho={}, per_parameter_rms={}, at={})
+    prob.real_cov = rc.with_jitter(mj.blocks(prob))
+    diff = rng.normal(size=n)
+    mask = np.ones(n, bool)
+    r = prob.standardize(diff, mask, 50.0)
+    sel = np.arange(n)
+    S = np.diag(prob.sig_diag**2) + prob.real_cov.dense(sel)
+    assert r @ r == pytest.approx(diff @ np.linalg.solve(S, diff), rel=1e-9)
+    assert np.allclose(prob.real_cov.variance(n), rc.variance(n) + mj.variance)
+    with pytest.raises(ValueError, match="rows differ"):
+        rc.with_jitter({0: (np.arange(3), np.eye(3))})
+
+
+def test_null_mixture_with_jitter_reduces_to_the_closed_form():
+    """J = 0: R^(−1/2) (I + λA)^(1/2) ξ = U diag(√((1 + λa)/(1 + a))) Uᵀ ξ (A = U diag(a) Uᵀ); λ = 1 with
+    any J gives ξ back (the estimate exact)."""
+    rng = np.random.default_rng(2)
+    n = 12
+    B = rng.normal(size=(n, n))
+    A = B @ B.T / n
+    Jm = np.diag(rng.uniform(0.2, 1.0, n))
+    xi = rng.standard_normal((300, n))
+    lam = np.full(300, 1.7)
+    a, U = np.linalg.eigh(A)
+    closed = ((xi @ U) * np.sqrt((1.0 + 1.7 * a) / (1.0 + a))) @ U.T
+    assert np.allclose(_mixture_with_jitter(xi, lam, A, np.zeros((n, n))), closed, atol=1e-10)
+    assert np.allclose(_mixture_with_jitter(xi, np.ones(300), A, Jm), xi, atol=1e-10)
+
+
+def test_jitter_in_the_likelihood_brings_the_truth_back_into_the_profile_interval(tmp_path):
+    """The toy whose p_inj jitters with β (amplitude 2 kPa, period 3 kPa·s): without the jitter term the
+    profile interval is falsely narrow and misses β = 40 (and is flagged rough); with it, the interval
+    contains 40 and is wider."""
+    from sweep.discrepancy.workflow import _attach_jitter, profile_interval
+
+    out = {}
+    for mode in ("none", "estimated"):
+        prob, params = _problem(tmp_path / mode, _JitteryToy({}, h=2.0), observables=("p_inj",))
+        train = ["a", "b", "c"]
+        x0 = np.array([params[0].to_x(params[0].initial), 40.0])
+        if mode == "estimated":
+            prob.jitter = estimate_model_jitter(prob, {"E": 331.0, "effect:damage_viscosity": 40.0}, params)
+            _attach_jitter(prob)
+        fit = prob.fit(params, [x0], train)
+        out[mode] = profile_interval(prob, fit, 1, train)
+    lo0, hi0 = out["none"]["lower"], out["none"]["upper"]
+    lo1, hi1 = out["estimated"]["lower"], out["estimated"]["upper"]
+    assert not (lo0 <= 40.0 <= hi0) and out["none"]["rough"]           # the premise (test above)
+    assert lo1 <= 40.0 <= hi1 and (hi1 - lo1) > 3 * (hi0 - lo0)
+
+
+def test_workflow_reports_the_jitter_and_the_spec_checks_its_options(tmp_path):
+    """A jitter that shifts a whole curve (as the solver's front jumps do): estimated at the baseline (E only:
+    β is off there, and stepping E leaves the draws alone, so only the smooth remainder) and again at the named
+    fit (β too).  Without the term the profile is rough and its interval a sliver set by one lucky draw; with
+    it the profile is no longer flagged and the interval is many times wider."""
+    data = _twin(tmp_path, {"beta": 40.0}, observables=("p_inj", "front_radius_mean"))
+    d = {"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
+         "candidates": {"effects": ["damage_viscosity", "compliant_boundary"]}, "holdout": {"ids": ["d"]},
+         "options": {"h": 8.0, "t_end": 1.0}}
+    reps = {mode: run_workflow(data, spec_from_dict({**d, "workflow": {"model_jitter": mode}}),
+                               _NoisyToy({}, h=8.0, white=False), figures=False) for mode in ("none", "estimated")}
+    for rep in reps.values():
+        assert rep["verdict"] == "named" and rep["named_effect"] == "damage_viscosity"
+    w = {m: r["strength_interval"][1] - r["strength_interval"][0] for m, r in reps.items()}
+    assert reps["none"]["strength_interval_rough"] and not reps["estimated"]["strength_interval_rough"]
+    assert w["estimated"] > 5 * w["none"]
+    assert reps["none"]["model_jitter"] is None
+    mj = reps["estimated"]["model_jitter"]
+    assert mj["baseline"]["steps"].keys() == {"E"}                          # β off at the baseline
+    assert mj["named"]["steps"].keys() == {"E", "effect:damage_viscosity"}
+    # one offset per series: 4 series × 4 dof, the estimate's relative sd ~ 1/√8 on v (bound: 3 sd on √v)
+    assert mj["named"]["rms"]["p_inj"] == pytest.approx(A, rel=3 * 0.5 / np.sqrt(8))
+    assert mj["named"]["lag1"]["p_inj"] > 0.9                               # a curve, not points
+    assert reps["estimated"]["forward_runs_by_stage"]["model_jitter"]["coarse"] > 0
+    for key, bad, msg in [("model_jitter", "yes", '"none" or "estimated"'), ("model_jitter_steps", 6, "odd integer"),
+                          ("model_jitter_rel_step", 0.0, r"\(0, 0.5\)")]:
+        with pytest.raises(ValueError, match=msg):
+            spec_from_dict({**d, "workflow": {key: bad}})
