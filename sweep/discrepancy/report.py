@@ -199,6 +199,19 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
               f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "
               f"the linearized (Wald) interval was {_f(pr['wald'])}.", "", "| strength | Δχ² |", "|---|---|"]
         L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
+        qd = pr.get("quadratic")
+        if pr.get("smoothing") == "quadratic":
+            if qd is None:
+                L += ["", "Smoothing (`profile_smoothing = \"quadratic\"`) not applied: fewer than 5 points in the "
+                          "quadratic region; the interval is the raw crossings'."]
+            elif qd.get("unbounded"):
+                L += ["", f"Smoothed profile (quadratic, MCAP): no minimum inside the points, so none of them is excluded: "
+                          f"interval {_f([pr['lower'], pr['upper']])} (their span; raw crossings {_f(pr['raw'])})."]
+            else:
+                L += ["", f"Smoothed profile (quadratic through {qd['n']} points with the Monte-Carlo-adjusted cutoff, MCAP, "
+                          f"Ionides et al. 2017): centre {qd['center']:.4g}, statistical se {qd['se_stat']:.3g}, "
+                          f"Monte-Carlo se {qd['se_mc']:.3g} (points' scatter about the quadratic {qd['residual_sd']:.3g} "
+                          f"in Δχ²); interval {_f([pr['lower'], pr['upper']])} (raw crossings {_f(pr['raw'])})."]
         if pr.get("rough"):
             L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
                       f"(more than `profile_rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "

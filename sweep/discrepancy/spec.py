@@ -64,6 +64,10 @@ Example (units mm, s, kPa)::
                                      # whitened with) or "none" (not modelled: right for a model smooth in its
                                      # parameters; campaigns run before 2026-11-25's third sitting)
     model_jitter_steps = 7; model_jitter_rel_step = 0.05
+    profile_smoothing = "none"       # "quadratic": the named strength's interval from a quadratic fitted to the
+                                     # profile points with a Monte-Carlo-adjusted cutoff (MCAP, Ionides et al.
+                                     # 2017; stats.quadratic_profile_interval), for a model whose profile
+                                     # points are noisy (model_jitter); "none": the raw crossings
 """
 from __future__ import annotations
 
@@ -83,7 +87,7 @@ _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_ex
                     profile_refine=2, profile_refine_tol=0.15, profile_rough_tol=0.25,
                     named_needs_noise_level=True, realization_covariance="correlated",
                     systematic_null="estimated_covariance", model_jitter="none", model_jitter_steps=7,
-                    model_jitter_rel_step=0.05)
+                    model_jitter_rel_step=0.05, profile_smoothing="none")
 
 
 @dataclass(frozen=True)
@@ -283,6 +287,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     mj = wf.get("model_jitter", "none")
     if mj not in ("none", "estimated"):
         _bad("workflow.model_jitter", mj, '"none" or "estimated"')
+    ps = wf.get("profile_smoothing", "none")
+    if ps not in ("none", "quadratic"):
+        _bad("workflow.profile_smoothing", ps, '"none" or "quadratic"')
     ms = wf.get("model_jitter_steps", 7)
     if not isinstance(ms, int) or isinstance(ms, bool) or ms < 5 or ms % 2 == 0 or ms > 21:
         _bad("workflow.model_jitter_steps", ms, "an odd integer in [5, 21] (runs per stepped parameter)")

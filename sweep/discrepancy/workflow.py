@@ -651,10 +651,21 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     # a jagged profile (Δχ² falling away from the fit) has its crossings set by the forward model's jitter
     rough = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
                                     p.from_x(x_hat[j]))
-    return {"lower": float(p.from_x(lo)), "upper": float(p.from_x(hi)), "threshold": float(thr),
-            "wald": [lo_w, hi_w], "roughness": rough,
-            "rough": bool(rough > problem.spec.wf("profile_rough_tol") * thr),
-            "points": points}
+    out = {"lower": float(p.from_x(lo)), "upper": float(p.from_x(hi)), "threshold": float(thr),
+           "wald": [lo_w, hi_w], "roughness": rough,
+           "rough": bool(rough > problem.spec.wf("profile_rough_tol") * thr),
+           "points": points, "smoothing": problem.spec.wf("profile_smoothing")}
+    if out["smoothing"] == "quadratic":
+        # the points are noisy evaluations (a jittering coarse model) and the fit the luckiest: the interval
+        # from a quadratic through them with the Monte-Carlo-adjusted cutoff (stats.quadratic_profile_interval)
+        q = stats.quadratic_profile_interval([r["value"] for r in points], [r["delta_chi2"] for r in points],
+                                             thr, level)
+        out["raw"] = [out["lower"], out["upper"]]
+        out["quadratic"] = q
+        if q is not None:
+            out["lower"] = float(max(q["lower"], p.lower))
+            out["upper"] = float(min(q["upper"], p.upper))
+    return out
 
 
 def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int = 2, fine_forward=None) -> tuple:
@@ -812,6 +823,8 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
             a["strength_interval_wald"] = a["strength_interval"]
             a["strength_interval"] = [pr["lower"], pr["upper"]]
             a["strength_interval_rough"] = pr["rough"]
+            if pr.get("smoothing") == "quadratic":
+                a["strength_interval_raw"] = pr["raw"]
         if any(pr["recentred"] for pr in profiles.values()):
             # the fit moved to a profile's minimum: every accepted strength is reported at the final fit
             final = current.values()
