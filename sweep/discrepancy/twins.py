@@ -264,6 +264,9 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
                          "data_runs": gen.n_runs,
                          "realization_spread_rms": rep["realization_spread_rms"],
                          "realization_covariance": rep.get("realization_covariance"), "conditions": list(conds),
+                         "model_jitter_rms": {k: (v or {}).get("rms") for k, v in (rep.get("model_jitter") or {}).items()} or None,
+                         "strength_interval_raw": (rep["accepted"][0].get("strength_interval_raw")
+                                                   if rep["named_effect"] and rep.get("accepted") else None),
                          "observables": list(twin_observables(camp, twin))}
         if ref is not None:
             from .reference_check import reference_models, run_reference_check
