@@ -56,7 +56,9 @@ def hanging_runner(params, options, run_dir):
 
 
 def slow_runner(params, options, run_dir):
-    time.sleep(0.3)
+    # 1 s a run: the 9 runs left after the parent sees 3 take >= 4 s, so the SIGINT lands mid-campaign even
+    # on a loaded machine (at 0.3 s the campaign could finish first while two solver jobs ran beside the suite)
+    time.sleep(1.0)
     return toy_runner(params, options, run_dir)
 
 
