@@ -229,23 +229,34 @@ def test_quadratic_profile_covers_the_smooth_minimum_that_raw_crossings_miss():
     assert cover_raw / n < floor
 
 
-def test_smoothed_profile_with_jitter_contains_the_truth(tmp_path):
-    """The curve-shifting jitter of the workflow test above: raw crossings of the jitter-aware profile still
-    miss β = 40 (the fit is the luckiest draw); the quadratic (MCAP) interval contains it."""
+def test_smoothed_profile_in_the_workflow(tmp_path):
+    """With profile_smoothing = "quadratic" the profile gets ``profile_grid`` more points per side (out to twice
+    the raw bound's distance), the reported interval is the MCAP quadratic through the points (clipped to the
+    strength's bounds), the raw crossings are kept, and report.md says so.  (Coverage is the unit test's above:
+    one noisy realization is not evidence.)"""
+    from sweep.discrepancy.spec import spec_from_dict as sfd
+
     data = _twin(tmp_path, {"beta": 40.0}, observables=("p_inj", "front_radius_mean"))
     d = {"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
          "candidates": {"effects": ["damage_viscosity", "compliant_boundary"]}, "holdout": {"ids": ["d"]},
          "options": {"h": 8.0, "t_end": 1.0},
-         "workflow": {"model_jitter": "estimated", "profile_smoothing": "quadratic"}}
-    rep = run_workflow(data, spec_from_dict(d), _NoisyToy({}, h=8.0, white=False), out_dir=tmp_path / "out",
-                       figures=False)
+         "workflow": {"model_jitter": "estimated", "profile_smoothing": "quadratic", "profile_grid": 3}}
+    rep = run_workflow(data, sfd(d), _NoisyToy({}, h=8.0, white=False), out_dir=tmp_path / "out", figures=False)
     md = (tmp_path / "out" / "report.md").read_text()
     assert "Smoothed profile (quadratic" in md and "Coarse model's jitter in its parameters (named" in md
     pr = rep["profiles"]["damage_viscosity"]
+    fit = rep["strength"]
     lo_raw, hi_raw = pr["raw"]
-    assert not (lo_raw <= 40.0 <= hi_raw)                                   # the premise
-    assert pr["quadratic"] is not None and not pr["quadratic"]["unbounded"]
+    for side, b in ((-1, lo_raw), (1, hi_raw)):
+        for k in (1, 2, 3):
+            target = fit + side * 2 * abs(b - fit) * k / 3
+            assert min(abs(q["value"] - target) for q in pr["points"]) < 1e-6 * max(1.0, abs(target))
+    q = stats.quadratic_profile_interval([r["value"] for r in pr["points"]], [r["delta_chi2"] for r in pr["points"]],
+                                         pr["threshold"], cap=6.0)
+    assert q is not None and not q["unbounded"] and q["se_mc"] > 0
     lo, hi = rep["strength_interval"]
-    assert (lo, hi) == (pr["lower"], pr["upper"]) and lo <= 40.0 <= hi and lo > 0
-    with pytest.raises(ValueError, match="profile_smoothing"):
-        spec_from_dict({**d, "workflow": {"profile_smoothing": "loess"}})
+    assert (lo, hi) == (pr["lower"], pr["upper"]) == (pytest.approx(max(q["lower"], 0.0)), pytest.approx(q["upper"]))
+    assert rep["accepted"][0]["strength_interval_raw"] == pr["raw"]
+    for key, bad in (("profile_smoothing", "loess"), ("profile_grid", 1)):
+        with pytest.raises(ValueError, match=key):
+            sfd({**d, "workflow": {key: bad}})

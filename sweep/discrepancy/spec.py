@@ -68,6 +68,8 @@ Example (units mm, s, kPa)::
                                      # profile points with a Monte-Carlo-adjusted cutoff (MCAP, Ionides et al.
                                      # 2017; stats.quadratic_profile_interval), for a model whose profile
                                      # points are noisy (model_jitter); "none": the raw crossings
+    profile_grid = 4                 # with "quadratic": this many more profile points per side, evenly out to
+                                     # twice the raw bound's distance from the fit (the quadratic's span)
 """
 from __future__ import annotations
 
@@ -87,7 +89,7 @@ _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_ex
                     profile_refine=2, profile_refine_tol=0.15, profile_rough_tol=0.25,
                     named_needs_noise_level=True, realization_covariance="correlated",
                     systematic_null="estimated_covariance", model_jitter="none", model_jitter_steps=7,
-                    model_jitter_rel_step=0.05, profile_smoothing="none")
+                    model_jitter_rel_step=0.05, profile_smoothing="none", profile_grid=4)
 
 
 @dataclass(frozen=True)
@@ -290,6 +292,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     ps = wf.get("profile_smoothing", "none")
     if ps not in ("none", "quadratic"):
         _bad("workflow.profile_smoothing", ps, '"none" or "quadratic"')
+    pg = wf.get("profile_grid", 4)
+    if not isinstance(pg, int) or isinstance(pg, bool) or not 2 <= pg <= 20:
+        _bad("workflow.profile_grid", pg, "an integer in [2, 20] (profile points per side for the quadratic)")
     ms = wf.get("model_jitter_steps", 7)
     if not isinstance(ms, int) or isinstance(ms, bool) or ms < 5 or ms % 2 == 0 or ms > 21:
         _bad("workflow.model_jitter_steps", ms, "an odd integer in [5, 21] (runs per stepped parameter)")

@@ -647,6 +647,18 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
         return x_in   # not crossed within the bracket: the last point that was inside (a lower bound on the width)
 
     lo, hi = side(-1), side(+1)
+    if problem.spec.wf("profile_smoothing") == "quadratic":
+        # The raw bracket stops at the first points past the threshold; with a jittering model those can sit
+        # just beside the fit (measured, twins_tie front: every point within ±0.1 of c_v = 1.13, Δχ² jumping
+        # 0.4 -> 11 over a step of 0.01), too narrow a span for the quadratic to see the smooth trend.  So
+        # ``profile_grid`` more points per side, evenly out to twice the raw bound's distance from the fit
+        # (where a quadratic profile is at 4x the threshold), inside the parameter's bounds.
+        for sign, b in ((-1, lo), (+1, hi)):
+            reach = 2.0 * abs(b - x_hat[j])
+            for k in range(1, problem.spec.wf("profile_grid") + 1):
+                xt = float(np.clip(x_hat[j] + sign * reach * k / problem.spec.wf("profile_grid"), x_lo, x_hi))
+                if all(abs(xt - p.to_x(q["value"])) > 1e-9 * (x_hi - x_lo) for q in points):
+                    dchi2(xt)
     points.sort(key=lambda q: q["value"])
     # a jagged profile (Δχ² falling away from the fit) has its crossings set by the forward model's jitter
     rough = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
@@ -659,7 +671,7 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
         # the points are noisy evaluations (a jittering coarse model) and the fit the luckiest: the interval
         # from a quadratic through them with the Monte-Carlo-adjusted cutoff (stats.quadratic_profile_interval)
         q = stats.quadratic_profile_interval([r["value"] for r in points], [r["delta_chi2"] for r in points],
-                                             thr, level)
+                                             thr, level, cap=6.0)
         out["raw"] = [out["lower"], out["upper"]]
         out["quadratic"] = q
         if q is not None:
