@@ -260,3 +260,26 @@ def test_smoothed_profile_in_the_workflow(tmp_path):
     for key, bad in (("profile_smoothing", "loess"), ("profile_grid", 1)):
         with pytest.raises(ValueError, match=key):
             sfd({**d, "workflow": {key: bad}})
+
+
+def test_passing_candidates_are_compared_under_common_weights():
+    """Two refits with the same χ² whose residuals differ only in autocorrelation: under each one's own series
+    weights (n_eff/n from the lag-1) their BICs differ by tens, a "margin" made by the weighting alone; under
+    the common (per-series minimum) weights they are equal to rounding, so the tie rule sees a tie."""
+    from types import SimpleNamespace
+
+    from sweep.discrepancy.workflow import compare_passing
+
+    rng = np.random.default_rng(4)
+    n = 60
+    white = rng.standard_normal(n)
+    smooth = np.sort(white)                                  # the same values, strongly autocorrelated
+    series = np.zeros(n, int)
+    prob = SimpleNamespace(series=series, mask=lambda ids: np.ones(n, bool))
+    mk = lambda r: {"fit": SimpleNamespace(r=r, params=(1, 2)), "effect": "x"}
+    a, b = mk(white), mk(smooth)
+    own = {k: stats.bic(p["fit"].r, stats.series_weights(p["fit"].r, series), 2) for k, p in (("a", a), ("b", b))}
+    assert abs(own["a"] - own["b"]) > 10                     # the premise: weighting alone makes a margin
+    ranked = compare_passing([a, b], prob, ["t"])
+    assert abs(a["bic_common"] - b["bic_common"]) < 1e-9
+    assert len(ranked) == 2 and compare_passing([], prob, ["t"]) == []

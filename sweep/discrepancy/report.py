@@ -194,6 +194,11 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     for c in report["candidates"]:
         L.append(f"| {c['effect']} | {_f(c['score'])} | {_f(c['delta_bic'])} | {c['identifiable']} | {c['tied_with']} | "
                  f"{_f(c['strength'])} | {_f(c['strength_interval'])} | {_f(c['explained_fraction'])} | {c['passed']} |")
+    common = {c["effect"]: c.get("bic_common") for c in report["candidates"] if c.get("passed") and c.get("bic_common") is not None}
+    if len(common) > 1:
+        L += ["", "Passing candidates compared under common series weights (the per-series minimum of theirs; each "
+                  "ΔBIC above uses its own): BIC " + ", ".join(f"{k} {v:.4g}" for k, v in common.items())
+              + f"; a tie when they differ by less than tie_bic."]
     for eff, pr in (report.get("profiles") or {}).items():
         L += ["", f"## Profile likelihood of `{eff}` (named model, training conditions)", "",
               f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "

@@ -33,7 +33,8 @@ Example (units mm, s, kPa)::
                                      # model cannot know: the mean over realizations is the correction and
                                      # their sample std (kPa, mm) is added in quadrature to σ
 
-    [workflow]                       # criteria (defaults shown)
+    [workflow]                       # criteria (defaults shown); passing candidates are ranked, and tied
+                                     # within tie_bic, by their BICs under common series weights
     delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5
     min_ratio = 0.15; tie_cos = 0.95; max_rounds = 3; max_refits = 2; starts = 1
     loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; n_jobs = 1; seed = 0

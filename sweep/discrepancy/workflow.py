@@ -418,6 +418,28 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
             "values": f.values()}
 
 
+def compare_passing(passing: list, problem: Problem, train) -> list:
+    """The passing refits ranked for the tie rule by BIC under weights common to all of them.
+
+    Each refit's ΔBIC against the baseline uses the series weights n_eff/n of its own residuals (the richer
+    model's, applied to both); a candidate that leaves less autocorrelated residuals gets larger weights, and
+    so a larger |ΔBIC| for the same χ².  Two candidates' ΔBICs are then on different scales, and their
+    difference is not evidence: measured on twins_tie/coupling_vs_compliance_front_rates (with the jitter
+    term), ΔBIC −64.0 (compliance) against −51.7 (coupling), a margin of 12.3 > tie_bic that named the wrong
+    effect, while under any common weights (either candidate's, their minimum, or none) the two BICs differ by
+    0.7–4.4, the coupling slightly ahead.  So candidates are compared with w = the per-series minimum of their
+    weights (the fewest effective points any of them leaves: the conservative choice, margins shrink, ties
+    are not broken by weighting).  Sets ``bic_common`` on each; returns them sorted by it (one refit: its BIC
+    under its own weights)."""
+    if not passing:
+        return []
+    ser = problem.series[problem.mask(train)]
+    w = np.minimum.reduce([stats.series_weights(p["fit"].r, ser) for p in passing])
+    for p in passing:
+        p["bic_common"] = float(stats.bic(p["fit"].r, w, len(p["fit"].params)))
+    return sorted(passing, key=lambda d: d["bic_common"])
+
+
 def _rms_per_observable(problem: Problem, v: np.ndarray) -> dict:
     return {o: float(np.sqrt(np.mean(v[problem.obs == o] ** 2))) for o in CURVE_OBSERVABLES if np.any(problem.obs == o)}
 
@@ -782,14 +804,17 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
                          "heldout_gap": rf["gap"] if rf else None})
         if first_candidates is None:
             first_candidates = rows
-        passing = sorted([refits[c] for c in refits if refits[c]["passed"]], key=lambda d: d["delta_bic"])
+        passing = compare_passing([refits[c] for c in refits if refits[c]["passed"]], problem, train)
+        for row in rows:
+            if row["effect"] in refits:
+                row["bic_common"] = refits[row["effect"]].get("bic_common")
         rounds.append({"round": rnd + 1, "baseline_values": current.values(), "candidates": rows,
                        "pinned_at_bound": [p.name for p, f in zip(current.params, free_columns(current)) if not f],
                        "systematic_before": loc["systematic"]})
         if not passing:
             break
         best = passing[0]
-        tied = [p["effect"] for p in passing[1:] if p["delta_bic"] - best["delta_bic"] < spec.wf("tie_bic")]
+        tied = [p["effect"] for p in passing[1:] if p["bic_common"] - best["bic_common"] < spec.wf("tie_bic")]
         if tied:
             tie = [best["effect"]] + tied
             verdict = "tie"
