@@ -27,6 +27,15 @@ parameters.  τ_o from the lag-1 autocorrelation of the polynomial residuals poo
 parameters (as :class:`~.realizations.RealizationCovariance`).  Units: v in kPa², mm²; τ in s.
 
 Cost: (m − 1) coarse runs per condition and stepped parameter (the centre run is usually cached).
+
+Measured with the solver (results/discrepancy/twins_tie_jitter, h = 4 mm, t ≤ 0.3 s): RMS 0.26 mm in the front
+radius (0.68 mm late at w65) and 0.58 kPa in p_inj at the baseline (E stepped), 0.29–0.31 mm and 0.29–0.99 kPa at
+the named fits; correlation times 0.03–0.10 s.  Beside the mesh-realization spread already in the covariance
+(0.49 mm, 3.85 kPa) it changed no verdict by itself; it widened the named coupling's interval (with the smoothed
+profile, 1.130 [1.088, 1.250] against 1.199 [1.183, 1.215]) without reaching the truth 1.0.  A jitter that is white
+in time is not tamed by any covariance: χ² then fluctuates by ~√(2n)·v/(σ² + v) between neighbouring parameter
+values (see tests/test_discrepancy_jitter.py); the profile smoothing (stats.quadratic_profile_interval) is the
+answer there.
 """
 from __future__ import annotations
 
