@@ -92,6 +92,10 @@ _WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_ex
                     systematic_null="estimated_covariance", model_jitter="none", model_jitter_steps=7,
                     model_jitter_rel_step=0.05, profile_smoothing="none", profile_grid=4)
 
+_WF_CHOICES = {"interval": ("profile", "wald"), "realization_covariance": ("correlated", "diagonal"),
+               "systematic_null": ("estimated_covariance", "known_covariance"), "model_jitter": ("none", "estimated"),
+               "profile_smoothing": ("none", "quadratic")}
+
 
 @dataclass(frozen=True)
 class CalibParam:
@@ -273,26 +277,13 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     unknown = sorted(set(wf) - set(_WF_DEFAULTS))
     if unknown:
         _bad("workflow", unknown, f"keys among {sorted(_WF_DEFAULTS)}")
-    if wf.get("interval", "profile") not in ("profile", "wald"):
-        _bad("workflow.interval", wf["interval"], '"profile" or "wald"')
-    for key in ("profile_fine",):
+    for key, allowed in _WF_CHOICES.items():      # the enumerated options, checked alike
+        v = wf.get(key, _WF_DEFAULTS[key])
+        if v not in allowed:
+            _bad(f"workflow.{key}", v, " or ".join(f'"{c}"' for c in allowed))
+    for key in ("profile_fine", "named_needs_noise_level"):
         if not isinstance(wf.get(key, True), bool):
             _bad(f"workflow.{key}", wf[key], "true or false")
-    nn = wf.get("named_needs_noise_level", True)
-    if not isinstance(nn, bool):
-        _bad("workflow.named_needs_noise_level", nn, "true or false")
-    rc = wf.get("realization_covariance", "correlated")
-    if rc not in ("correlated", "diagonal"):
-        _bad("workflow.realization_covariance", rc, '"correlated" or "diagonal"')
-    sn = wf.get("systematic_null", "estimated_covariance")
-    if sn not in ("estimated_covariance", "known_covariance"):
-        _bad("workflow.systematic_null", sn, '"estimated_covariance" or "known_covariance"')
-    mj = wf.get("model_jitter", "none")
-    if mj not in ("none", "estimated"):
-        _bad("workflow.model_jitter", mj, '"none" or "estimated"')
-    ps = wf.get("profile_smoothing", "none")
-    if ps not in ("none", "quadratic"):
-        _bad("workflow.profile_smoothing", ps, '"none" or "quadratic"')
     pg = wf.get("profile_grid", 4)
     if not isinstance(pg, int) or isinstance(pg, bool) or not 2 <= pg <= 20:
         _bad("workflow.profile_grid", pg, "an integer in [2, 20] (profile points per side for the quadratic)")
