@@ -1027,3 +1027,41 @@ def test_strength_interval_coverage_with_mesh_realizations(tmp_path):
             lo, hi = rep["strength_interval"]
             covered += lo <= 40.0 <= hi
     assert named >= 110 and covered / named >= 0.90
+
+
+def test_progress_is_logged_per_stage_refit_and_profile_point(tmp_path, caplog):
+    """A run takes hours on the solver: its progress (logger dchfrac.discrepancy) names every stage the
+    report books runs to, every refit, every profile point with its Δχ², and the verdict, matching the report."""
+    import logging
+
+    with caplog.at_level(logging.INFO, logger="dchfrac.discrepancy"):
+        rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), _spec(), ToyForward({}, h=8.0), figures=False)
+    msgs = [r.getMessage() for r in caplog.records if r.name == "dchfrac.discrepancy"]
+    for stage in rep["forward_runs_by_stage"]:
+        assert any(m.startswith(f"stage {stage} done:") for m in msgs), stage
+    refits = [c["effect"] for c in rep["candidates"] if c["delta_bic"] is not None]
+    assert sorted(m.split()[1].rstrip(":") for m in msgs if m.startswith("refit ")) == sorted(refits)
+    points = rep["profiles"]["damage_viscosity"]["points"]
+    assert sum(m.startswith("profile effect:damage_viscosity = ") for m in msgs) == len(points) - 1  # the fit's own
+    assert msgs[-2].startswith(f"verdict {rep['verdict']}: damage_viscosity = ")
+
+
+def test_show_progress_prints_to_stderr_unless_quiet(capsys):
+    import logging
+
+    from sweep.discrepancy.cli import show_progress
+
+    lg = logging.getLogger("dchfrac.discrepancy")
+    saved = (lg.handlers[:], lg.level)
+    try:
+        lg.handlers.clear()
+        show_progress(quiet=True)
+        assert not lg.handlers
+        show_progress()
+        show_progress()                       # idempotent: one handler, one line per record
+        assert len(lg.handlers) == 1
+        lg.info("stage screening done")
+        assert capsys.readouterr().err.count("stage screening done") == 1
+    finally:
+        lg.handlers[:] = saved[0]
+        lg.setLevel(saved[1])

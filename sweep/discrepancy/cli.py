@@ -2,9 +2,23 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
-__all__ = ["add_discrepancy_commands", "main"]
+__all__ = ["add_discrepancy_commands", "main", "show_progress"]
+
+
+def show_progress(quiet: bool = False) -> None:
+    """Print the workflow's progress (logger ``dchfrac.discrepancy``, INFO: each stage's forward runs and
+    seconds, each refit, each profile point, the verdict) on stderr, unless ``quiet``.  A run takes minutes to
+    hours; its progress is how a user tells a slow stage from a stuck one.  Idempotent."""
+    lg = logging.getLogger("dchfrac.discrepancy")
+    if quiet or lg.handlers:
+        return
+    h = logging.StreamHandler(sys.stderr)
+    h.setFormatter(logging.Formatter("%(asctime)s %(message)s", "%H:%M:%S"))
+    lg.addHandler(h)
+    lg.setLevel(logging.INFO)
 
 
 def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
@@ -20,6 +34,7 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     r.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: spec workflow.n_jobs)")
     r.add_argument("--cache", default=None, help="forward-run cache folder (default: OUT/cache)")
     r.add_argument("--no-figures", action="store_true")
+    r.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     r.set_defaults(func=cmd_run)
     return d
 
@@ -41,6 +56,7 @@ def cmd_run(args) -> int:
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
+    show_progress(args.quiet)
     out = Path(args.out)
     cache = Path(args.cache) if args.cache else out / "cache"
     jobs = args.jobs if args.jobs is not None else spec.wf("n_jobs")

@@ -32,10 +32,13 @@ gaps, pass/fail).  Forward runs are cached in ``cache`` (not committed).
 from __future__ import annotations
 
 import json
+import logging
 import time
 from pathlib import Path
 
 import numpy as np
+
+log = logging.getLogger("dchfrac.discrepancy")
 
 __all__ = ["load_twin_campaign", "run_twins", "twin_passed", "twin_conditions", "twin_observables"]
 
@@ -239,6 +242,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
         if only and name not in only:
             continue
         t0 = time.time()
+        log.info("twin %s (hidden %s, expect %s)", name, twin.get("hidden", {}), twin["expect"])
         hidden = dict(twin.get("hidden", {}))
         law = [k for k, v in hidden.items() if v == "law"]   # "law": the parameter follows its law of C (β = 65.7 √C)
         gen_base = {k: v for k, v in spec.baseline_overrides().items() if k not in law}
@@ -291,7 +295,10 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", required=True)
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: the spec's workflow.n_jobs)")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     a = ap.parse_args(argv)
+    from .cli import show_progress
+    show_progress(a.quiet)
     s = run_twins(a.campaign, a.results, a.cache, a.only, a.jobs)
     print(json.dumps(s, indent=1))
     return 0

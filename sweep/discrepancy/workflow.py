@@ -8,7 +8,9 @@ standardized (dimensionless) by the measured uncertainties.
 from __future__ import annotations
 
 import json
+import logging
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +24,10 @@ from .data import CURVE_OBSERVABLES, MeasuredData
 from .jitter import estimate_model_jitter
 from .realizations import RealizationCovariance, realization_mean_spread, realizations
 from .spec import CalibParam, DiscrepancySpec
+
+# Progress of a workflow that runs for hours (each stage's runs and time, each refit, each profile point): the
+# standard library's logger, silent unless the caller configures logging (the CLIs do, at INFO, on stderr).
+log = logging.getLogger("dchfrac.discrepancy")
 
 __all__ = ["Problem", "Fit", "run_workflow", "VERDICTS"]
 
@@ -51,6 +57,7 @@ class _RunLedger:
         self.models = {"coarse": [forward], "fine": list(fine)}
         self.last = self._now()
         self.stages: dict = {}
+        self.t_last = time.perf_counter()
 
     def _now(self) -> dict:
         return {k: sum(int(getattr(m, "n_runs", 0)) for m in ms) for k, ms in self.models.items()}
@@ -60,7 +67,10 @@ class _RunLedger:
         row = self.stages.setdefault(stage, {k: 0 for k in now})
         for k in now:
             row[k] += now[k] - self.last[k]
-        self.last = now
+        t = time.perf_counter()
+        log.info("stage %s done: %d coarse + %d fine forward runs, %.0f s", stage,
+                 now["coarse"] - self.last["coarse"], now["fine"] - self.last["fine"], t - self.t_last)
+        self.last, self.t_last = now, t
 
 
 def values_to_overrides(spec: DiscrepancySpec, base: dict, condition: dict, values: dict) -> dict:
@@ -410,6 +420,8 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
     else:
         excludes_off = bool(lo > e.off)
     passed = bool(b1 - b0 <= spec.wf("delta_bic") and excludes_off and gap_ok and explained >= spec.wf("min_explained"))
+    log.info("refit %s: strength %.5g, delta BIC %.1f, held-out gap %.3g -> %.3g, %s", cand, f.x[-1], b1 - b0,
+             gap_base["total"], gap["total"], "passes" if passed else "fails")
     return {"effect": cand, "fit": f, "delta_bic": float(b1 - b0), "strength": float(f.x[-1]),
             "strength_interval": [lo, hi], "strength_sd": sd,
             "explained_fraction": float(explained), "gap": gap, "gap_ok": gap_ok,
@@ -625,6 +637,8 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
         d = float(c - chi2_hat)
         row.update({"delta_chi2": d, "others": _jsonable(f.values())})
         points.append(row)
+        log.info("profile %s = %.5g: delta chi2 %.2f (threshold %.2f), point %d", p.name, row["value"], d, thr,
+                 len(points) - 1)
         return d
 
     def cross(x_in: float, d_in: float, x_out: float, d_out: float) -> float:
@@ -896,6 +910,8 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
                    "localization_after": loc}
         verdict = "unexplained_discrepancy"
     named = accepted[0] if accepted and verdict == "named" else None
+    log.info("verdict %s%s", verdict, f": {named['effect']} = {named['strength']:.5g} {named['strength_interval']}"
+             if named else "")
     ledger.mark("gaps_and_localization")    # whatever the stages above left (held-out gaps, residual maps)
     has_rc = problem.real_cov is not None and problem.real_cov.k >= 2
     report = {
