@@ -283,3 +283,25 @@ def test_passing_candidates_are_compared_under_common_weights():
     ranked = compare_passing([a, b], prob, ["t"])
     assert abs(a["bic_common"] - b["bic_common"]) < 1e-9
     assert len(ranked) == 2 and compare_passing([], prob, ["t"]) == []
+
+
+def test_recentring_ignores_a_dip_within_the_profiles_scatter():
+    """A smoothed profile whose lowest point lies below the fit by less than twice the points' scatter about
+    the quadratic is noise: no re-centring.  The same dip without smoothing, or a dip deeper than the scatter,
+    re-centres."""
+    from sweep.discrepancy.workflow import recentre_target
+
+    v = np.linspace(0.6, 1.1, 11)
+    d = 40.0 * (v - 0.85) ** 2 + np.array([0.0, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5, 0.0])
+    pts = [{"value": float(a), "delta_chi2": float(b)} for a, b in zip(v, d)]
+    pts.append({"value": 0.86, "delta_chi2": 0.0})                  # the fit
+    q = stats.quadratic_profile_interval(v, d, 4.0)
+    assert 0.3 < q["residual_sd"] < 0.6                              # the premise: scatter about 0.5 in Δχ²
+    pts[5]["delta_chi2"] = -0.6                                      # a dip of ~1.2 sd
+    raw = {"points": pts, "threshold": 4.0}
+    assert recentre_target(raw) is pts[5]                            # no smoothing: re-centre on it
+    assert recentre_target({**raw, "quadratic": q}) is None          # smoothed: within 2 × the scatter
+    pts[5]["delta_chi2"] = -3.0 * q["residual_sd"]                   # a dip beyond the scatter
+    assert recentre_target({**raw, "quadratic": q}) is pts[5]
+    tiny = [{"value": 1.0, "delta_chi2": 0.0}, {"value": 1.1, "delta_chi2": -0.001}, {"value": 0.9, "delta_chi2": 2.0}]
+    assert recentre_target({"points": tiny, "threshold": 4.0}) is None   # below the fit by < tol × threshold
