@@ -743,7 +743,8 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     fit stopped short of the minimum (a budget-limited least-squares, ``max_nfev``, in a curved valley:
     β against E).  Then the fit is redone from the best profile point and the profile recomputed about it,
     so the strength reported is the profile's minimum and the interval is measured from it (Δχ²
-    relative to a point above the minimum would widen it).  At most ``max_passes`` re-centrings.
+    relative to a point above the minimum would widen it).  Which point, if any: :func:`recentre_target` (a
+    smoothed profile ignores dips within its scatter).  At most ``max_passes`` re-centrings.
     With ``fine_forward`` the profile points are corrected where they are (:func:`profile_interval`), and a
     re-centring also re-estimates the correction at the new fit.
     Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima).
