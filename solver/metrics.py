@@ -35,29 +35,60 @@ def invaded_from_inlet(S: np.ndarray, edges: np.ndarray, inner_nodes: np.ndarray
     return inv & np.isin(labels, np.unique(labels[seeds]))
 
 
-def front_radii(points, S, edges, inner_nodes, level: float = 0.5, nbins: int = 72) -> tuple[float, float]:
-    """Mean and max radius (mm) of the S = level front connected to the inlet.
+def front_envelope(points, S, edges, inner_nodes, level: float = 0.5, nbins: int = 72) -> np.ndarray:
+    """Outer envelope r(θ) (mm) of the S = level front connected to the inlet, over ``nbins`` angular sectors.
 
-    The front points are the linear-interpolation crossings on edges leaving
-    the connected invaded region; the mean is taken over ``nbins`` angular
-    sectors of the farthest crossing in each sector.  Returns (nan, nan)
-    when no front exists.
+    The front points are the linear-interpolation crossings on edges leaving the connected invaded region;
+    each sector holds its farthest crossing, or -inf when it has none.  All -inf when no front exists.
     """
     conn = invaded_from_inlet(S, edges, inner_nodes, level)
     a, b = edges[:, 0], edges[:, 1]
     out = (conn[a] & (S[b] < level)) | (conn[b] & (S[a] < level))
+    rb = np.full(nbins, -np.inf)
     if not out.any():
-        return float("nan"), float("nan")
+        return rb
     a, b = a[out], b[out]
     t = (S[a] - level) / (S[a] - S[b])
     x = points[a] + t[:, None] * (points[b] - points[a])
     r = np.hypot(x[:, 0], x[:, 1])
     th = np.arctan2(x[:, 1], x[:, 0])
     k = np.minimum(((th + np.pi) / (2 * np.pi) * nbins).astype(int), nbins - 1)
-    rb = np.full(nbins, -np.inf)
     np.maximum.at(rb, k, r)
-    rb = rb[np.isfinite(rb)]
-    return float(rb.mean()), float(r.max())
+    return rb
+
+
+def front_measures(points, S, edges, inner_nodes, level: float = 0.5, nbins: int = 72) -> tuple[float, float, float]:
+    """Mean, max and main-branch radius (mm) of the S = level front connected to the inlet.
+
+    The mean is over the sectors of :func:`front_envelope` that hold a crossing; the branch radius is the
+    mean of the three main invasion branches (:func:`branch_radii`), the paper's front measure (Sec. 3.5:
+    "mean over the three main invasion branches").  (nan, nan, nan) when no front exists.
+    """
+    rb = front_envelope(points, S, edges, inner_nodes, level, nbins)
+    fin = rb[np.isfinite(rb)]
+    if len(fin) == 0:
+        return float("nan"), float("nan"), float("nan")
+    return float(fin.mean()), float(fin.max()), float(branch_radii(rb).mean())
+
+
+def branch_radii(envelope: np.ndarray, n_branches: int = 3, min_separation_deg: float = 45.0) -> np.ndarray:
+    """Radii (mm) of the ``n_branches`` main invasion branches of an envelope r(θ), largest first.
+
+    A branch is a local maximum of the circular envelope; branches are taken greedily by radius, each at
+    least ``min_separation_deg`` away from those already taken (so one lobe is not counted twice).
+    Fewer are returned when the envelope has fewer.
+    """
+    nb = len(envelope)
+    r = np.where(np.isfinite(envelope), envelope, -np.inf)
+    peaks = np.flatnonzero(np.isfinite(r) & (r >= np.roll(r, 1)) & (r >= np.roll(r, -1)))
+    sep = int(np.ceil(min_separation_deg / (360.0 / nb)))
+    taken: list[int] = []
+    for i in peaks[np.argsort(-r[peaks], kind="stable")]:
+        if all(min(abs(i - j), nb - abs(i - j)) >= sep for j in taken):
+            taken.append(int(i))
+        if len(taken) == n_branches:
+            break
+    return r[taken]
 
 
 def outer_layer_area(points, triangles, areas, S, edges, inner_nodes, outer_nodes, level: float = 0.5) -> float:

@@ -41,6 +41,7 @@ from . import ad, codegen, fem, kernels, physics
 from .ad import Dual
 
 UX, UY, P, S, MU, GX, GY = range(7)
+TRANSPORTS = ("galerkin", "upwind")
 FIELD_NAMES = ("ux", "uy", "p", "S", "mu", "Gx", "Gy")
 
 
@@ -66,6 +67,7 @@ class Discretization:
     dirichlet_values: np.ndarray
     lumped_mass: np.ndarray  # (N,) mm²
     inner_length: float  # mm
+    upwind_length: np.ndarray | None = None  # (M,) mm, h_e/2 with transport = "upwind"; None: Galerkin
     chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
 
     @property
@@ -73,8 +75,14 @@ class Discretization:
         return len(self.points)
 
 
-def build_discretization(mesh, params, phi0: np.ndarray) -> Discretization:
-    """Assemble the mesh-dependent operators for ``params`` (units mm, s, kPa)."""
+def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galerkin") -> Discretization:
+    """Assemble the mesh-dependent operators for ``params`` (units mm, s, kPa).
+
+    ``transport``: "galerkin" (mobilities at the point's saturation) or "upwind" (mobilities at the
+    saturation shifted upstream by half the element size, see :func:`upwind_saturation`).
+    """
+    if transport not in TRANSPORTS:
+        raise ValueError(f"transport={transport!r}: allowed one of {TRANSPORTS}")
     pts, tri = np.asarray(mesh.points, float), np.asarray(mesh.triangles)
     n = len(pts)
     nf = 7 if params.korteweg_factor > 0 else 5
@@ -121,7 +129,8 @@ def build_discretization(mesh, params, phi0: np.ndarray) -> Discretization:
     fix(inner_n, S, 1.0)
     fix(inner_n, MU, params.mu_i)
     fix(outer_n, P, 0.0)
-    fix(outer_n, S, 0.0)
+    if params.outer_saturation_bc == "dirichlet":
+        fix(outer_n, S, 0.0)
     if params.mu_outer_bc == "dirichlet":
         fix(outer_n, MU, params.mu_o)
     if params.outer_compliance == 0:
@@ -138,6 +147,7 @@ def build_discretization(mesh, params, phi0: np.ndarray) -> Discretization:
         phi0=np.asarray(phi0, float), boundary_slots=slots, boundary_vals=vals, boundary_op=op,
         inject=inject, dirichlet=asm.dirichlet_rows(dofs), dirichlet_values=values,
         lumped_mass=lumped, inner_length=float(L.sum()), chunks=fem.element_chunks(len(tri)),
+        upwind_length=0.5 * np.sqrt(2.0 * geom.areas) if transport == "upwind" else None,
     )
 
 
@@ -150,22 +160,116 @@ class StepData:
     phi_n: np.ndarray  # porosity at quadrature points (M, nq)
     S_n: np.ndarray  # saturation at quadrature points (M, nq)
     ev_n: np.ndarray  # volumetric strain per element (M,)
+    up_x: np.ndarray | None = None  # upwind shift per element (M,), mm (None: Galerkin transport)
+    up_y: np.ndarray | None = None
 
     def take(self, sl: slice) -> "StepData":
         """The same data restricted to the elements of ``sl`` (views, no copies)."""
-        return StepData(dt=self.dt, d_q=self.d_q[sl], phi_n=self.phi_n[sl], S_n=self.S_n[sl], ev_n=self.ev_n[sl])
+        cut = lambda a: None if a is None else a[sl]
+        return StepData(dt=self.dt, d_q=self.d_q[sl], phi_n=self.phi_n[sl], S_n=self.S_n[sl], ev_n=self.ev_n[sl],
+                        up_x=cut(self.up_x), up_y=cut(self.up_y))
 
 
 def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: float) -> StepData:
     """Freeze the previous state ``U_n`` (N, nf) and the damage iterate ``d`` (N,)."""
     tri = disc.triangles
     q = fem.STRANG3
-    grads = np.einsum("mai,maf->mfi", disc.geom.grads, U_n[tri][:, :, :2])
+    grads = np.einsum("mai,maf->mfi", disc.geom.grads, U_n[tri][:, :, :P + 1])
     ev_n = grads[:, UX, 0] + grads[:, UY, 1]
     p_n = fem.at_quadrature(U_n[:, P], tri, q)
     S_n = fem.at_quadrature(U_n[:, S], tri, q)
     phi_n = physics.porosity(disc.phi0[:, None], ev_n[:, None], p_n, params.K_s)
-    return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n)
+    up_x, up_y = upwind_shift(disc, grads[:, P]) if disc.upwind_length is not None else (None, None)
+    return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n, up_x=up_x, up_y=up_y)
+
+
+def upwind_shift(disc: Discretization, grad_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Upstream shift (mm) per element: half the element size along ∇p/|∇p| of the previous step.
+
+    The flow runs down the pressure gradient, so +∇p points upstream.  The direction is lagged one step
+    (taken from the converged previous state), so the Newton Jacobian of the step is exact and the
+    shift vanishes where the previous pressure is uniform (the first step is Galerkin).
+    """
+    norm = np.sqrt(np.sum(grad_p * grad_p, axis=1) + 1e-24)
+    return disc.upwind_length * grad_p[:, 0] / norm, disc.upwind_length * grad_p[:, 1] / norm
+
+
+@dataclass
+class Constitutive:
+    """The constitutive chain at a set of points (one definition for the residual, Jacobian and outputs).
+
+    Units: φ (-), stresses kPa (σ' effective, total = σ' − b p I), k mm², mobilities mm²/(kPa·s),
+    Darcy fluxes mm/s, ψ_A kPa.
+    """
+
+    phi: object
+    sxx: object  # total stress σ = σ' − b p I, kPa
+    syy: object
+    sxy: object
+    psi_a: object
+    k: object
+    lam1: object
+    lam2: object
+    w1x: object
+    w1y: object
+    wx: object
+    wy: object
+    M: object
+
+
+def upwind_saturation(Sat, Sx, Sy, up_x, up_y):
+    """S shifted upstream by the vector (up_x, up_y) (mm, :func:`upwind_shift`): S + up·∇S.
+
+    Evaluating the phase mobilities at this saturation upwinds the convective transport of S (first-order
+    streamline upwinding of the fractional flow, artificial diffusion of about |v_S| h_e/2 along the flow);
+    it tends to S as h -> 0.
+    """
+    return Sat + up_x * Sx + up_y * Sy
+
+
+def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -> Constitutive:
+    """Porosity, stress, permeability, mobilities, Darcy fluxes and Cahn–Hilliard mobility (Sec. 2.9).
+
+    Strains exx, eyy, exy (-), pressure p (kPa), saturation S and its gradient (1/mm), degradation g(d) (-);
+    ``S_flow``: the saturation the phase mobilities see (default S; upwind transport:
+    :func:`upwind_saturation`).  Numpy arrays, Duals or traced symbols alike.  The Darcy fluxes follow
+    from :func:`darcy_fluxes`.
+
+    * φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p/K_s (Eq. summary_equations_3);
+    * σ = g(d) σ_A + σ_I − κ ∇S⊗∇S − b p I with Miehe's split (Eq. summary_equations_4, _secondary_3);
+    * w_α = −λ_α (∇p + φ⁻¹ κ ∇·(∇S⊗∇S)), λ_α = k k_rα/η_α (Eq. fluid_equation);
+    * M from :func:`solver.physics.ch_mobility` (Sec. 2.8, option ``ch_mobility``).
+    """
+    kap = params.kappa * params.korteweg_factor
+    phi = physics.porosity(phi0, exx + eyy, p, params.K_s)
+    (ax, ay, axy), (ex, ey, exy_s), psi_a = physics.spectral_split(exx, eyy, exy, params.lame_lambda, params.lame_mu)
+    deg = gd - 1.0  # σ' = σ_elastic + (g − 1) σ_A
+    sxx = ex + ax * deg - params.biot * p
+    syy = ey + ay * deg - params.biot * p
+    sxy = exy_s + axy * deg
+    if kap > 0:
+        sxx = sxx - kap * Sx * Sx
+        syy = syy - kap * Sy * Sy
+        sxy = sxy - kap * Sx * Sy
+    k = physics.permeability(phi, phi0, params.kbar, params.k_max, params.crack_permeability)
+    kr1, kr2 = physics.relative_permeabilities(Sat if S_flow is None else S_flow, params.viscosity_ratio)
+    lam1 = k * kr1 / params.eta_w
+    lam2 = k * kr2 / params.eta_o
+    return Constitutive(phi=phi, sxx=sxx, syy=syy, sxy=sxy, psi_a=psi_a, k=k, lam1=lam1, lam2=lam2,
+                        w1x=None, w1y=None, wx=None, wy=None,
+                        M=physics.ch_mobility(k, Sat, params.eta_o, params.eta_w, params.ch_mobility))
+
+
+def darcy_fluxes(c: Constitutive, px, py, force=None) -> Constitutive:
+    """Fill the Darcy fluxes w_1, w = w_1 + w_2 (mm/s) of ``c`` from ∇p (kPa/mm) and the Korteweg force."""
+    Yx, Yy = px, py
+    if force is not None:
+        Yx = Yx + force[0] / c.phi
+        Yy = Yy + force[1] / c.phi
+    c.w1x, c.w1y = -c.lam1 * Yx, -c.lam1 * Yy
+    lam = c.lam1 + c.lam2
+    c.wx, c.wy = -lam * Yx, -lam * Yy
+    return c
 
 
 def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields: int) -> list:
@@ -174,7 +278,6 @@ def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields:
     ``X[3 f + k]`` is field f's value (k = 0) or gradient component (k = 1, 2).
     """
     g = lambda f, k: X[3 * f + k]
-    lam, mu_s = params.lame_lambda, params.lame_mu
     kap = params.kappa * params.korteweg_factor
     cv = params.volumetric_coupling
     dt = data.dt
@@ -184,47 +287,30 @@ def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields:
     ev = exx + eyy
     p, Sat, mu = g(P, 0), g(S, 0), g(MU, 0)
     Sx, Sy = g(S, 1), g(S, 2)
-
-    phi = physics.porosity(phi0[:, None], ev, p, params.K_s)
-
-    # effective stress σ' = g(d) σ_A + σ_I − κ ∇S⊗∇S, total σ = σ' − b p I
-    (ax, ay, axy), (ex, ey, exy_s), _ = physics.spectral_split(exx, eyy, exy, lam, mu_s)
-    gd = physics.degradation(data.d_q, params.m)
-    deg = gd - 1.0  # σ' = σ_elastic + (g − 1) σ_A
-    sxx = ex + ax * deg - params.biot * p
-    syy = ey + ay * deg - params.biot * p
-    sxy = exy_s + axy * deg
-    if kap > 0:
-        sxx = sxx - kap * Sx * Sx
-        syy = syy - kap * Sy * Sy
-        sxy = sxy - kap * Sx * Sy
-
-    # Darcy fluxes with the Korteweg force (Eq. fluid_equation)
-    k = physics.permeability(phi, phi0[:, None], params.kbar, params.k_max, params.crack_permeability)
-    kr1, kr2 = physics.relative_permeabilities(Sat, params.viscosity_ratio)
-    lam1 = k * kr1 / params.eta_w
-    lam2 = k * kr2 / params.eta_o
-    Yx, Yy = g(P, 1), g(P, 2)
+    S_flow = None
+    if data.up_x is not None:
+        S_flow = upwind_saturation(Sat, Sx, Sy, data.up_x[:, None], data.up_y[:, None])
+    c = constitutive(params, phi0[:, None], exx, eyy, exy, p, Sat, Sx, Sy,
+                     physics.degradation(data.d_q, params.m), S_flow)
+    force = None
     if n_fields == 7:
+        # κ ∇·(G⊗G) = κ ((∇·G) G + (∇G) G) from the projected gradient G = Π∇S
         Gx, Gy = g(GX, 0), g(GY, 0)
         divG = g(GX, 1) + g(GY, 2)
-        fx = kap * (divG * Gx + g(GX, 1) * Gx + g(GX, 2) * Gy)
-        fy = kap * (divG * Gy + g(GY, 1) * Gx + g(GY, 2) * Gy)
-        Yx = Yx + fx / phi
-        Yy = Yy + fy / phi
-    w1x, w1y = -lam1 * Yx, -lam1 * Yy
-    wx, wy = -(lam1 + lam2) * Yx, -(lam1 + lam2) * Yy
-    Mch = k / params.eta_bar
+        force = (kap * (divG * Gx + g(GX, 1) * Gx + g(GX, 2) * Gy),
+                 kap * (divG * Gy + g(GY, 1) * Gx + g(GY, 2) * Gy))
+    darcy_fluxes(c, g(P, 1), g(P, 2), force)
+    phi = c.phi
 
     dev = (ev - data.ev_n[:, None]) / dt
     c_mu = 12.0 * params.gamma / params.l_S
     c_grad = c_mu * params.l_S**2 / 8.0
     return [
-        [None, sxx, sxy],
-        [None, sxy, syy],
-        [(phi - data.phi_n) / dt + cv * phi * dev, -wx, -wy],
+        [None, c.sxx, c.sxy],
+        [None, c.sxy, c.syy],
+        [(phi - data.phi_n) / dt + cv * phi * dev, -c.wx, -c.wy],
         [(phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev,
-         -w1x + Mch * g(MU, 1), -w1y + Mch * g(MU, 2)],
+         -c.w1x + c.M * g(MU, 1), -c.w1y + c.M * g(MU, 2)],
         [mu - c_mu * physics.double_well_prime(Sat), -c_grad * Sx, -c_grad * Sy],
     ]
 
@@ -255,7 +341,8 @@ def compiled_forms(params, n_fields: int, data: StepData) -> tuple:
     of ``data``) and per-point arrays ((M, nq) fields) become inputs, parameters and ``data.dt`` become
     constants; traced once per (params, n_fields, dt), compiled once per structure.
     """
-    layout = tuple((f.name, np.ndim(getattr(data, f.name))) for f in fields(StepData) if f.name != "dt")
+    layout = tuple((f.name, np.ndim(getattr(data, f.name))) for f in fields(StepData)
+                   if f.name != "dt" and getattr(data, f.name) is not None)
 
     def build(tr):
         step = StepData(dt=data.dt, **{name: tr.data(name, per_point=nd == 2) for name, nd in layout})
@@ -284,7 +371,8 @@ def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepDat
         # the same forms, traced once and compiled (solver.codegen): point-wise physics, derivatives and
         # contraction in one pass over the elements, without the GIL
         kern, consts = compiled_forms(params, nf, data)
-        step = {f.name: getattr(data, f.name)[sl] for f in fields(StepData) if f.name != "dt"}
+        step = {f.name: getattr(data, f.name)[sl] for f in fields(StepData)
+                if f.name != "dt" and getattr(data, f.name) is not None}
         kern(consts, U, disc.triangles[sl], disc.geom.grads[sl], disc.geom.areas[sl], {"phi0": disc.phi0[sl], **step},
              Fe, Ke if need_jacobian else None)
         return Fe, Ke
@@ -355,29 +443,25 @@ def project_gradient(disc: Discretization, S_nodal: np.ndarray) -> np.ndarray:
 
 
 def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray) -> dict:
-    """Post-processed element fields at the centroid: φ, ε_v, hoop stress (σ'_θθ, kPa), k (mm²), |w_1| (mm/s), ψ_A (kPa)."""
+    """Post-processed element fields at the centroid: φ, ε_v, hoop stress (σ'_θθ, kPa), k (mm²), |w_1| (mm/s),
+    ψ_A (kPa), Cahn–Hilliard mobility M (mm²/(kPa·s)), from the same :func:`constitutive` as the residual."""
     tri = disc.triangles
     gradU = np.einsum("mai,maf->mfi", disc.geom.grads, U[tri])
     cen = U[tri].mean(axis=1)
     exx, eyy = gradU[:, UX, 0], gradU[:, UY, 1]
     exy = 0.5 * (gradU[:, UX, 1] + gradU[:, UY, 0])
-    ev = exx + eyy
-    phi = physics.porosity(disc.phi0, ev, cen[:, P], params.K_s)
-    (ax, ay, axy), (sx, sy, sxy), psi_a = physics.spectral_split(exx, eyy, exy, params.lame_lambda, params.lame_mu)
-    gd = physics.degradation(d[tri].mean(axis=1), params.m)
-    kap = params.kappa * params.korteweg_factor
-    Sx, Sy = gradU[:, S, 0], gradU[:, S, 1]
-    sxx = sx + (gd - 1) * ax - kap * Sx * Sx
-    syy = sy + (gd - 1) * ay - kap * Sy * Sy
-    sxy_e = sxy + (gd - 1) * axy - kap * Sx * Sy
+    c = constitutive(params, disc.phi0, exx, eyy, exy, cen[:, P], cen[:, S], gradU[:, S, 0], gradU[:, S, 1],
+                     physics.degradation(d[tri].mean(axis=1), params.m))
+    force = None
+    if disc.n_fields == 7:
+        f = korteweg_force(disc, U, params.kappa * params.korteweg_factor)
+        force = (f[:, 0], f[:, 1])
+    darcy_fluxes(c, gradU[:, P, 0], gradU[:, P, 1], force)
+    # effective hoop stress σ'_θθ = (σ + b p I)_θθ
+    sxx, syy = c.sxx + params.biot * cen[:, P], c.syy + params.biot * cen[:, P]
     xc = disc.points[tri].mean(axis=1)
     th = np.arctan2(xc[:, 1], xc[:, 0])
-    c, s = np.cos(th), np.sin(th)
-    hoop = sxx * s * s + syy * c * c - 2 * sxy_e * s * c
-    k = physics.permeability(phi, disc.phi0, params.kbar, params.k_max, params.crack_permeability)
-    kr1, _ = physics.relative_permeabilities(cen[:, S], params.viscosity_ratio)
-    Y = gradU[:, P, :].copy()
-    if disc.n_fields == 7:
-        Y += korteweg_force(disc, U, kap) / phi[:, None]
-    w1 = -(k * kr1 / params.eta_w)[:, None] * Y
-    return {"phi": phi, "eps_v": ev, "hoop_stress": hoop, "k": k, "w1_mag": np.hypot(w1[:, 0], w1[:, 1]), "psi_a": psi_a}
+    cs, sn = np.cos(th), np.sin(th)
+    hoop = sxx * sn * sn + syy * cs * cs - 2 * c.sxy * sn * cs
+    return {"phi": c.phi, "eps_v": exx + eyy, "hoop_stress": hoop, "k": c.k, "w1_mag": np.hypot(c.w1x, c.w1y),
+            "psi_a": c.psi_a, "ch_mobility": c.M}

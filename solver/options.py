@@ -8,6 +8,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from .tomlio import read_toml, write_flat_toml
 
 _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
+_TRANSPORTS = ("galerkin", "upwind")
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
 _OMIT_WHEN_NONE = ("h_inner",)
@@ -44,6 +45,9 @@ class RunOptions:
         iteration; 0 disables reuse (exact Newton: every iteration factorizes).
     max_wall_time : give up (status "failed") after this many seconds of wall time (None: no limit).
     write_xdmf : also write the snapshots as XDMF for ParaView.
+    transport : discretization of the convective transport of S: "galerkin" (the plain P1 Galerkin
+        form, the paper's Sec. 3.1) or "upwind" (phase mobilities at the saturation shifted upstream by
+        half the element size, ``solver.model.upwind_saturation``: first-order streamline upwinding).
     """
 
     h: float = 1.0
@@ -67,6 +71,7 @@ class RunOptions:
     jacobian_reuse: float = 0.3
     max_wall_time: float | None = None
     write_xdmf: bool = True
+    transport: str = "galerkin"
 
     def __post_init__(self):
         object.__setattr__(self, "snapshot_times", tuple(float(t) for t in self.snapshot_times))
@@ -145,7 +150,8 @@ def _check(o: RunOptions) -> None:
         num("max_wall_time", 0.0)
     if o.mesh_seed is not None and (not isinstance(o.mesh_seed, int) or o.mesh_seed < 0):
         _fail("mesh_seed", o.mesh_seed, "None or an integer >= 0")
-    if o.linear_solver not in _LINEAR_SOLVERS:
-        _fail("linear_solver", o.linear_solver, f"one of {_LINEAR_SOLVERS}")
+    for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", _TRANSPORTS)):
+        if getattr(o, name) not in allowed:
+            _fail(name, getattr(o, name), f"one of {allowed}")
     if any((not math.isfinite(t)) or t < 0 for t in o.snapshot_times):
         _fail("snapshot_times", list(o.snapshot_times), "finite times >= 0")

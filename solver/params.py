@@ -41,6 +41,8 @@ import numpy as np
 
 POROSITY_FIELDS = ("random", "pockets", "constant")
 MU_OUTER_BCS = ("dirichlet", "zero_flux")
+CH_MOBILITIES = ("harmonic", "oil", "degenerate")
+OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow")
 
 _FIELD_DOCS = {
     "eta_o": "defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 300 kcSt = 0.29 kPa·s)",
@@ -68,6 +70,10 @@ _FIELD_DOCS = {
     "seed": "seed of the random initial porosity (numpy default_rng), int >= 0",
     "porosity_field": f"initial porosity field, one of {POROSITY_FIELDS} (Sec. 3.3)",
     "mu_outer_bc": f"outer boundary condition on μ, one of {MU_OUTER_BCS} (Sec. 3.3: Dirichlet μ_o; Dong: zero flux)",
+    "ch_mobility": f"Cahn–Hilliard mobility law, one of {CH_MOBILITIES}: k/η̄ (paper, Eq. M = k/η̄), k/η_o, "
+                   "or 4S(1 − S) k/η̄ (degenerate)",
+    "outer_saturation_bc": f"outer condition on the invading phase, one of {OUTER_SATURATION_BCS}: S = 0 (paper, "
+                           "Sec. 3.4) or no invading flux (only the defending fluid leaves)",
     "volumetric_coupling": "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)",
     "korteweg_factor": "factor on κ in the Korteweg terms of Eq. summary_equations_secondary (1 paper, 0 off)",
     "outer_compliance": "compliance of a spring on the outer boundary, mm/kPa (0 = rigid u = 0, the paper)",
@@ -103,6 +109,10 @@ class Parameters:
     seed : RNG seed of the random initial porosity (0).
     porosity_field : "random" | "pockets" | "constant".
     mu_outer_bc : "dirichlet" (paper) | "zero_flux" (Dong).
+    ch_mobility : Cahn–Hilliard mobility law (see :func:`solver.physics.ch_mobility`): "harmonic" (paper,
+        M = k/η̄), "oil" (M = k/η_o) or "degenerate" (M = 4S(1 − S) k/η̄), mm²/(kPa·s).
+    outer_saturation_bc : "dirichlet" (paper: S = 0 on r_o, the invading fluid may leave) or
+        "defending_outflow" (no invading flux through r_o: only the defending fluid leaves).
     volumetric_coupling : factor on φ S ε̇_v and φ ε̇_v (1; off 0).
     korteweg_factor : factor on κ in the Korteweg terms (1; off 0).
     outer_compliance : outer spring compliance, mm/kPa (0 = rigid, the paper).
@@ -134,6 +144,8 @@ class Parameters:
     seed: int = 0
     porosity_field: str = "random"
     mu_outer_bc: str = "dirichlet"
+    ch_mobility: str = "harmonic"
+    outer_saturation_bc: str = "dirichlet"
     volumetric_coupling: float = 1.0
     korteweg_factor: float = 1.0
     outer_compliance: float = 0.0
@@ -202,7 +214,9 @@ class Parameters:
     @property
     def eta_bar(self) -> float:
         """Harmonic mean η̄ = 2 η_o η_w / (η_o + η_w), kPa·s (Cahn–Hilliard mobility M = k/η̄)."""
-        return 2.0 * self.eta_o * self.eta_w / (self.eta_o + self.eta_w)
+        from .physics import harmonic_viscosity
+
+        return harmonic_viscosity(self.eta_o, self.eta_w)
 
     @property
     def kappa(self) -> float:
@@ -289,6 +303,9 @@ _FLOAT_FIELDS = (
     "phi_range", "volumetric_coupling", "korteweg_factor", "outer_compliance", "crack_permeability",
 )
 _OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta")
+_CHOICES = (("porosity_field", POROSITY_FIELDS), ("mu_outer_bc", MU_OUTER_BCS), ("ch_mobility", CH_MOBILITIES),
+            ("outer_saturation_bc", OUTER_SATURATION_BCS))
+CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
 
 
 def _bulk(E: float, nu: float) -> float:
@@ -320,7 +337,7 @@ def _coerce_and_check(p: Parameters) -> None:
     if isinstance(s, (bool, np.bool_)) or not isinstance(s, Integral):
         _fail("seed", s, "an integer >= 0")
     object.__setattr__(p, "seed", int(s))
-    for name, allowed in (("porosity_field", POROSITY_FIELDS), ("mu_outer_bc", MU_OUTER_BCS)):
+    for name, allowed in _CHOICES:
         if getattr(p, name) not in allowed:
             _fail(name, getattr(p, name), f"one of {allowed}")
 

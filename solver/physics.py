@@ -81,6 +81,36 @@ def relative_permeabilities(S, M: float):
 
 
 # ---------------------------------------------------------------- Cahn–Hilliard
+def harmonic_viscosity(eta_o: float, eta_w: float) -> float:
+    """η̄ = 2 η_o η_w / (η_o + η_w), kPa·s: the harmonic mean of Cogswell and Szulczewski (Sec. 2.8)."""
+    return 2.0 * eta_o * eta_w / (eta_o + eta_w)
+
+
+def ch_mobility(k, S, eta_o: float, eta_w: float, law: str = "harmonic"):
+    """Cahn–Hilliard mobility M, mm²/(kPa·s), of the flux h = −M∇μ (Eq. solution_dissipation_inequality_4).
+
+    ``law``:
+
+    * "harmonic" (the paper): M = k/η̄ with the harmonic mean η̄ of the two viscosities.  At
+      η_w/η_o = 3.4e-6, η̄ ≈ 2η_w and M is about 1.5e5 times the defending fluid's Darcy mobility k/η_o.
+    * "oil": M = k/η_o, the mobility of the slower, defending fluid, which limits the counter-current
+      exchange h_1 = −h_2 that the Cahn–Hilliard flux describes.
+    * "degenerate": M = 4 S(1 − S) k/η̄ (S clipped to [0, 1]): the paper's value at the interface centre,
+      zero in both pure phases, so the Cahn–Hilliard flux acts only inside the diffuse interface
+      (the usual degenerate mobility of Cahn–Hilliard models of two-phase flow).
+
+    ``k`` permeability (mm²), ``S`` saturation (-), viscosities kPa·s.
+    """
+    if law == "harmonic":
+        return k / harmonic_viscosity(eta_o, eta_w)
+    if law == "oil":
+        return k / eta_o
+    if law == "degenerate":
+        Sc = ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
+        return 4.0 * Sc * (1.0 - Sc) * k / harmonic_viscosity(eta_o, eta_w)
+    raise ValueError(f"ch_mobility law {law!r}: allowed 'harmonic', 'oil', 'degenerate'")
+
+
 def double_well_prime(S):
     """f'(S) for f = S²(1 − S)²: 2S(1 − S)(1 − 2S)."""
     return 2.0 * S * (1.0 - S) * (1.0 - 2.0 * S)

@@ -55,7 +55,7 @@ class Simulation:
 
     def __init__(self, params, options: RunOptions, mesh, phi0: np.ndarray):
         self.params, self.options, self.mesh = params, options, mesh
-        self.disc = build_discretization(mesh, params, phi0)
+        self.disc = build_discretization(mesh, params, phi0, transport=options.transport)
         self.dmg = damage.damage_operators(self.disc.points, self.disc.triangles)
         self.edges = metrics.mesh_edges(self.disc.triangles)
         self.solver_kind = linsolve.resolve(options.linear_solver, self.disc.asm.ndof)
@@ -304,7 +304,7 @@ def _row(sim, dt, info, cum, V0) -> dict:
     disc, p, U, d = sim.disc, sim.params, sim.U, sim.d
     ef = element_fields(disc, p, U, d)
     Sn = U[:, S]
-    fm, fx = metrics.front_radii(disc.points, Sn, sim.edges, disc.inner_nodes)
+    fm, fx, fb = metrics.front_measures(disc.points, Sn, sim.edges, disc.inner_nodes)
     V = _stored_volume(sim, U)
     err = abs(cum["inj"] - (V - V0 + cum["src"] + cum["out"])) / max(cum["inj"], 1e-300)
     area = disc.geom.areas
@@ -324,6 +324,7 @@ def _row(sim, dt, info, cum, V0) -> dict:
         "max_hoop_stress": float(ef["hoop_stress"].max()),
         "front_radius_mean": fm,
         "front_radius_max": fx,
+        "front_radius_branches": fb,
         "open_tip_radius": metrics.open_tip_radius(disc.points, disc.triangles, ef["phi"], disc.inner_nodes),
         "outer_layer_area": metrics.outer_layer_area(disc.points, disc.triangles, area, Sn, sim.edges, disc.inner_nodes, disc.outer_nodes),
         "newton_its": info["newton_its"],

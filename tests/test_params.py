@@ -12,7 +12,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-from solver.params import Parameters, field_doc
+from solver.params import CHOICE_FIELDS, Parameters, field_doc
 
 REPORTED = tomllib.loads(Path("/work/shared/data/paper_reported.toml").read_text()) \
     if Path("/work/shared/data/paper_reported.toml").exists() else None
@@ -105,7 +105,7 @@ def test_k_of_phi():
     assert p.k_of_phi(0.0) == 0.0
 
 
-_NUMERIC = [f.name for f in dataclasses.fields(Parameters) if f.name not in ("porosity_field", "mu_outer_bc", "seed")]
+_NUMERIC = [f.name for f in dataclasses.fields(Parameters) if f.name not in (*CHOICE_FIELDS, "seed")]
 
 BAD = [
     ("eta_o", 0.0), ("eta_o", -1.0), ("eta_w", 0.0), ("kbar", 0.0), ("kbar", -1e-3),

@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from solver.params import CHOICE_FIELDS
+
 __all__ = ["OBSERVABLES", "CURVE_OBSERVABLES", "UNITS", "MeasuredData", "load_measured", "write_measured"]
 
 CURVE_OBSERVABLES = ("p_inj", "front_radius_mean", "crack_length")
@@ -153,7 +155,7 @@ def load_measured(folder) -> MeasuredData:
             if s == "":
                 rec[col] = float("nan")
                 continue
-            if col in ("porosity_field", "mu_outer_bc"):
+            if col in CHOICE_FIELDS:
                 rec[col] = s
             elif col == "seed":
                 rec[col] = int(_num(cpath, cdf, i, col))

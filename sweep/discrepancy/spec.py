@@ -79,6 +79,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from solver.effects import EFFECTS, get_effect
+from solver.params import CHOICE_FIELDS
 
 __all__ = ["CalibParam", "DiscrepancySpec", "load_spec", "spec_from_dict", "fine_options", "SCALINGS"]
 
@@ -224,7 +225,7 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     cal = []
     for c in d.get("calibrate", []):
         name = c.get("name")
-        if name not in Parameters.__dataclass_fields__ or name in ("porosity_field", "mu_outer_bc", "seed"):
+        if name not in Parameters.__dataclass_fields__ or name in (*CHOICE_FIELDS, "seed"):
             _bad("calibrate.name", name, "a numeric solver.Parameters field")
         if name in {get_effect(e).parameter for e in EFFECTS}:
             _bad("calibrate.name", name, "not an effect strength (effects are candidates)")

@@ -1,0 +1,205 @@
+"""Fidelity study of the reference experiment (Sec. 3.5): which model ingredient lets the water bypass the oil.
+
+Runs named variants of the paper's model (``VARIANTS``: parameter changes of one hypothesis each) and measures,
+from each run folder, the figures of the root-cause study (``results/fidelity/``):
+
+* outflow through r_o as a fraction of the injected volume at 1 and 2 s (total and invading fluid);
+* the fluid-volume budget: stored volume against its grain-compressibility part (1 − φ0) ∫ p/K_s;
+* S and p along a ray (θ = 0) at 0.5 and 2 s;
+* p_inj(t), the front at 2 s (angular mean and mean of the three main branches), the open-crack tip radius;
+* d ln p_inj / d ln η_o at 1 s, from a second run with η_o doubled.
+
+Units mm, s, kPa.  Usage::
+
+    python -m sweep.fidelity run --h 2 --out /path/to/runs [--only NAME ...] [--jobs 2]
+    python -m sweep.fidelity table --h 2 --out /path/to/runs --json results/fidelity/screen_h2.json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+_OIL = {"ch_mobility": "oil"}
+_DEFENDING = {"outer_saturation_bc": "defending_outflow", "mu_outer_bc": "zero_flux"}
+_UPWIND = {"transport": "upwind"}
+
+#: Hypotheses of the study: parameter changes from the paper's model (Sec. 3.5 defaults) and run-option
+#: changes (discretization), each ``name: (params, options)``.
+VARIANTS: dict[str, tuple[dict, dict]] = {
+    "paper": ({}, {}),
+    "a_mobility_oil": (_OIL, {}),
+    "a_mobility_degenerate": ({"ch_mobility": "degenerate"}, {}),
+    "d_mu_zero_flux": ({"mu_outer_bc": "zero_flux"}, {}),
+    "d_mu_o_0.006": ({"mu_o": 0.006}, {}),
+    "d_defending_outflow": (_DEFENDING, {}),
+    "e_kbar_mean_k": ({"kbar": 0.0046}, {}),
+    "c_upwind": ({}, _UPWIND),
+    "ac_oil_upwind": (_OIL, _UPWIND),
+    "dc_defending_upwind": (_DEFENDING, _UPWIND),
+    "adc_oil_defending_upwind": ({**_OIL, **_DEFENDING}, _UPWIND),
+}
+
+SNAPSHOT_TIMES = (0.5, 1.0, 2.0)
+ETA_FACTOR = 2.0  # η_o multiplier of the elasticity run
+ELASTICITY_TIME = 1.0  # s
+
+
+def run_variant(name: str, h: float, out: Path, eta_factor: float = 1.0, t_end: float = 2.0) -> Path:
+    """Run variant ``name`` at mesh size ``h`` (mm) into ``out/<name>[_eta2]``; returns the run folder."""
+    from solver import Parameters, RunOptions, simulate
+
+    changes, opts = VARIANTS[name]
+    base = Parameters(**changes)
+    params = base.replace(eta_o=base.eta_o * eta_factor)
+    tag = name if eta_factor == 1.0 else f"{name}_eta{eta_factor:g}"
+    run_dir = out / tag
+    if (run_dir / "summary.json").exists():
+        return run_dir
+    times = [t for t in SNAPSHOT_TIMES if t <= t_end]
+    simulate(params, RunOptions(h=h, t_end=t_end, snapshot_times=times, write_xdmf=False, **opts), out_dir=run_dir)
+    return run_dir
+
+
+def _snapshots(run_dir: Path) -> dict:
+    mesh = np.load(run_dir / "snapshots" / "mesh.npz")
+    snaps = {}
+    for f in sorted((run_dir / "snapshots").glob("snap_*.npz")):
+        s = np.load(f)
+        snaps[round(float(s["t"]), 6)] = {k: s[k] for k in s.files}
+    return {"points": mesh["points"], "triangles": mesh["triangles"], "snaps": snaps}
+
+
+def ray_profile(points, triangles, nodal: np.ndarray, r_inner: float, r_outer: float, n: int = 97,
+                theta: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """A nodal P1 field along the ray at angle ``theta`` (rad): radii (mm) and interpolated values."""
+    import matplotlib.tri as mtri
+
+    tr = mtri.Triangulation(points[:, 0], points[:, 1], triangles)
+    r = np.linspace(r_inner, r_outer, n)
+    r[-1] -= 1e-9 * r_outer
+    vals = mtri.LinearTriInterpolator(tr, nodal)(r * math.cos(theta), r * math.sin(theta))
+    return r, np.ma.filled(vals, np.nan)
+
+
+def volume_budget(snap: dict, points, triangles, params) -> dict:
+    """Stored fluid volume (mm²) and its grain-compressibility part (1 − φ0) ∫ p/K_s at one snapshot.
+
+    φ0 is recovered per element from φ = φ0 + (1 − φ0)(ε_v + p/K_s) (Eq. summary_equations_3).
+    """
+    x = points[triangles]
+    area = 0.5 * np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
+                        - (x[:, 2, 0] - x[:, 0, 0]) * (x[:, 1, 1] - x[:, 0, 1]))
+    pe = snap["p"][triangles].mean(axis=1)
+    z = snap["eps_v"] + pe / params.K_s
+    phi0 = (snap["phi"] - z) / (1.0 - z)
+    return {
+        "grain_compressibility": float(np.sum((1 - phi0) * pe / params.K_s * area)),
+        "skeleton_strain": float(np.sum((1 - phi0) * snap["eps_v"] * area)),
+        "mean_p": float(np.sum(pe * area) / area.sum()),
+        "area": float(area.sum()),
+    }
+
+
+def _at(ts: pd.DataFrame, t: float, col: str) -> float:
+    i = int((ts["t"] - t).abs().idxmin())
+    return float(ts.at[i, col]) if abs(ts.at[i, "t"] - t) < 0.05 else float("nan")
+
+
+def measure(run_dir: Path) -> dict:
+    """The study's figures of one run folder (see the module docstring)."""
+    from solver import Parameters
+
+    params = Parameters.from_toml(run_dir / "params.toml")
+    summary = json.loads((run_dir / "summary.json").read_text())
+    ts = pd.read_csv(run_dir / "timeseries.csv")
+    out = {"status": summary.get("status"), "t_final": float(ts["t"].iloc[-1]),
+           "wall_s": summary.get("wall_time_s", summary.get("wall_time"))}
+    for t in (1.0, 2.0):
+        inj = _at(ts, t, "injected_volume")
+        out[f"outflow_frac_{t:g}"] = _at(ts, t, "outflow_volume") / inj
+        out[f"water_outflow_frac_{t:g}"] = _at(ts, t, "water_outflow_volume") / inj
+        out[f"p_inj_{t:g}"] = _at(ts, t, "p_inj")
+        out[f"stored_{t:g}"] = inj - _at(ts, t, "outflow_volume")
+    out["p_inj_peak"] = float(ts["p_inj"].max())
+    for col in ("front_radius_mean", "front_radius_branches", "open_tip_radius", "mean_damage", "mass_error"):
+        if col in ts:
+            out[f"{col}_2"] = _at(ts, 2.0, col)
+    out["max_mass_error"] = float(ts["mass_error"].max())
+    sn = _snapshots(run_dir)
+    out["profiles"] = {}
+    for t, snap in sn["snaps"].items():
+        if t in (0.5, 2.0):
+            r, S = ray_profile(sn["points"], sn["triangles"], snap["S"], params.r_inner, params.r_outer)
+            _, p = ray_profile(sn["points"], sn["triangles"], snap["p"], params.r_inner, params.r_outer)
+            out["profiles"][f"{t:g}"] = {"r": r.round(3).tolist(), "S": np.round(S, 4).tolist(),
+                                         "p": np.round(p, 2).tolist()}
+        if t in (1.0, 2.0):
+            out[f"budget_{t:g}"] = volume_budget(snap, sn["points"], sn["triangles"], params)
+    out["p_inj_series"] = {"t": ts["t"].round(4).tolist(), "p": ts["p_inj"].round(2).tolist()}
+    return out
+
+
+def elasticity(base: dict, doubled: dict, factor: float = ETA_FACTOR) -> float:
+    """d ln p_inj / d ln η_o at ``ELASTICITY_TIME`` from two runs (η_o and factor·η_o)."""
+    key = f"p_inj_{ELASTICITY_TIME:g}"
+    return math.log(doubled[key] / base[key]) / math.log(factor)
+
+
+def _run_all(args) -> None:
+    from joblib import Parallel, delayed
+
+    names = args.only or list(VARIANTS)
+    for n in names:
+        if n not in VARIANTS:
+            raise SystemExit(f"unknown variant {n!r}; allowed: {list(VARIANTS)}")
+    jobs = [(n, 1.0, 2.0) for n in names] + [(n, ETA_FACTOR, ELASTICITY_TIME) for n in names]
+    Parallel(n_jobs=args.jobs)(delayed(run_variant)(n, args.h, Path(args.out), f, t) for n, f, t in jobs)
+
+
+def _table(args) -> None:
+    out = Path(args.out)
+    rows = {}
+    for n in VARIANTS:
+        a, b = out / n, out / f"{n}_eta{ETA_FACTOR:g}"
+        if not (a / "summary.json").exists():
+            continue
+        m = measure(a)
+        if (b / "summary.json").exists():
+            m["dlnp_dlneta"] = elasticity(m, measure(b))
+        rows[n] = m
+    text = json.dumps({"h": args.h, "variants": {n: {"params": v[0], "options": v[1]} for n, v in VARIANTS.items()},
+                       "results": rows}, indent=1)
+    if args.json:
+        from sweep.store import write_text_atomic
+
+        write_text_atomic(Path(args.json), text + "\n")
+    keys = ["status", "outflow_frac_1", "outflow_frac_2", "water_outflow_frac_2", "p_inj_1", "p_inj_2",
+            "front_radius_mean_2", "front_radius_branches_2", "open_tip_radius_2", "dlnp_dlneta"]
+    print(pd.DataFrame({n: {k: r.get(k) for k in keys} for n, r in rows.items()}).T.to_string())
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sweep.fidelity", description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    for name in ("run", "table"):
+        s = sub.add_parser(name)
+        s.add_argument("--h", type=float, default=2.0, help="mesh size, mm")
+        s.add_argument("--out", required=True, help="folder of the run folders")
+        if name == "run":
+            s.add_argument("--only", nargs="*")
+            s.add_argument("--jobs", type=int, default=2)
+        else:
+            s.add_argument("--json", help="write the measured figures to this JSON file")
+    args = ap.parse_args(argv)
+    (_run_all if args.cmd == "run" else _table)(args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
