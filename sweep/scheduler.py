@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
-from sweep.store import ResultsStore, to_json, write_json_atomic
+from sweep.store import ResultsStore, current_classifier_hash, file_manifest, to_json, write_json_atomic
 
 __all__ = [
     "RunTask",
@@ -54,7 +54,7 @@ __all__ = [
 ]
 
 BACKENDS = ("loky", "dask", "ray")
-_RESERVED = {"status", "reason", "metrics", "classification", "regime", "numbers"}
+_RESERVED = {"status", "reason", "metrics", "classification", "regime", "numbers", "classifier_hash"}
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,7 @@ class ExecConfig:
     retries : extra attempts after a failure.
     isolate : "auto" (child process iff timeout), "process" (always) or "none" (never).
     blas_threads : BLAS/OpenMP threads of a child process (None: inherit).
-    solver_version : recorded in each record.
+    code_hash : hash of the solver source that runs (solver.codehash), recorded in each record.
     """
 
     root: str
@@ -87,7 +87,7 @@ class ExecConfig:
     retries: int = 0
     isolate: str = "auto"
     blas_threads: int | None = 1
-    solver_version: str = "unknown"
+    code_hash: str = "unknown"
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -102,8 +102,10 @@ class DefaultRunner:
     max_hoop_stress_max (kPa), mass_error_max (-), n_steps.
     """
 
-    def __init__(self, classify_options: Mapping[str, Any] | None = None):
+    def __init__(self, classify_options: Mapping[str, Any] | None = None, classifier_hash: str | None = None):
         self.classify_options = dict(classify_options or {})
+        # taken where the campaign is planned, so that the records and the plan name one classifier
+        self.classifier_hash = classifier_hash or current_classifier_hash()
 
     def __call__(self, params: dict, options: dict, run_dir: str) -> dict:
         from solver import Parameters, RunOptions, simulate
@@ -116,6 +118,7 @@ class DefaultRunner:
                 from sweep.classify import classify_run
 
                 out["classification"] = classification_dict(classify_run(run_dir, **self.classify_options))
+                out["classifier_hash"] = self.classifier_hash
             except Exception as e:  # noqa: BLE001 - the simulation stays valid; reclassify later
                 out["classify_error"] = f"{type(e).__name__}: {e}"
         return out
@@ -214,6 +217,8 @@ def normalize_result(res) -> dict:
            "metrics": metrics, "classification": cls}
     if res.get("numbers") is not None:
         out["numbers"] = dict(res["numbers"])
+    if res.get("classifier_hash"):
+        out["classifier_hash"] = str(res["classifier_hash"])
     return json.loads(to_json(out))  # plain JSON types only
 
 
@@ -333,7 +338,7 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         "reason": out.get("reason"),
         "params": dict(task.params),
         "options": dict(task.options),
-        "solver_version": cfg.solver_version,
+        "code_hash": cfg.code_hash,
         "metrics": out.get("metrics", {}),
         "classification": out.get("classification", {}),
         "wall_time_s": wall,
@@ -345,8 +350,11 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         "host": socket.gethostname(),
         "isolate": isolate,
     }
+    if out.get("classifier_hash"):
+        record["classifier_hash"] = out["classifier_hash"]
     if "numbers" in out:
         record["numbers"] = out["numbers"]
+    record["files"] = file_manifest(tmp)
     if "traceback" in out:
         record["traceback"] = out["traceback"]
     write_json_atomic(tmp / "record.json", record)
