@@ -77,13 +77,19 @@ def git_hashes(rev: str, repo=".") -> dict:
 
 def main(argv=None) -> int:
     import argparse
+    import subprocess
+    import sys
 
     ap = argparse.ArgumentParser(prog="python -m solver.codehash", description=__doc__.split("\n")[0])
     ap.add_argument("--git", metavar="REV", help="hash the sources at this git revision instead of this copy")
     ap.add_argument("--repo", default=".", metavar="DIR", help="git checkout for --git (default: .)")
     a = ap.parse_args(argv)
-    hashes = git_hashes(a.git, a.repo) if a.git else {"code_hash": code_hash(),
-                                                      "classifier_hash": classifier_code_hash()}
+    try:
+        hashes = git_hashes(a.git, a.repo) if a.git else {"code_hash": code_hash(),
+                                                          "classifier_hash": classifier_code_hash()}
+    except subprocess.CalledProcessError as e:
+        print(f"error: --git {a.git}: {e.stderr.decode(errors='replace').strip()}", file=sys.stderr)
+        return 2
     for k, v in hashes.items():
         print(f"{k} {v}")
     return 0

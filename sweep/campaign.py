@@ -171,7 +171,12 @@ def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, poin
     store = ResultsStore(root, spec.name)
     keys = _keys(pts)
     recs = {k: r for k in keys if (r := store.read_record(k)) is not None}
-    return Plan(spec, store, pts, keys, recs, code_hash, current_classifier_hash(), accept_stale, verify)
+    plan = Plan(spec, store, pts, keys, recs, code_hash, current_classifier_hash(), accept_stale, verify)
+    for k in keys:
+        if k not in recs and store.run_dir(k).exists():  # a finished folder whose record was lost or broken
+            recs[k] = {"key": k, "status": "damaged"}
+            plan._problems[k] = ["record.json is missing or does not parse"]
+    return plan
 
 
 def check_intact(plan: Plan, allow_damaged: bool = False) -> None:
@@ -986,7 +991,7 @@ def provenance_lines(plan: Plan) -> list[str]:
              "(`python -m solver.codehash`)."]
     for h, n in code_counts(plan).items():
         who = "pre-hash code (made before runs recorded their code)" if h == "pre-hash" else f"code hash `{h}`"
-        lines.append(f"- {n} run(s) made by {who}{' (current)' if h == plan.code_hash else ''}")
+        lines.append(f"- {n} run(s) made by {who}{' (current)' if h == plan.code_hash else ' (other code: stale)'}")
     return lines
 
 

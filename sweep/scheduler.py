@@ -13,14 +13,16 @@ With dask or ray on several machines, the results root must be on a shared file 
 A *runner* executes one run: ``runner(params: dict, options: dict, run_dir: str) -> dict``
 with keys ``status`` ("ok" | "failed", default "ok"), ``reason`` (str | None),
 ``metrics`` (dict of scalars), ``classification`` (dict, or the regime as a str),
-``numbers`` (dict, optional); other scalar keys are taken as metrics. It must be
+``numbers`` (dict, optional), ``classifier_hash`` (str: the classifier code that labelled the run,
+when sweep.classify did); other scalar keys are taken as metrics. It must be
 picklable (a module-level function, or a ``functools.partial`` of one).
 :class:`DefaultRunner` calls ``solver.simulate`` then ``sweep.classify.classify_run``.
 
 Each run is isolated: an exception becomes a record with status "failed" and the reason;
 with a timeout (or ``isolate="process"``) the runner runs in a child Python process that
 is killed when the timeout expires, so a hung or crashing run costs that run only.
-Every record is written to the store by the worker as soon as the run ends.
+Every record is written to the store by the worker as soon as the run ends; it states the solver
+code (``code_hash``) and lists each file of the run folder with its size and SHA-256 (``files``).
 """
 from __future__ import annotations
 
