@@ -469,7 +469,11 @@ def run_campaign(
         plan = None
         while points:
             plan = plan_campaign(spec, root, code_hash=code_hash, points=points, accept_stale=accept_stale)
-            todo = _todo(plan, retry_failed, result)
+            todo = _todo(plan, retry_failed)
+            stale = [k for _, k in plan.stale]
+            result.damaged_rerun += [k for _, k in plan.damaged]
+            result.stale_reused += stale if accept_stale else []
+            result.stale_rerun += [] if accept_stale else stale
             result.n_points = len(points)
             if progress is not None:
                 print(f"[{spec.name}] {len(points)} runs: {_counts_text(plan)}; executing {len(todo)} on {backend} "
@@ -519,14 +523,10 @@ def _check_run_settings(spec: CampaignSpec, jobs, timeout, retries, isolate):
     return jobs, timeout, retries, isolate
 
 
-def _todo(plan: Plan, retry_failed: bool, result: CampaignResult) -> list[tuple[Point, str]]:
+def _todo(plan: Plan, retry_failed: bool) -> list[tuple[Point, str]]:
     """Points to execute, in grid order: pending, damaged, stale (unless accepted), failed (if retried)."""
     stale = [] if plan.accept_stale else plan.stale
     todo = plan.pending + plan.damaged + stale + (plan.failed if retry_failed else [])
-    result.damaged_rerun += [k for _, k in plan.damaged]
-    result.stale_rerun += [k for _, k in stale]
-    if plan.accept_stale:
-        result.stale_reused += [k for _, k in plan.stale]
     unique = {k: (p, k) for p, k in todo}  # a point both stale and failed is run once
     return sorted(unique.values(), key=lambda pk: pk[0].index)
 
@@ -629,7 +629,7 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
     bench = _load_bench(root)
     per_h: dict[float, dict] = {}
     total = 0.0
-    for p, k in _todo(plan, retry_failed, CampaignResult(spec.name, 0, 0, 0, 0, 0, False, [])):
+    for p, k in _todo(plan, retry_failed):
         h = float(p.options.get("h", 1.0))
         c, src = wall_per_sim_second(h, bench)
         t = estimated_sim_time(p.params, p.options)
@@ -746,9 +746,11 @@ def _timeseries_plot(spec, store, table, g, path):
 
     fig, ax = plt.subplots(figsize=(6, 4))
     by = g.get("by")
+    missing = []
     for _, row in table[table["status"] == "ok"].iterrows():
         f = store.run_dir(row["key"]) / "timeseries.csv"
         if not f.exists():
+            missing.append(row["key"])
             continue
         ts = pd.read_csv(f)
         if g["x"] in ts.columns and g["y"] in ts.columns:
@@ -762,7 +764,14 @@ def _timeseries_plot(spec, store, table, g, path):
     ax.set_title(g.get("title", spec.name))
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)
+    _warn_left_out(path, missing, "no timeseries.csv")
     return path
+
+
+def _warn_left_out(path: Path, keys: Sequence[str], why: str) -> None:
+    """Say on stderr which finished runs a figure does not show."""
+    if keys:
+        print(f"warning: {path.name} leaves out {len(keys)} run(s) ({why}): {' '.join(keys)}", file=sys.stderr)
 
 
 def _snapshot(run_dir: Path, time_s=None):
@@ -808,11 +817,13 @@ def _fields_plot(spec, store, table, g, path):
     for ax in axes.ravel():
         ax.set_axis_off()
     swept = list(spec.axis_names)
+    missing = []
     for i, (rlabel, sub) in enumerate(rows):
         for j, (_, row) in enumerate(sub.iterrows()):
             jj = cvals.index(row[cols_col]) if cvals else j
             snap = _snapshot(store.run_dir(row["key"]), g.get("time"))
             if snap is None or g["field"] not in snap[2]:
+                missing.append(row["key"])
                 continue
             pts, tri, s = snap
             ax = axes[i, jj]
@@ -827,6 +838,7 @@ def _fields_plot(spec, store, table, g, path):
     fig.suptitle(g.get("title", f"{spec.name}: {g['field']}"))
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
+    _warn_left_out(path, missing, f"no snapshot with {g['field']}")
     return path
 
 
