@@ -13,7 +13,8 @@ the stale ones and lists them. ``plot``, ``report`` and ``classify`` refuse (exi
 are damaged, naming them.
 
 Also runnable alone: ``python -m sweep.campaign_cli run campaigns/demo.toml``.
-Exit codes: 0 success, 1 failed runs (run) or errors, 2 bad arguments or spec, 130 interrupted.
+Exit codes: 0 success, 1 failed runs (run), damaged runs (status, plot, report, classify) or errors,
+2 bad arguments or spec, 130 interrupted.
 """
 from __future__ import annotations
 
