@@ -4,7 +4,7 @@ Layout of ``run_dir``::
 
     params.toml, options.toml        inputs (round-trip through Parameters / RunOptions)
     timeseries.csv                   one row per accepted step
-    summary.json                     status, reason, wall time, t reached, versions, complete
+    summary.json                     status, reason, wall time, t reached, versions, code_hash, complete
     log.txt                          rejected steps, warnings, tracebacks
     snapshots/mesh.npz               points (N, 2) mm, triangles (M, 3)
     snapshots/snap_00000.npz ...     t; nodal S, mu, p, d, u; element phi, eps_v, hoop_stress, k, w1_mag
@@ -120,6 +120,9 @@ class RunWriter:
     def _summary(self, d: dict) -> None:
         d = dict(d)
         d["versions"] = versions()
+        from solver.codehash import code_hash
+
+        d["code_hash"] = code_hash()
         atomic_write_text(self.dir / "summary.json", json.dumps(d, indent=2, default=float))
 
 

@@ -10,8 +10,11 @@ Public API (paths default to ``results/``; every function takes ``root``)::
     plot_campaign(spec, root="results"); write_report(spec, root="results")
 
 Run records live in ``<root>/<name>/runs/<key>/record.json`` (see :mod:`sweep.store`);
-a rerun skips every key with a record ("ok" or "failed"; ``retry_failed=True`` reruns the
-failures), so an interrupted campaign loses at most its runs in flight.
+a rerun skips every key with an intact record of the current code ("ok" or "failed";
+``retry_failed=True`` reruns the failures), so an interrupted campaign loses at most its runs
+in flight. It reruns damaged runs (files missing, changed or unreadable: :func:`sweep.store.verify_run`)
+and runs made by other solver code (recorded ``code_hash`` != :func:`solver.code_hash`), and
+reclassifies runs labelled by other classifier code; ``accept_stale=True`` keeps those instead.
 """
 from __future__ import annotations
 
@@ -27,7 +30,7 @@ from typing import Any, Callable, Mapping, Sequence, TextIO
 from sweep.sampler import SAMPLERS, Point
 from sweep.scheduler import DefaultRunner, ExecConfig, RunTask, classification_dict, iter_records, resolve_runner
 from sweep.spec import CampaignSpec, load_spec
-from sweep.store import ResultsStore, run_key, solver_version, write_text_atomic
+from sweep.store import ResultsStore, current_classifier_hash, current_code_hash, run_key, verify_run, write_text_atomic
 
 __all__ = [
     "DEFAULT_ROOT",
@@ -67,46 +70,125 @@ def as_spec(spec) -> CampaignSpec:
 # ---------------------------------------------------------------------------
 # planning
 # ---------------------------------------------------------------------------
+class DamagedRunsError(RuntimeError):
+    """Stored runs whose files are missing, changed or do not parse (see :func:`sweep.store.verify_run`)."""
+
+
 @dataclass
 class Plan:
-    """The grid of a campaign and what the store already holds for it."""
+    """The grid of a campaign and what the store already holds for it.
+
+    Each point with a record is exactly one of: damaged (its files fail :func:`verify_run`),
+    stale (made by other solver code: recorded ``code_hash`` != ``code_hash``; a record
+    without one is stale), done ("ok") or failed. With ``accept_stale`` the stale runs count
+    as done or failed too (``stale`` still lists them).
+    """
 
     spec: CampaignSpec
     store: ResultsStore
     points: list[Point]
     keys: list[str]
     records: dict[str, dict]
-    version: str
+    code_hash: str
+    classifier_hash: str
+    accept_stale: bool = False
+    verify: bool = True
+    _problems: dict[str, list[str]] = field(default_factory=dict, repr=False)
+
+    def problems(self, key: str) -> list[str]:
+        """What is wrong with the stored run ``key`` ([] = intact, or not verified)."""
+        if not self.verify or key not in self.records:
+            return []
+        if key not in self._problems:
+            self._problems[key] = verify_run(self.store.run_dir(key), self.records[key])
+        return self._problems[key]
+
+    def add(self, record: Mapping[str, Any]) -> None:
+        """Take in the record of a run just finished (intact by construction)."""
+        self.records[record["key"]] = dict(record)
+        self._problems[record["key"]] = []
+
+    def is_stale(self, key: str) -> bool:
+        return self.records[key].get("code_hash") != self.code_hash
 
     def _with(self, pred) -> list[tuple[Point, str]]:
-        return [(p, k) for p, k in zip(self.points, self.keys) if pred(self.records.get(k))]
+        return [(p, k) for p, k in zip(self.points, self.keys) if pred(k, self.records.get(k))]
+
+    def _usable(self, k, r) -> bool:
+        return r is not None and not self.problems(k) and (self.accept_stale or not self.is_stale(k))
 
     @property
     def done(self):
-        return self._with(lambda r: r is not None and r.get("status") == "ok")
+        return self._with(lambda k, r: self._usable(k, r) and r.get("status") == "ok")
 
     @property
     def failed(self):
-        return self._with(lambda r: r is not None and r.get("status") != "ok")
+        return self._with(lambda k, r: self._usable(k, r) and r.get("status") != "ok")
 
     @property
     def pending(self):
-        return self._with(lambda r: r is None)
+        return self._with(lambda k, r: r is None)
+
+    @property
+    def damaged(self):
+        return self._with(lambda k, r: r is not None and bool(self.problems(k)))
+
+    @property
+    def stale(self):
+        """Intact runs made by other solver code (rerun by run_campaign unless accept_stale)."""
+        return self._with(lambda k, r: r is not None and not self.problems(k) and self.is_stale(k))
+
+    @property
+    def misclassified(self):
+        """Done runs labelled by sweep.classify of other classifier code (reclassified by run_campaign)."""
+        return [(p, k) for p, k in self.done
+                if self.records[k].get("classifier_hash") not in (None, self.classifier_hash)]
+
+    def damage_text(self) -> str:
+        """One line per damaged run: key, swept values, problems."""
+        return "\n".join(f"  damaged {k} ({_swept_text(p)}): {'; '.join(self.problems(k))}" for p, k in self.damaged)
 
 
-def _keys(points: Sequence[Point], version: str) -> list[str]:
-    return [run_key(p.params, p.options, version) for p in points]
+def _swept_text(p: Point) -> str:
+    return ", ".join(f"{a}={v}" for a, v in p.swept.items())
 
 
-def plan_campaign(spec, root=DEFAULT_ROOT, *, version: str | None = None, points: Sequence[Point] | None = None) -> Plan:
-    """Expand the spec's initial points and look their keys up in the store."""
+def _keys(points: Sequence[Point]) -> list[str]:
+    return [run_key(p.params, p.options) for p in points]
+
+
+def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, points: Sequence[Point] | None = None,
+                  accept_stale: bool = False, verify: bool = True) -> Plan:
+    """Expand the spec's initial points and look their keys up in the store.
+
+    code_hash : the current solver code (default :func:`sweep.store.current_code_hash`); records of
+        other code are stale. accept_stale : count stale runs as done/failed. verify : check each
+        stored run's files against its record (:func:`sweep.store.verify_run`).
+    """
     spec = as_spec(spec)
-    version = solver_version() if version is None else version
+    code_hash = current_code_hash() if code_hash is None else code_hash
     pts = list(points) if points is not None else SAMPLERS[spec.sampler["kind"]]().initial(spec)
     store = ResultsStore(root, spec.name)
-    keys = _keys(pts, version)
+    keys = _keys(pts)
     recs = {k: r for k in keys if (r := store.read_record(k)) is not None}
-    return Plan(spec, store, pts, keys, recs, version)
+    plan = Plan(spec, store, pts, keys, recs, code_hash, current_classifier_hash(), accept_stale, verify)
+    for k in keys:
+        if k not in recs and store.run_dir(k).exists():  # a finished folder whose record was lost or broken
+            recs[k] = {"key": k, "status": "damaged"}
+            plan._problems[k] = ["record.json is missing or does not parse"]
+    return plan
+
+
+def check_intact(plan: Plan, allow_damaged: bool = False) -> None:
+    """Raise DamagedRunsError naming the plan's damaged runs (a warning on stderr with ``allow_damaged``)."""
+    if not plan.damaged:
+        return
+    msg = (f"campaign {plan.spec.name}: {len(plan.damaged)} damaged run(s) (files missing, changed or unreadable "
+           f"since their record was written); `dchfrac campaign run {plan.spec.source}` reruns them:\n"
+           + plan.damage_text())
+    if not allow_damaged:
+        raise DamagedRunsError(msg)
+    print(f"warning: {msg}\n  (left out)", file=sys.stderr)
 
 
 # ---------------------------------------------------------------------------
@@ -154,11 +236,16 @@ def _cell(v):
     return json.dumps(v, sort_keys=True, default=str)
 
 
-def _row(point: Point, key: str, rec: Mapping[str, Any], with_numbers: bool) -> dict:
+def _row(point: Point, key: str, rec: Mapping[str, Any], with_numbers: bool, plan: Plan) -> dict:
+    """Table row of one stored run; a damaged run has status "damaged", its problems as the reason and
+    no classification (its regime cannot be trusted)."""
     row: dict[str, Any] = {"index": point.index, "key": key, "status": rec.get("status"), "reason": rec.get("reason")}
     cls = rec.get("classification") or {}
+    if problems := plan.problems(key):
+        row["status"], row["reason"], cls = "damaged", "; ".join(problems), {}
     row["regime"] = cls.get("regime")
     row["blocks"] = ";".join(point.blocks)
+    row["stale"] = plan.is_stale(key)
 
     def put(name, value, prefix):
         name = str(name)
@@ -181,24 +268,26 @@ def _row(point: Point, key: str, rec: Mapping[str, Any], with_numbers: bool) -> 
         put(k, v, "param_")
     for k, v in (rec.get("options") or point.options).items():
         put(k, v, "opt_")
-    for k in ("wall_time_s", "attempts", "solver_version", "host", "finished_at"):
+    for k in ("wall_time_s", "attempts", "code_hash", "classifier_hash", "host", "finished_at"):
         put(k, rec.get(k), "rec_")
     return row
 
 
-def build_table(spec, root=DEFAULT_ROOT, *, version: str | None = None, plan: Plan | None = None,
+def build_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None,
                 numbers: bool = True):
-    """One row per finished run of the campaign's grid, in grid order (pandas DataFrame).
+    """One row per stored run of the campaign's grid, in grid order (pandas DataFrame).
 
-    Columns: index, key, status, reason, regime, blocks, dimensionless numbers, the swept
-    values, classification fields, metrics, every parameter and run option (model units),
-    wall_time_s, attempts, solver_version, host, finished_at. Pending runs have no row.
+    Columns: index, key, status ("ok", "failed" or "damaged"), reason, regime, blocks, stale (made
+    by other solver code), dimensionless numbers, the swept values, classification fields,
+    metrics, every parameter and run option (model units), wall_time_s, attempts, code_hash,
+    classifier_hash (the code that made the run and its label), host, finished_at. Pending runs
+    have no row.
     """
     import pandas as pd
 
-    plan = plan or plan_campaign(spec, root, version=version)
+    plan = plan or plan_campaign(spec, root, code_hash=code_hash)
     extra = _extra_points(plan)
-    rows = [_row(p, k, plan.records[k], numbers) for p, k in zip(plan.points + extra[0], plan.keys + extra[1])
+    rows = [_row(p, k, plan.records[k], numbers, plan) for p, k in zip(plan.points + extra[0], plan.keys + extra[1])
             if k in plan.records]
     df = pd.DataFrame(rows)
     if not df.empty:
@@ -240,22 +329,24 @@ def _add_fracturing_number(df, spec: CampaignSpec):
 
 
 def _extra_points(plan: Plan):
-    """Points added by a refining sampler in earlier sessions (records not in the initial grid)."""
+    """Points added by a refining sampler in earlier sessions (records not in the initial grid; they
+    join ``plan.records``)."""
     if plan.spec.sampler["kind"] == "grid":
         return [], []
     known = set(plan.keys)
     pts, keys = [], []
     for k, r in plan.store.records().items():
-        if k not in known and r.get("solver_version") == plan.version:
+        if k not in known:
             pts.append(Point(r["params"], r["options"], {}, ("refined",), len(plan.points) + len(pts)))
             keys.append(k)
+            plan.records.setdefault(k, r)
     return pts, keys
 
 
-def write_table(spec, root=DEFAULT_ROOT, *, version: str | None = None, plan: Plan | None = None) -> list[Path]:
+def write_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None) -> list[Path]:
     """Rebuild the campaign table from the run records and write it (CSV, Parquet with pyarrow)."""
     spec = as_spec(spec)
-    df = build_table(spec, root, version=version, plan=plan)
+    df = build_table(spec, root, code_hash=code_hash, plan=plan)
     return ResultsStore(root, spec.name).write_table(df)
 
 
@@ -276,6 +367,10 @@ class CampaignResult:
     table_paths: list[Path]
     table: Any = None
     failures: list[tuple[str, str]] = field(default_factory=list)
+    stale_rerun: list[str] = field(default_factory=list)
+    stale_reused: list[str] = field(default_factory=list)
+    damaged_rerun: list[str] = field(default_factory=list)
+    reclassified: list[str] = field(default_factory=list)
 
 
 class Progress:
@@ -333,13 +428,14 @@ def run_campaign(
     retries: int | None = None,
     fail_fast: bool = False,
     retry_failed: bool = False,
+    accept_stale: bool = False,
     runner: Callable | str | None = None,
     isolate: str | None = None,
-    version: str | None = None,
+    code_hash: str | None = None,
     progress: TextIO | None = sys.stderr,
     table_interval: float = 2.0,
 ) -> CampaignResult:
-    """Run every pending point of ``spec`` and keep the table up to date.
+    """Run every pending, damaged and stale point of ``spec`` and keep the table up to date.
 
     jobs : parallel runs (default spec ``[run] jobs`` or 1; -1 = all cores).
     backend, scheduler : "loky" | "dask" | "ray" and the cluster address (see sweep.scheduler).
@@ -347,13 +443,67 @@ def run_campaign(
     retries : extra attempts after a failure (default spec ``[run] retries`` or 0).
     fail_fast : stop at the first failed run (runs not yet started are cancelled).
     retry_failed : rerun points whose record is "failed" (otherwise they are skipped).
+    accept_stale : keep runs made by other solver code (and labels of other classifier code) instead
+        of rerunning (reclassifying) them; they are listed in ``stale_reused``.
     runner : callable or "module:function" (default spec ``[run] runner`` or DefaultRunner).
     isolate : "auto" | "process" | "none" (default spec ``[run] isolate`` or "auto").
-    version : solver version in the run keys (default :func:`sweep.store.solver_version`).
+    code_hash : the solver code recorded in each record (default :func:`sweep.store.current_code_hash`).
     progress : stream for the progress line (None: quiet).
     table_interval : s between table rewrites while running (always written at the end).
     """
     spec = as_spec(spec)
+    jobs, timeout, retries, isolate = _check_run_settings(spec, jobs, timeout, retries, isolate)
+    runner_fn = _make_runner(spec, runner)
+    code_hash = current_code_hash() if code_hash is None else code_hash
+    sampler = SAMPLERS[spec.sampler["kind"]]()
+    store = ResultsStore(root, spec.name)
+    store.acquire_lock()
+    try:
+        store.clean_tmp()
+        _save_spec(spec, store)
+        cfg = ExecConfig(root=str(Path(root).resolve()), campaign=spec.name, runner=runner_fn, timeout=timeout,
+                         retries=retries, isolate=isolate, blas_threads=1 if jobs > 1 or backend != "loky" else None,
+                         code_hash=code_hash)
+        points = sampler.initial(spec)
+        result = CampaignResult(spec.name, 0, 0, 0, 0, 0, False, [])
+        plan = None
+        while points:
+            plan = plan_campaign(spec, root, code_hash=code_hash, points=points, accept_stale=accept_stale)
+            todo = _todo(plan, retry_failed)
+            stale = [k for _, k in plan.stale]
+            result.damaged_rerun += [k for _, k in plan.damaged]
+            result.stale_reused += stale if accept_stale else []
+            result.stale_rerun += [] if accept_stale else stale
+            result.n_points = len(points)
+            if progress is not None:
+                print(f"[{spec.name}] {len(points)} runs: {_counts_text(plan)}; executing {len(todo)} on {backend} "
+                      f"with {jobs} job(s)", file=progress, flush=True)
+            try:
+                _execute(plan, todo, cfg, result, jobs=jobs, backend=backend, scheduler=scheduler,
+                         fail_fast=fail_fast, progress=progress, table_interval=table_interval)
+            finally:
+                # whatever happened (Ctrl-C included), the table reflects every finished run
+                plan = plan_campaign(spec, root, code_hash=code_hash, points=points, accept_stale=accept_stale)
+                result.table_paths = write_table(spec, root, plan=plan)
+            if result.aborted:
+                break
+            if not accept_stale:
+                result.reclassified += _reclassify_keys(plan, [k for _, k in plan.misclassified], spec.classify)
+            new = [p for p in sampler.refine(spec, build_table(spec, root, plan=plan))
+                   if run_key(p.params, p.options) not in set(plan.keys)]
+            points = points + new if new else []
+        result.n_skipped = result.n_points - result.n_executed
+        if result.reclassified:
+            result.table_paths = write_table(spec, root, plan=plan)
+        result.table = build_table(spec, root, plan=plan)
+        return result
+    finally:
+        store.clean_tmp()
+        store.release_lock()
+
+
+def _check_run_settings(spec: CampaignSpec, jobs, timeout, retries, isolate):
+    """(jobs, timeout s, retries, isolate) from the arguments and the spec's [run] table; ValueError if bad."""
     jobs = int(spec.run.get("jobs", 1) if jobs is None else jobs)
     if jobs == -1:
         jobs = os.cpu_count() or 1
@@ -370,65 +520,53 @@ def run_campaign(
         raise ValueError(f"isolate={isolate!r} must be one of auto, process, none")
     if isolate == "none" and timeout is not None:
         raise ValueError("a per-run timeout needs the run in a child process: isolate='auto' or 'process'")
-    runner_fn = _make_runner(spec, runner)
-    version = solver_version() if version is None else version
-    sampler = SAMPLERS[spec.sampler["kind"]]()
-    store = ResultsStore(root, spec.name)
-    store.acquire_lock()
+    return jobs, timeout, retries, isolate
+
+
+def _todo(plan: Plan, retry_failed: bool) -> list[tuple[Point, str]]:
+    """Points to execute, in grid order: pending, damaged, stale (unless accepted), failed (if retried)."""
+    stale = [] if plan.accept_stale else plan.stale
+    todo = plan.pending + plan.damaged + stale + (plan.failed if retry_failed else [])
+    unique = {k: (p, k) for p, k in todo}  # a point both stale and failed is run once
+    return sorted(unique.values(), key=lambda pk: pk[0].index)
+
+
+def _counts_text(plan: Plan) -> str:
+    """"a done, b failed, c pending" plus the stale (made by other code) and damaged counts."""
+    text = f"{len(plan.done)} done, {len(plan.failed)} failed, {len(plan.pending)} pending"
+    if plan.stale:
+        text += (f", {len(plan.stale)} made by other code (accepted)" if plan.accept_stale
+                 else f", {len(plan.stale)} made by other code (stale)")
+    if plan.damaged:
+        text += f", {len(plan.damaged)} damaged"
+    return text
+
+
+def _execute(plan: Plan, todo, cfg: ExecConfig, result: CampaignResult, *, jobs, backend, scheduler, fail_fast,
+             progress, table_interval) -> None:
+    """Execute ``todo`` through sweep.scheduler, counting into ``result`` and rewriting the table now and then."""
+    prog = Progress(plan.spec.name, len(plan.points), len(plan.points) - len(todo), progress)
+    tasks = [RunTask(k, p.params, p.options, p.index) for p, k in todo]
+    last_write = time.perf_counter()
+    gen = iter_records(tasks, cfg, jobs=jobs, backend=backend, scheduler=scheduler)
     try:
-        store.clean_tmp()
-        _save_spec(spec, store)
-        cfg = ExecConfig(root=str(Path(root).resolve()), campaign=spec.name, runner=runner_fn, timeout=timeout,
-                         retries=retries, isolate=isolate, blas_threads=1 if jobs > 1 or backend != "loky" else None,
-                         solver_version=version)
-        points = sampler.initial(spec)
-        result = CampaignResult(spec.name, 0, 0, 0, 0, 0, False, [])
-        while points:
-            plan = plan_campaign(spec, root, version=version, points=points)
-            todo = plan.pending + (plan.failed if retry_failed else [])
-            todo.sort(key=lambda pk: pk[0].index)
-            result.n_points = len(points)
-            prog = Progress(spec.name, len(points), len(points) - len(todo), progress)
-            if progress is not None:
-                print(f"[{spec.name}] {len(points)} runs: {len(plan.done)} done, {len(plan.failed)} failed, "
-                      f"{len(plan.pending)} pending; executing {len(todo)} on {backend} with {jobs} job(s)",
-                      file=progress, flush=True)
-            tasks = [RunTask(k, p.params, p.options, p.index) for p, k in todo]
-            last_write = time.perf_counter()
-            gen = iter_records(tasks, cfg, jobs=jobs, backend=backend, scheduler=scheduler)
-            try:
-                for rec in gen:
-                    result.n_executed += 1
-                    prog.update(rec)
-                    plan.records[rec["key"]] = rec
-                    if rec.get("status") == "ok":
-                        result.n_ok += 1
-                    else:
-                        result.n_failed += 1
-                        result.failures.append((rec["key"], str(rec.get("reason"))))
-                        if fail_fast:
-                            result.aborted = True
-                            break
-                    if time.perf_counter() - last_write > table_interval:
-                        store.write_table(build_table(spec, root, version=version, plan=plan))
-                        last_write = time.perf_counter()
-            finally:
-                gen.close()
-                # whatever happened (Ctrl-C included), the table reflects every finished run
-                result.table_paths = write_table(spec, root, version=version,
-                                                 plan=plan_campaign(spec, root, version=version, points=points))
-            if result.aborted:
-                break
-            table = build_table(spec, root, version=version, plan=plan_campaign(spec, root, version=version, points=points))
-            known = set(plan.keys)
-            new = [p for p in sampler.refine(spec, table) if run_key(p.params, p.options, version) not in known]
-            points = points + new if new else []
-        result.n_skipped = result.n_points - result.n_executed
-        result.table = build_table(spec, root, version=version)
-        return result
+        for rec in gen:
+            result.n_executed += 1
+            prog.update(rec)
+            plan.add(rec)
+            if rec.get("status") == "ok":
+                result.n_ok += 1
+            else:
+                result.n_failed += 1
+                result.failures.append((rec["key"], str(rec.get("reason"))))
+                if fail_fast:
+                    result.aborted = True
+                    break
+            if time.perf_counter() - last_write > table_interval:
+                plan.store.write_table(build_table(plan.spec, plan=plan))
+                last_write = time.perf_counter()
     finally:
-        store.clean_tmp()
-        store.release_lock()
+        gen.close()
 
 
 def _save_spec(spec: CampaignSpec, store: ResultsStore) -> None:
@@ -477,20 +615,21 @@ def estimated_sim_time(params: Mapping[str, Any], options: Mapping[str, Any]) ->
     return min(t_end, phi * (r_stop**2 - r_i**2) / (2.0 * r_i * w_i))
 
 
-def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, version: str | None = None,
-                  retry_failed: bool = False) -> dict:
-    """Grid size and estimated wall time (s) of the pending runs of a campaign on ``jobs`` workers.
+def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | None = None,
+                  retry_failed: bool = False, accept_stale: bool = False) -> dict:
+    """Grid size and estimated wall time (s) of the runs to do (pending, damaged, stale unless
+    ``accept_stale``, failed with ``retry_failed``) of a campaign on ``jobs`` workers.
 
     Uses :func:`wall_per_sim_second` (bench figures or the documented default) times
     :func:`estimated_sim_time` per run, divided by ``jobs`` (perfect packing: a lower bound
-    of the wall time when runs differ much in cost). Failed runs count only with ``retry_failed``.
+    of the wall time when runs differ much in cost).
     """
     spec = as_spec(spec)
-    plan = plan_campaign(spec, root, version=version)
+    plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=accept_stale)
     bench = _load_bench(root)
     per_h: dict[float, dict] = {}
     total = 0.0
-    for p, k in plan.pending + (plan.failed if retry_failed else []):
+    for p, k in _todo(plan, retry_failed):
         h = float(p.options.get("h", 1.0))
         c, src = wall_per_sim_second(h, bench)
         t = estimated_sim_time(p.params, p.options)
@@ -505,6 +644,8 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, version: str | None
         "done": len(plan.done),
         "failed": len(plan.failed),
         "pending": len(plan.pending),
+        "stale": 0 if accept_stale else len(plan.stale),
+        "damaged": len(plan.damaged),
         "by_mesh_size": per_h,
         "cpu_s": total,
         "wall_s": total / max(1, jobs),
@@ -515,28 +656,45 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, version: str | None
 # ---------------------------------------------------------------------------
 # reclassification
 # ---------------------------------------------------------------------------
-def reclassify(spec, root=DEFAULT_ROOT, *, version: str | None = None) -> int:
-    """Rerun ``sweep.classify.classify_run`` on every finished ("ok") run and rewrite its record
-    (e.g. after a classifier change; no simulation is rerun). Returns the number of runs updated."""
+def reclassify(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, allow_damaged: bool = False) -> int:
+    """Rerun ``sweep.classify.classify_run`` on every intact finished ("ok") run, whatever code made
+    it, and rewrite its record (no simulation is rerun). Returns the number of runs updated.
+
+    Raises DamagedRunsError naming the damaged runs unless ``allow_damaged`` (then they are left out).
+    A run the classifier cannot read loses its label (``metrics.classify_error`` says why).
+    """
+    spec = as_spec(spec)
+    plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=True)
+    check_intact(plan, allow_damaged)
+    n = len(_reclassify_keys(plan, [k for _, k in plan.done], spec.classify))
+    write_table(spec, root, plan=plan)
+    return n
+
+
+def _reclassify_keys(plan: Plan, keys: Sequence[str], classify_options: Mapping[str, Any]) -> list[str]:
+    """Classify the stored runs ``keys`` with the current classifier and rewrite their records (a run that
+    cannot be classified loses its label); returns ``keys``."""
     from sweep.classify import classify_run
     from sweep.store import write_json_atomic
 
-    spec = as_spec(spec)
-    plan = plan_campaign(spec, root, version=version)
-    n = 0
-    for p, k in plan.done:
+    done = []
+    for k in keys:
         rd = plan.store.run_dir(k)
         rec = dict(plan.records[k])
+        rec["metrics"] = dict(rec.get("metrics") or {})
         try:
-            rec["classification"] = json.loads(json.dumps(classification_dict(classify_run(str(rd), **spec.classify)),
-                                                          default=_json_default))
-            rec.get("metrics", {}).pop("classify_error", None)
-        except Exception as e:  # noqa: BLE001
-            rec.setdefault("metrics", {})["classify_error"] = f"{type(e).__name__}: {e}"
+            cls = classification_dict(classify_run(str(rd), **classify_options))
+            rec["classification"] = json.loads(json.dumps(cls, default=_json_default))
+            rec["classifier_hash"] = plan.classifier_hash
+            rec["metrics"].pop("classify_error", None)
+        except Exception as e:  # noqa: BLE001 - the run stays; its label is gone and the error recorded
+            rec["classification"] = {}
+            rec.pop("classifier_hash", None)
+            rec["metrics"]["classify_error"] = f"{type(e).__name__}: {e}"
         write_json_atomic(rd / "record.json", rec)
-        n += 1
-    write_table(spec, root, version=version)
-    return n
+        plan.records[k] = rec
+        done.append(k)
+    return done
 
 
 def _json_default(o):
@@ -588,9 +746,11 @@ def _timeseries_plot(spec, store, table, g, path):
 
     fig, ax = plt.subplots(figsize=(6, 4))
     by = g.get("by")
+    missing = []
     for _, row in table[table["status"] == "ok"].iterrows():
         f = store.run_dir(row["key"]) / "timeseries.csv"
         if not f.exists():
+            missing.append(row["key"])
             continue
         ts = pd.read_csv(f)
         if g["x"] in ts.columns and g["y"] in ts.columns:
@@ -604,7 +764,14 @@ def _timeseries_plot(spec, store, table, g, path):
     ax.set_title(g.get("title", spec.name))
     fig.savefig(path, dpi=150, bbox_inches="tight")
     plt.close(fig)
+    _warn_left_out(path, missing, "no timeseries.csv")
     return path
+
+
+def _warn_left_out(path: Path, keys: Sequence[str], why: str) -> None:
+    """Say on stderr which finished runs a figure does not show."""
+    if keys:
+        print(f"warning: {path.name} leaves out {len(keys)} run(s) ({why}): {' '.join(keys)}", file=sys.stderr)
 
 
 def _snapshot(run_dir: Path, time_s=None):
@@ -650,11 +817,13 @@ def _fields_plot(spec, store, table, g, path):
     for ax in axes.ravel():
         ax.set_axis_off()
     swept = list(spec.axis_names)
+    missing = []
     for i, (rlabel, sub) in enumerate(rows):
         for j, (_, row) in enumerate(sub.iterrows()):
             jj = cvals.index(row[cols_col]) if cvals else j
             snap = _snapshot(store.run_dir(row["key"]), g.get("time"))
             if snap is None or g["field"] not in snap[2]:
+                missing.append(row["key"])
                 continue
             pts, tri, s = snap
             ax = axes[i, jj]
@@ -669,6 +838,7 @@ def _fields_plot(spec, store, table, g, path):
     fig.suptitle(g.get("title", f"{spec.name}: {g['field']}"))
     fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
+    _warn_left_out(path, missing, f"no snapshot with {g['field']}")
     return path
 
 
@@ -708,8 +878,13 @@ def _phase_diagram(spec, table, g, path) -> list[Path]:
     return [Path(p) for p in paths] if paths else [path]
 
 
-def plot_campaign(spec, root=DEFAULT_ROOT, *, version: str | None = None, table=None) -> list[Path]:
-    """Draw the spec's diagrams from the campaign table into ``<root>/<name>/figures/``."""
+def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None,
+                  allow_damaged: bool = False) -> list[Path]:
+    """Draw the spec's diagrams from the campaign table into ``<root>/<name>/figures/``.
+
+    Without ``table``, the stored runs are verified first: DamagedRunsError names the damaged ones
+    unless ``allow_damaged`` (then they are left out of the figures, with a warning).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -717,7 +892,10 @@ def plot_campaign(spec, root=DEFAULT_ROOT, *, version: str | None = None, table=
 
     spec = as_spec(spec)
     store = ResultsStore(root, spec.name)
-    table = build_table(spec, root, version=version) if table is None else table
+    if table is None:
+        plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=True)
+        check_intact(plan, allow_damaged)
+        table = build_table(spec, root, plan=plan)
     store.figures_dir.mkdir(parents=True, exist_ok=True)
     out = []
     if table.empty:
@@ -746,14 +924,17 @@ def plot_campaign(spec, root=DEFAULT_ROOT, *, version: str | None = None, table=
 # ---------------------------------------------------------------------------
 # report
 # ---------------------------------------------------------------------------
-def write_report(spec, root=DEFAULT_ROOT, *, version: str | None = None, plot: bool = True) -> Path:
-    """Markdown summary of a campaign (``<root>/<name>/report.md``): counts, regimes, failures with
-    their reasons, the run table's main columns, and the figures (drawn first when ``plot``)."""
+def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot: bool = True,
+                 allow_damaged: bool = False) -> Path:
+    """Markdown summary of a campaign (``<root>/<name>/report.md``): counts, the code that made the runs,
+    regimes, failures with their reasons, the run table's main columns, and the figures (drawn first
+    when ``plot``). DamagedRunsError names damaged runs unless ``allow_damaged`` (then listed)."""
     spec = as_spec(spec)
     store = ResultsStore(root, spec.name)
-    plan = plan_campaign(spec, root, version=version)
+    plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=True)
+    check_intact(plan, allow_damaged)
     table = build_table(spec, root, plan=plan)
-    figs = plot_campaign(spec, root, version=version, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
+    figs = plot_campaign(spec, root, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
     if not table.empty:
         store.write_table(table)
     L = [f"# Campaign `{spec.name}`", ""]
@@ -761,9 +942,12 @@ def write_report(spec, root=DEFAULT_ROOT, *, version: str | None = None, plot: b
         L += [spec.description.strip(), ""]
     if spec.paper:
         L += [f"Paper: {spec.paper}", ""]
-    L += [f"Spec: `{spec.source}`; solver version `{plan.version}`.", "",
+    L += [f"Spec: `{spec.source}`.", "", *provenance_lines(plan), "",
           f"- runs in the grid: {len(plan.points)}",
-          f"- done: {len(plan.done)}", f"- failed: {len(plan.failed)}", f"- pending: {len(plan.pending)}", ""]
+          f"- done: {len(plan.done)}", f"- failed: {len(plan.failed)}", f"- pending: {len(plan.pending)}"]
+    if plan.damaged:
+        L += [f"- damaged (left out): {len(plan.damaged)}", "", "```", plan.damage_text(), "```"]
+    L.append("")
     if not table.empty and "wall_time_s" in table.columns:
         L += [f"Total wall time of the runs: {table['wall_time_s'].sum():.1f} s "
               f"(median {table['wall_time_s'].median():.1f} s per run).", ""]
@@ -801,6 +985,26 @@ def write_report(spec, root=DEFAULT_ROOT, *, version: str | None = None, plot: b
     L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}`.", ""]
     write_text_atomic(store.report_md, "\n".join(L))
     return store.report_md
+
+
+def code_counts(plan: Plan) -> dict[str, int]:
+    """{solver code hash: stored runs of the plan made by it}; "pre-hash" for records without a hash."""
+    out: dict[str, int] = {}
+    for k in plan.keys:
+        if k in plan.records:
+            h = plan.records[k].get("code_hash") or "pre-hash"
+            out[h] = out.get(h, 0) + 1
+    return out
+
+
+def provenance_lines(plan: Plan) -> list[str]:
+    """Markdown lines stating the code that made the stored runs, against the current code."""
+    lines = [f"Current code: solver code hash `{plan.code_hash}`, classifier hash `{plan.classifier_hash}` "
+             "(`python -m solver.codehash`)."]
+    for h, n in code_counts(plan).items():
+        who = "pre-hash code (made before runs recorded their code)" if h == "pre-hash" else f"code hash `{h}`"
+        lines.append(f"- {n} run(s) made by {who}{' (current)' if h == plan.code_hash else ' (other code: stale)'}")
+    return lines
 
 
 def _fmt(v) -> str:

@@ -1,14 +1,20 @@
 """``dchfrac campaign ...`` commands (argparse), added to the main CLI by :func:`add_campaign_commands`.
 
     dchfrac campaign run SPEC [--jobs N] [--backend loky|dask|ray] [--scheduler ADDR] [--dry-run]
-                              [--retry-failed] [--fail-fast] [--timeout S] [--retries N] [--results DIR]
-    dchfrac campaign status SPEC [--results DIR]
+                              [--retry-failed] [--accept-stale] [--fail-fast] [--timeout S] [--retries N]
+                              [--results DIR]
+    dchfrac campaign status SPEC [--results DIR]       (also: runs made by other code, damaged runs)
     dchfrac campaign plot SPEC [--results DIR]
     dchfrac campaign report SPEC [--results DIR]
     dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
 
+``run`` reruns damaged runs and runs made by other solver code (stale); ``--accept-stale`` keeps
+the stale ones and lists them. ``plot``, ``report`` and ``classify`` refuse (exit 1) while runs
+are damaged, naming them.
+
 Also runnable alone: ``python -m sweep.campaign_cli run campaigns/demo.toml``.
-Exit codes: 0 success, 1 failed runs (run) or errors, 2 bad arguments or spec, 130 interrupted.
+Exit codes: 0 success, 1 failed runs (run), damaged runs (status, plot, report, classify) or errors,
+2 bad arguments or spec, 130 interrupted.
 """
 from __future__ import annotations
 
@@ -43,6 +49,9 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                    help="dask scheduler / ray address (default: a local cluster of --jobs workers)")
     p.add_argument("--dry-run", action="store_true", help="print the grid size and an estimated cost, run nothing")
     p.add_argument("--retry-failed", action="store_true", help="rerun runs recorded as failed")
+    p.add_argument("--accept-stale", action="store_true",
+                   help="keep runs made by other solver code (and labels of other classifier code) instead of "
+                        "rerunning them; they are listed")
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failed run")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="wall-time limit per run, s (default: spec [run] timeout, else none); the run is killed")
@@ -68,6 +77,7 @@ def _guarded(fn):
 
     @functools.wraps(fn)
     def wrapper(args) -> int:
+        from sweep.campaign import DamagedRunsError
         from sweep.spec import SpecError
 
         try:
@@ -80,6 +90,9 @@ def _guarded(fn):
                 print(f"error: {e}", file=sys.stderr)
                 return 2
             raise
+        except DamagedRunsError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 1
         except RuntimeError as e:
             if "is in use by process" in str(e):
                 print(f"error: {e}", file=sys.stderr)
@@ -108,9 +121,11 @@ def cmd_run(args) -> int:
     spec = _spec(args)
     if args.dry_run:
         jobs = args.jobs or int(spec.run.get("jobs", 1))
-        est = estimate_cost(spec, args.results, jobs=jobs, retry_failed=args.retry_failed)
+        est = estimate_cost(spec, args.results, jobs=jobs, retry_failed=args.retry_failed,
+                            accept_stale=args.accept_stale)
         print(f"campaign {spec.name}: {est['grid_size']} runs in the grid ({est['done']} done, "
-              f"{est['failed']} failed, {est['pending']} pending)")
+              f"{est['failed']} failed, {est['pending']} pending, {est['stale']} made by other code to rerun, "
+              f"{est['damaged']} damaged)")
         for h, d in sorted(est["by_mesh_size"].items()):
             print(f"  h = {h:g} mm: {d['runs']} runs, {d['sim_s']:.1f} simulated s x {d['wall_s_per_sim_s']:.3g} "
                   f"wall s per simulated s ({d['source']}) = {_fmt_s(d['wall_s'])} CPU")
@@ -124,12 +139,14 @@ def cmd_run(args) -> int:
     try:
         res = run_campaign(spec, args.results, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                            timeout=timeout, retries=args.retries, fail_fast=args.fail_fast,
-                           retry_failed=args.retry_failed, progress=None if args.quiet else sys.stderr)
+                           retry_failed=args.retry_failed, accept_stale=args.accept_stale,
+                           progress=None if args.quiet else sys.stderr)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished runs are recorded; rerun the same command to resume", file=sys.stderr)
         return 130
     print(f"campaign {spec.name}: {res.n_points} runs, {res.n_executed} executed now "
           f"({res.n_ok} ok, {res.n_failed} failed), {res.n_skipped} not executed (already recorded or cancelled)")
+    _print_provenance(res)
     for k, reason in res.failures:
         print(f"  failed {k}: {reason}")
     if res.aborted:
@@ -139,17 +156,41 @@ def cmd_run(args) -> int:
     return 1 if res.n_failed else 0
 
 
+def _print_provenance(res) -> None:
+    """What ``campaign run`` did about stale and damaged runs."""
+    if res.stale_reused:
+        print(f"  reused {len(res.stale_reused)} run(s) made by other solver code (--accept-stale): "
+              + " ".join(res.stale_reused))
+    if res.stale_rerun:
+        print(f"  reran {len(res.stale_rerun)} run(s) made by other solver code")
+    if res.damaged_rerun:
+        print(f"  reran {len(res.damaged_rerun)} damaged run(s): " + " ".join(res.damaged_rerun))
+    if res.reclassified:
+        print(f"  reclassified {len(res.reclassified)} run(s) labelled by other classifier code")
+
+
 @_guarded
 def cmd_status(args) -> int:
-    from sweep.campaign import plan_campaign
+    from sweep.campaign import code_counts, plan_campaign
 
     spec = _spec(args)
     plan = plan_campaign(spec, args.results)
     print(f"campaign {spec.name}: {len(plan.points)} runs: {len(plan.done)} done, {len(plan.failed)} failed, "
-          f"{len(plan.pending)} pending  ({plan.store.dir})")
+          f"{len(plan.pending)} pending, {len(plan.stale)} made by other code (stale), {len(plan.damaged)} damaged"
+          f"  ({plan.store.dir})")
+    counts = code_counts(plan)
+    print(f"  current code: solver {plan.code_hash}, classifier {plan.classifier_hash}; stored runs by code: "
+          + ", ".join(f"{h}{' (current)' if h == plan.code_hash else ''}: {n}" for h, n in counts.items()))
+    if plan.misclassified:
+        print(f"  {len(plan.misclassified)} run(s) labelled by other classifier code (`campaign run` reclassifies)")
+    if plan.stale:
+        print(f"  `campaign run` reruns the {len(plan.stale)} stale run(s); `--accept-stale` keeps them")
     for p, k in plan.failed:
         swept = ", ".join(f"{a}={v}" for a, v in p.swept.items())
         print(f"  failed {k} ({swept}): {plan.records[k].get('reason')}")
+    if plan.damaged:
+        print(plan.damage_text())
+        return 1
     return 0
 
 
@@ -179,9 +220,17 @@ def cmd_report(args) -> int:
 def cmd_classify(args) -> int:
     from sweep.campaign import reclassify
 
-    n = reclassify(_spec(args), args.results)
+    from sweep.campaign import plan_campaign
+
+    spec = _spec(args)
+    n = reclassify(spec, args.results)
     print(f"reclassified {n} runs")
-    return 0
+    plan = plan_campaign(spec, args.results, accept_stale=True, verify=False)
+    errors = [(k, plan.records[k]["metrics"]["classify_error"]) for _, k in plan.done
+              if "classify_error" in (plan.records[k].get("metrics") or {})]
+    for k, e in errors:
+        print(f"  no label for {k}: {e}", file=sys.stderr)
+    return 1 if errors else 0
 
 
 def main(argv=None) -> int:

@@ -13,14 +13,16 @@ With dask or ray on several machines, the results root must be on a shared file 
 A *runner* executes one run: ``runner(params: dict, options: dict, run_dir: str) -> dict``
 with keys ``status`` ("ok" | "failed", default "ok"), ``reason`` (str | None),
 ``metrics`` (dict of scalars), ``classification`` (dict, or the regime as a str),
-``numbers`` (dict, optional); other scalar keys are taken as metrics. It must be
+``numbers`` (dict, optional), ``classifier_hash`` (str: the classifier code that labelled the run,
+when sweep.classify did); other scalar keys are taken as metrics. It must be
 picklable (a module-level function, or a ``functools.partial`` of one).
 :class:`DefaultRunner` calls ``solver.simulate`` then ``sweep.classify.classify_run``.
 
 Each run is isolated: an exception becomes a record with status "failed" and the reason;
 with a timeout (or ``isolate="process"``) the runner runs in a child Python process that
 is killed when the timeout expires, so a hung or crashing run costs that run only.
-Every record is written to the store by the worker as soon as the run ends.
+Every record is written to the store by the worker as soon as the run ends; it states the solver
+code (``code_hash``) and lists each file of the run folder with its size and SHA-256 (``files``).
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
-from sweep.store import ResultsStore, to_json, write_json_atomic
+from sweep.store import ResultsStore, current_classifier_hash, file_manifest, to_json, write_json_atomic
 
 __all__ = [
     "RunTask",
@@ -54,7 +56,7 @@ __all__ = [
 ]
 
 BACKENDS = ("loky", "dask", "ray")
-_RESERVED = {"status", "reason", "metrics", "classification", "regime", "numbers"}
+_RESERVED = {"status", "reason", "metrics", "classification", "regime", "numbers", "classifier_hash"}
 
 
 @dataclass(frozen=True)
@@ -77,7 +79,7 @@ class ExecConfig:
     retries : extra attempts after a failure.
     isolate : "auto" (child process iff timeout), "process" (always) or "none" (never).
     blas_threads : BLAS/OpenMP threads of a child process (None: inherit).
-    solver_version : recorded in each record.
+    code_hash : hash of the solver source that runs (solver.codehash), recorded in each record.
     """
 
     root: str
@@ -87,7 +89,7 @@ class ExecConfig:
     retries: int = 0
     isolate: str = "auto"
     blas_threads: int | None = 1
-    solver_version: str = "unknown"
+    code_hash: str = "unknown"
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -102,8 +104,10 @@ class DefaultRunner:
     max_hoop_stress_max (kPa), mass_error_max (-), n_steps.
     """
 
-    def __init__(self, classify_options: Mapping[str, Any] | None = None):
+    def __init__(self, classify_options: Mapping[str, Any] | None = None, classifier_hash: str | None = None):
         self.classify_options = dict(classify_options or {})
+        # taken where the campaign is planned, so that the records and the plan name one classifier
+        self.classifier_hash = classifier_hash or current_classifier_hash()
 
     def __call__(self, params: dict, options: dict, run_dir: str) -> dict:
         from solver import Parameters, RunOptions, simulate
@@ -116,6 +120,7 @@ class DefaultRunner:
                 from sweep.classify import classify_run
 
                 out["classification"] = classification_dict(classify_run(run_dir, **self.classify_options))
+                out["classifier_hash"] = self.classifier_hash
             except Exception as e:  # noqa: BLE001 - the simulation stays valid; reclassify later
                 out["classify_error"] = f"{type(e).__name__}: {e}"
         return out
@@ -214,6 +219,8 @@ def normalize_result(res) -> dict:
            "metrics": metrics, "classification": cls}
     if res.get("numbers") is not None:
         out["numbers"] = dict(res["numbers"])
+    if res.get("classifier_hash"):
+        out["classifier_hash"] = str(res["classifier_hash"])
     return json.loads(to_json(out))  # plain JSON types only
 
 
@@ -333,7 +340,7 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         "reason": out.get("reason"),
         "params": dict(task.params),
         "options": dict(task.options),
-        "solver_version": cfg.solver_version,
+        "code_hash": cfg.code_hash,
         "metrics": out.get("metrics", {}),
         "classification": out.get("classification", {}),
         "wall_time_s": wall,
@@ -345,8 +352,11 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         "host": socket.gethostname(),
         "isolate": isolate,
     }
+    if out.get("classifier_hash"):
+        record["classifier_hash"] = out["classifier_hash"]
     if "numbers" in out:
         record["numbers"] = out["numbers"]
+    record["files"] = file_manifest(tmp)
     if "traceback" in out:
         record["traceback"] = out["traceback"]
     write_json_atomic(tmp / "record.json", record)

@@ -9,10 +9,15 @@ Layout under a configurable root (default ``results/``)::
     <root>/<campaign>/report.md            Markdown summary
 
 ``key`` = first 16 hex digits of the SHA-256 of the canonical JSON of the resolved
-parameters, run options and solver version (floats at 12 significant digits, so 0.1 and
-0.1000000000001 give one key). A run is executed in ``runs/.tmp-<key>-<uuid>/`` and renamed
-to ``runs/<key>/`` once its ``record.json`` (status "ok" | "failed", reason, metrics, ...)
+parameters and run options (floats at 12 significant digits, so 0.1 and 0.1000000000001
+give one key). A run is executed in ``runs/.tmp-<key>-<uuid>/`` and renamed to
+``runs/<key>/`` once its ``record.json`` (status "ok" | "failed", reason, metrics, ...)
 is written: a folder named by its key is always complete.
+
+The record states the code that made the run (``code_hash``: the solver's source;
+``classifier_hash``: the classifier's, when sweep.classify labelled it) and the size and
+SHA-256 of each of the run's files (``files``): a record whose code hash is not the current
+one is stale (made by other code), and :func:`verify_run` finds a damaged run folder.
 """
 from __future__ import annotations
 
@@ -27,34 +32,35 @@ from typing import Any, Mapping
 
 from sweep.sampler import canonical_json
 
-__all__ = ["run_key", "solver_version", "ResultsStore", "write_json_atomic", "write_text_atomic", "to_json"]
+__all__ = ["run_key", "KEY_FORMAT", "current_code_hash", "current_classifier_hash", "file_manifest", "verify_run", "ResultsStore", "write_json_atomic", "write_text_atomic", "to_json"]
 
 _KEY_RE = re.compile(r"^[0-9a-f]{16}$")
 
 
-def solver_version() -> str:
-    """Version string of the solver that goes into run keys: ``solver.__version__`` if defined,
-    else the installed ``dchfrac`` distribution's version, else "unknown"."""
-    try:
-        import solver
-
-        v = getattr(solver, "__version__", None)
-        if v:
-            return str(v)
-    except Exception:  # noqa: BLE001 - a broken solver import must not break the store
-        pass
-    try:
-        from importlib.metadata import version
-
-        return version("dchfrac")
-    except Exception:  # noqa: BLE001
-        return "unknown"
+# The key names a run's inputs only, so that a run's folder keeps its name when the code changes
+# (the code that made a run is recorded in it, see current_code_hash). The constant is the
+# format of the keys of every run stored so far; it changes only if the key's recipe does.
+KEY_FORMAT = "0.1.0"
 
 
-def run_key(params: Mapping[str, Any], options: Mapping[str, Any], version: str) -> str:
-    """Hash of canonical (params, options, solver version): 16 hex digits."""
-    text = canonical_json({"params": dict(params), "options": dict(options), "solver_version": str(version)})
+def run_key(params: Mapping[str, Any], options: Mapping[str, Any], key_format: str = KEY_FORMAT) -> str:
+    """Hash of canonical (params, options): 16 hex digits, the name of the run's folder."""
+    text = canonical_json({"params": dict(params), "options": dict(options), "solver_version": str(key_format)})
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def current_code_hash() -> str:
+    """Hash of the solver source of this process (:func:`solver.codehash.code_hash`)."""
+    from solver import codehash
+
+    return codehash.code_hash()
+
+
+def current_classifier_hash() -> str:
+    """Hash of the classifier source of this process (:func:`solver.codehash.classifier_code_hash`)."""
+    from solver import codehash
+
+    return codehash.classifier_code_hash()
 
 
 def _default(o):
@@ -87,6 +93,88 @@ def write_text_atomic(path, text: str) -> None:
 
 def write_json_atomic(path, obj) -> None:
     write_text_atomic(path, to_json(obj) + "\n")
+
+
+RECORD_NAME = "record.json"
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _run_files(run_dir: Path) -> list[Path]:
+    """The run's files (recursive), hidden ones (temporary) and the record itself excepted."""
+    return sorted(p for p in run_dir.rglob("*") if p.is_file() and p.name != RECORD_NAME
+                  and not any(part.startswith(".") for part in p.relative_to(run_dir).parts))
+
+
+def file_manifest(run_dir) -> dict[str, dict]:
+    """{relative path: {"size": bytes, "sha256": hex}} of every file of a finished run folder."""
+    run_dir = Path(run_dir)
+    return {p.relative_to(run_dir).as_posix(): {"size": p.stat().st_size, "sha256": _sha256(p)}
+            for p in _run_files(run_dir)}
+
+
+def _parse_problem(path: Path) -> str | None:
+    """Why a run file does not parse (JSON, CSV and NPZ files are read), or None."""
+    try:
+        if path.suffix == ".json":
+            json.loads(path.read_text())
+        elif path.suffix == ".csv":
+            import pandas as pd
+
+            pd.read_csv(path, nrows=2)
+        elif path.suffix == ".npz":
+            import numpy as np
+
+            with np.load(path) as z:
+                z.files  # noqa: B018 - reads the archive's directory
+    except Exception as e:  # noqa: BLE001 - any reading error is damage
+        return f"{path.name} does not parse ({type(e).__name__}: {e})"
+    return None
+
+
+def _manifest_problems(run_dir: Path, files: Mapping[str, Mapping], checksums: bool) -> list[str]:
+    out = []
+    for rel, want in files.items():
+        p = run_dir / rel
+        if not p.is_file():
+            out.append(f"{rel} is missing")
+        elif p.stat().st_size != want.get("size"):
+            out.append(f"{rel} has {p.stat().st_size} bytes, the record wrote {want.get('size')}")
+        elif checksums and want.get("sha256") and _sha256(p) != want["sha256"]:
+            out.append(f"{rel} differs from the file the record wrote (SHA-256)")
+    return out
+
+
+def _legacy_problems(run_dir: Path, record: Mapping) -> list[str]:
+    """Files a solver run folder must hold, for a record without a file list (made before records had one)."""
+    if not (run_dir / "params.toml").is_file() or record.get("status") != "ok":
+        return []
+    need = ["summary.json", "timeseries.csv"]
+    if (record.get("classification") or {}).get("regime") is not None:
+        need.append("snapshots/mesh.npz")  # the regime was read from the snapshots
+    return [f"{rel} is missing" for rel in need if not (run_dir / rel).is_file()]
+
+
+def verify_run(run_dir, record: Mapping, *, checksums: bool = True) -> list[str]:
+    """Problems of a stored run folder ([] = intact): files of the record's list missing, of another
+    size or (``checksums``) other content; JSON, CSV and NPZ files that do not parse. A record
+    without a file list gets the presence check of a solver run's main files."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        return ["the run folder is missing"]
+    files = record.get("files")
+    out = _manifest_problems(run_dir, files, checksums) if isinstance(files, Mapping) else \
+        _legacy_problems(run_dir, record)
+    for p in _run_files(run_dir):
+        if p.suffix in (".json", ".csv", ".npz") and (why := _parse_problem(p)):
+            out.append(why)
+    return out
 
 
 class ResultsStore:

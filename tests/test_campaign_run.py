@@ -87,7 +87,7 @@ def _stable(df):
 # results and table
 # ---------------------------------------------------------------------------
 def test_table_rows_known_answers_and_store_layout(tmp_path):
-    res = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=2, version=VERSION, progress=None)
+    res = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=2, code_hash=VERSION, progress=None)
     assert (res.n_points, res.n_executed, res.n_ok, res.n_failed) == (6, 6, 6, 0)
     t = pd.read_csv(tmp_path / "toy" / "table.csv")
     assert list(t["index"]) == list(range(6))
@@ -102,7 +102,7 @@ def test_table_rows_known_answers_and_store_layout(tmp_path):
     for key in t["key"]:
         d = tmp_path / "toy" / "runs" / key
         rec = json.loads((d / "record.json").read_text())
-        assert rec["status"] == "ok" and rec["solver_version"] == VERSION
+        assert rec["status"] == "ok" and rec["code_hash"] == VERSION
         assert json.loads((d / "out.json").read_text())["x"] == pytest.approx(rec["params"]["eta_o"] * 10.0)
     assert not [p for p in (tmp_path / "toy" / "runs").iterdir() if p.name.startswith(".")]
     try:
@@ -115,35 +115,35 @@ def test_table_rows_known_answers_and_store_layout(tmp_path):
 
 
 def test_failures_are_isolated_and_their_reasons_tabled(tmp_path):
-    res = run_campaign(_spec(), tmp_path, runner=failing_runner, jobs=2, version=VERSION, progress=None)
+    res = run_campaign(_spec(), tmp_path, runner=failing_runner, jobs=2, code_hash=VERSION, progress=None)
     assert (res.n_ok, res.n_failed, res.aborted) == (2, 4, False)
     t = res.table.set_index("cement")
     assert set(t.loc[1.0, "status"]) == {"ok"}
     assert all(r.startswith("RuntimeError: boom at cement=2.0") for r in t.loc[2.0, "reason"])
     assert set(t.loc[3.0, "reason"]) == {"Newton did not converge at t=0.3 s"}
     # rerun: failures are recorded, so nothing executes ...
-    again = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=1, version=VERSION, progress=None)
+    again = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=1, code_hash=VERSION, progress=None)
     assert again.n_executed == 0
     # ... unless asked to retry them, which reruns exactly the 4 failures
-    retried = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=1, version=VERSION, progress=None,
+    retried = run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=1, code_hash=VERSION, progress=None,
                            retry_failed=True)
     assert (retried.n_executed, retried.n_ok) == (4, 4)
     assert set(retried.table["status"]) == {"ok"}
 
 
 def test_fail_fast_stops_at_the_first_failure(tmp_path):
-    res = run_campaign(_spec(), tmp_path, runner=failing_runner, jobs=1, version=VERSION, progress=None,
+    res = run_campaign(_spec(), tmp_path, runner=failing_runner, jobs=1, code_hash=VERSION, progress=None,
                        fail_fast=True)
     # grid order: (1, .1) ok, (1, .5) ok, (2, .1) raises -> stop
     assert res.aborted and (res.n_executed, res.n_ok, res.n_failed) == (3, 2, 1)
-    plan = plan_campaign(_spec(), tmp_path, version=VERSION)
+    plan = plan_campaign(_spec(), tmp_path, code_hash=VERSION)
     assert (len(plan.done), len(plan.failed), len(plan.pending)) == (2, 1, 3)
 
 
 def test_retries_rerun_a_failed_attempt(tmp_path, monkeypatch):
     monkeypatch.setenv("FLAKY_DIR", str(tmp_path))
     spec = _spec(axes={"cement": [1.0, 2.0]})
-    res = run_campaign(spec, tmp_path, runner=flaky_runner, jobs=1, retries=1, version=VERSION, progress=None)
+    res = run_campaign(spec, tmp_path, runner=flaky_runner, jobs=1, retries=1, code_hash=VERSION, progress=None)
     assert (res.n_ok, res.n_failed) == (2, 0)
     assert list(res.table["attempts"]) == [2, 2]
     assert sorted(int(p.read_text()) for p in tmp_path.glob("c*")) == [2, 2]
@@ -153,7 +153,7 @@ def test_timeout_kills_the_hung_run_only(tmp_path):
     t0 = time.perf_counter()
     # the limit leaves room for the child's start (python + this test module's imports: ~1-2 s on a
     # loaded 2-core machine) and is far below the 60 s a hung run would take
-    res = run_campaign(_spec(), tmp_path, runner=hanging_runner, jobs=2, timeout=6.0, version=VERSION, progress=None)
+    res = run_campaign(_spec(), tmp_path, runner=hanging_runner, jobs=2, timeout=6.0, code_hash=VERSION, progress=None)
     elapsed = time.perf_counter() - t0
     t = res.table
     assert list(t.loc[t["status"] == "failed", "index"]) == [5], list(t["reason"])
@@ -174,7 +174,7 @@ _INTERRUPTED = textwrap.dedent("""
     from test_campaign_run import _spec, slow_runner, VERSION
     from sweep.campaign import run_campaign
     spec = _spec(axes={{"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]}})
-    run_campaign(spec, {root!r}, runner=slow_runner, jobs=2, version=VERSION, progress=None)
+    run_campaign(spec, {root!r}, runner=slow_runner, jobs=2, code_hash=VERSION, progress=None)
 """)
 
 
@@ -192,19 +192,19 @@ def test_resume_after_ctrl_c_runs_only_the_rest_and_gives_the_same_table(tmp_pat
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode != 0 and b"KeyboardInterrupt" in err
-    before = {k: r for k, r in plan_campaign(spec, root, version=VERSION).records.items()}
+    before = {k: r for k, r in plan_campaign(spec, root, code_hash=VERSION).records.items()}
     k = len(before)
     assert 3 <= k < 12
     assert (root / "toy" / "table.csv").exists()  # written on the way out
     assert len(pd.read_csv(root / "toy" / "table.csv")) == k
     assert not [p for p in runs.iterdir() if p.name.startswith(".")]  # no half-written run left
 
-    res = run_campaign(spec, root, runner=toy_runner, jobs=2, version=VERSION, progress=None)
+    res = run_campaign(spec, root, runner=toy_runner, jobs=2, code_hash=VERSION, progress=None)
     assert (res.n_executed, res.n_skipped) == (12 - k, k)
-    after = plan_campaign(spec, root, version=VERSION).records
+    after = plan_campaign(spec, root, code_hash=VERSION).records
     assert all(after[key] == rec for key, rec in before.items())  # finished runs untouched
 
-    full = run_campaign(spec, tmp_path / "uninterrupted", runner=toy_runner, jobs=1, version=VERSION, progress=None)
+    full = run_campaign(spec, tmp_path / "uninterrupted", runner=toy_runner, jobs=1, code_hash=VERSION, progress=None)
     assert full.n_executed == 12
     pd.testing.assert_frame_equal(_stable(res.table), _stable(full.table))
     pd.testing.assert_frame_equal(_stable(pd.read_csv(root / "toy" / "table.csv")),
@@ -213,20 +213,20 @@ def test_resume_after_ctrl_c_runs_only_the_rest_and_gives_the_same_table(tmp_pat
 
 def test_dask_local_cluster_gives_the_loky_table(tmp_path):
     pytest.importorskip("dask.distributed")
-    loky = run_campaign(_spec(), tmp_path / "loky", runner=failing_runner, jobs=2, version=VERSION, progress=None)
+    loky = run_campaign(_spec(), tmp_path / "loky", runner=failing_runner, jobs=2, code_hash=VERSION, progress=None)
     dask = run_campaign(_spec(), tmp_path / "dask", runner=failing_runner, jobs=2, backend="dask",
-                        version=VERSION, progress=None)
+                        code_hash=VERSION, progress=None)
     assert (dask.n_ok, dask.n_failed) == (2, 4)
     pd.testing.assert_frame_equal(_stable(dask.table), _stable(loky.table))
 
 
 def test_bad_backend_and_arguments_are_rejected_before_running(tmp_path):
     with pytest.raises(ValueError, match="backend='spark'"):
-        run_campaign(_spec(), tmp_path, runner=toy_runner, backend="spark", version=VERSION, progress=None)
+        run_campaign(_spec(), tmp_path, runner=toy_runner, backend="spark", code_hash=VERSION, progress=None)
     with pytest.raises(ValueError, match="jobs=0"):
-        run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=0, version=VERSION, progress=None)
+        run_campaign(_spec(), tmp_path, runner=toy_runner, jobs=0, code_hash=VERSION, progress=None)
     with pytest.raises(ValueError, match="timeout"):
-        run_campaign(_spec(), tmp_path, runner=toy_runner, timeout=-1.0, version=VERSION, progress=None)
+        run_campaign(_spec(), tmp_path, runner=toy_runner, timeout=-1.0, code_hash=VERSION, progress=None)
 
 
 # ---------------------------------------------------------------------------
@@ -289,7 +289,7 @@ def test_cli_rejects_a_bad_spec_naming_the_key(tmp_path, capsys):
 
 
 def test_report_of_an_unrun_campaign_lists_pending(tmp_path):
-    p = write_report(_spec(), tmp_path, version=VERSION)
+    p = write_report(_spec(), tmp_path, code_hash=VERSION)
     text = p.read_text()
     assert "- pending: 6" in text and "- done: 0" in text
 
@@ -316,9 +316,9 @@ def test_ray_backend_without_ray_says_which_extra(tmp_path):
         import ray  # noqa: F401
     except ImportError:
         with pytest.raises(ValueError, match=r"dchfrac\[ray\]"):
-            run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", version=VERSION, progress=None)
+            run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", code_hash=VERSION, progress=None)
     else:
-        res = run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", jobs=2, version=VERSION, progress=None)
+        res = run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", jobs=2, code_hash=VERSION, progress=None)
         assert (res.n_ok, res.n_failed) == (6, 0)
 
 
@@ -360,14 +360,14 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
     spec = spec_from_dict({"name": "fmt", "axes": {"eta_o": [0.25, 1.0]},
                            "diagrams": [{"kind": "timeseries", "x": "t", "y": "p_inj", "by": "eta_o"},
                                         {"kind": "fields", "field": "phi", "rows": "blocks", "cols": "eta_o"}]})
-    run_campaign(spec, tmp_path, runner=contract_runner, jobs=1, version=VERSION, progress=None)
-    assert reclassify(spec, tmp_path, version=VERSION) == 2
-    t = build_table(spec, tmp_path, version=VERSION).set_index("eta_o")
+    run_campaign(spec, tmp_path, runner=contract_runner, jobs=1, code_hash=VERSION, progress=None)
+    assert reclassify(spec, tmp_path, code_hash=VERSION) == 2
+    t = build_table(spec, tmp_path, code_hash=VERSION).set_index("eta_o")
     assert list(t["regime"]) == ["uniform_invasion", "uniform_invasion"]
     assert not t["fracturing"].any() and list(t["n_cracks"]) == [0, 0]
     # S = 0.5 at R = 20 + 20 eta_o mm at t = 1 s (25 and 40 mm); radial mesh spacing 1.5 mm
     assert list(t["front_radius_mean"]) == pytest.approx([25.0, 40.0], abs=1.5)
     assert list(t["t_classified"]) == [1.0, 1.0]
-    figs = plot_campaign(spec, tmp_path, version=VERSION)
+    figs = plot_campaign(spec, tmp_path, code_hash=VERSION)
     assert [f.name for f in figs] == ["timeseries.png", "fields.png"]
     assert all(f.stat().st_size > 5000 for f in figs)

@@ -37,7 +37,9 @@ class ForwardModel:
 
 
 def params_hash(params_dict: dict, options_dict: dict) -> str:
-    """Stable short hash of (parameters, options): the cache key of a forward run."""
+    """Stable short hash of (parameters, options): the name of a forward run's cache folder. The code
+    that made the entry is checked by :func:`finished` (summary.json ``code_hash``), so an entry of other
+    code is run again in the same folder."""
     def norm(v):
         if isinstance(v, float):
             return float(f"{v:.12g}")
@@ -76,37 +78,63 @@ def observables_from_timeseries(ts: pd.DataFrame, times: dict, r_inner: float, t
     return out
 
 
-def finished(run_dir) -> bool:
-    """Is the cache entry ``run_dir`` a finished run ("ok" or "failed")?
+def finished(run_dir, code_hash: str | None = None) -> bool:
+    """Is the cache entry ``run_dir`` a finished run ("ok" or "failed") of the current solver code?
 
     A run writes ``summary.json`` with status "running" when it starts (solver.output); one that was
     killed (machine lost, job cancelled) keeps it.  Such an entry is not a result: reading it would feed
-    the workflow a truncated curve (NaN residuals), so it is run again."""
-    f = Path(run_dir) / "summary.json"
-    if not f.is_file():
-        return False
+    the workflow a truncated curve (NaN residuals), so it is run again.  So is an entry whose
+    ``code_hash`` (the solver source that made it) is not ``code_hash`` (default: the current one), and
+    an "ok" entry whose time series is missing or does not parse (damaged)."""
+    from sweep.store import current_code_hash
+
+    rd = Path(run_dir)
     try:
-        return json.loads(f.read_text()).get("status") in ("ok", "failed")
+        summ = json.loads((rd / "summary.json").read_text())
     except (OSError, ValueError):
         return False
+    if not isinstance(summ, dict) or summ.get("code_hash") != (code_hash or current_code_hash()):
+        return False
+    if summ.get("status") == "failed":
+        return True
+    return summ.get("status") == "ok" and _timeseries(rd) is not None
 
 
-def _run_one(pdict: dict, odict: dict, run_dir: str, classify: bool) -> None:
-    """Run the solver into ``run_dir`` (a cache entry) unless it is already finished."""
+def _timeseries(rd: Path):
+    """The run's time series (DataFrame), None if missing, empty or unreadable."""
+    try:
+        ts = pd.read_csv(rd / "timeseries.csv")
+    except (OSError, ValueError, pd.errors.EmptyDataError, pd.errors.ParserError):
+        return None
+    return ts if len(ts) and "t" in ts.columns else None
+
+
+def _run_one(pdict: dict, odict: dict, run_dir: str, code_hash: str) -> None:
+    """Run the solver into ``run_dir`` (a cache entry) unless it is already finished by code ``code_hash``.
+
+    A run that raises is recorded as a failure (summary.json: status "failed", the reason, no t_reached),
+    which the workflow reads as no prediction (NaN), never as a result."""
     import shutil
 
     from solver import Parameters, RunOptions, simulate
+    from sweep.store import write_json_atomic
 
     rd = Path(run_dir)
-    if finished(rd):
+    if finished(rd, code_hash):
         return
     if rd.exists():
-        shutil.rmtree(rd)  # an interrupted run's partial files must not mix with the new run's
-    simulate(Parameters.from_dict(pdict), RunOptions.from_dict(odict), out_dir=rd)
+        shutil.rmtree(rd)  # an interrupted or other code's run's files must not mix with the new run's
+    try:
+        simulate(Parameters.from_dict(pdict), RunOptions.from_dict(odict), out_dir=rd)
+    except Exception as e:  # noqa: BLE001 - recorded as this entry's failure
+        rd.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(rd / "summary.json", {"status": "failed", "reason": f"{type(e).__name__}: {e}",
+                                               "complete": False, "t_reached": None, "code_hash": code_hash})
 
 
 class SolverForward(ForwardModel):
-    """The coupled solver with an on-disk cache (one run folder per hash of parameters and options).
+    """The coupled solver with an on-disk cache (one run folder per hash of parameters and options; an
+    entry made by other solver code, interrupted or damaged is run again: :func:`finished`).
 
     base : dict of solver.Parameters fields common to every run (below the overrides).
     options : solver.RunOptions (mesh size h mm, t_end s, dt_max s, ...); snapshots are written
@@ -136,10 +164,13 @@ class SolverForward(ForwardModel):
         return self.cache_dir / params_hash(pd_, self.options.to_dict())
 
     def predict_many(self, jobs: list) -> list:
+        from sweep.store import current_code_hash
+
+        code = current_code_hash()
         todo = {}
         for o, _ in jobs:
             rd = self.run_dir(o)
-            if not finished(rd):
+            if not finished(rd, code):
                 todo[str(rd)] = {k: v for k, v in self._pdict(o).items() if v is not None}
         if todo:
             self.n_runs += len(todo)
@@ -149,21 +180,22 @@ class SolverForward(ForwardModel):
 
                 # one BLAS/PARDISO thread per solver run: n_jobs runs already share the cores
                 with parallel_config(backend="loky", inner_max_num_threads=1):
-                    Parallel(n_jobs=self.n_jobs)(delayed(_run_one)(p, od, rd, True) for rd, p in todo.items())
+                    Parallel(n_jobs=self.n_jobs)(delayed(_run_one)(p, od, rd, code) for rd, p in todo.items())
             else:
                 for rd, p in todo.items():
-                    _run_one(p, od, rd, True)
+                    _run_one(p, od, rd, code)
         return [self._read(self.run_dir(o), o, t) for o, t in jobs]
 
     def predict_one(self, overrides: dict, times: dict) -> dict:
         return self.predict_many([(overrides, times)])[0]
 
     def _read(self, rd: Path, overrides: dict, times: dict) -> dict:
+        """Predictions of the finished entry ``rd``: a failed run's values up to the time it reached
+        (NaN after; all NaN when it reached none)."""
         summ = json.loads((rd / "summary.json").read_text())
-        f = rd / "timeseries.csv"
-        ts = pd.read_csv(f) if f.is_file() and f.stat().st_size > 0 else None
-        r_inner = self._pdict(overrides)["r_inner"]
         ok = summ.get("status") == "ok"
+        ts = _timeseries(rd) if ok or summ.get("t_reached") is not None else None
+        r_inner = self._pdict(overrides)["r_inner"]
         out = observables_from_timeseries(ts, times, r_inner, summ.get("t_reached") if not ok else None)
         if "regime" in times:
             out["regime"] = _regime(rd) if ok else None

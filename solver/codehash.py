@@ -1,0 +1,99 @@
+"""Hashes of the source code that produces results: the key of every stored result's provenance.
+
+``code_hash()`` is the SHA-256 (first 16 hex digits) of the solver package's ``*.py`` files,
+sorted by name, each hashed by content (never by modification time), found next to this
+module through ``__file__``: an installed (non-editable) copy hashes its own files.
+``classifier_code_hash()`` hashes the regime classifier (``sweep/classify.py``) and the solver
+module it imports (``solver/tomlio.py``, which reads a run's parameters).
+
+A result stored with a hash other than the current one was made by other code (stale).
+Both hashes are computed once per process.
+
+Command line (prints the hashes of this copy, or of a git revision of a checkout)::
+
+    python -m solver.codehash [--git REV [--repo DIR]]
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+from pathlib import Path
+from typing import Iterable
+
+__all__ = ["source_hash", "directory_hash", "code_hash", "classifier_code_hash", "git_hashes", "HASH_DIGITS"]
+
+HASH_DIGITS = 16
+SOLVER_DIR = Path(__file__).resolve().parent
+# the classifier's files, relative to the folder holding the solver and sweep packages
+CLASSIFIER_FILES = ("sweep/classify.py", "solver/tomlio.py")
+
+
+def source_hash(files: Iterable[tuple[str, bytes]]) -> str:
+    """Hash of (name, content) pairs, order-independent (sorted by name): 16 hex digits."""
+    h = hashlib.sha256()
+    for name, data in sorted(files):
+        h.update(name.encode() + b"\0" + hashlib.sha256(data).digest())
+    return h.hexdigest()[:HASH_DIGITS]
+
+
+def directory_hash(directory, pattern: str = "*.py") -> str:
+    """Hash of the files of ``directory`` matching ``pattern`` (not recursive), by name and content."""
+    d = Path(directory)
+    files = sorted(p for p in d.glob(pattern) if p.is_file())
+    if not files:
+        raise FileNotFoundError(f"no {pattern} files in {d} to hash")
+    return source_hash((p.name, p.read_bytes()) for p in files)
+
+
+@functools.lru_cache(maxsize=None)
+def code_hash() -> str:
+    """Hash of the solver's source (every ``solver/*.py`` of the imported package)."""
+    return directory_hash(SOLVER_DIR)
+
+
+@functools.lru_cache(maxsize=None)
+def classifier_code_hash() -> str:
+    """Hash of the regime classifier's source (``sweep/classify.py`` and ``solver/tomlio.py``)."""
+    import sweep.classify
+
+    classify_file = Path(sweep.classify.__file__).resolve()
+    paths = {"sweep/classify.py": classify_file, "solver/tomlio.py": SOLVER_DIR / "tomlio.py"}
+    return source_hash((name, paths[name].read_bytes()) for name in CLASSIFIER_FILES)
+
+
+def git_hashes(rev: str, repo=".") -> dict:
+    """{"code_hash", "classifier_hash"} of the sources at git revision ``rev`` of the checkout ``repo``:
+    what a result made by that commit's code records."""
+    import subprocess
+
+    def git(*args) -> bytes:
+        return subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True).stdout
+
+    names = git("ls-tree", "--name-only", rev, "solver/").decode().split()
+    solver = [(Path(n).name, git("show", f"{rev}:{n}")) for n in names if n.endswith(".py")]
+    classifier = [(n, git("show", f"{rev}:{n}")) for n in CLASSIFIER_FILES]
+    return {"code_hash": source_hash(solver), "classifier_hash": source_hash(classifier)}
+
+
+def main(argv=None) -> int:
+    import argparse
+    import subprocess
+    import sys
+
+    ap = argparse.ArgumentParser(prog="python -m solver.codehash", description=__doc__.split("\n")[0])
+    ap.add_argument("--git", metavar="REV", help="hash the sources at this git revision instead of this copy")
+    ap.add_argument("--repo", default=".", metavar="DIR", help="git checkout for --git (default: .)")
+    a = ap.parse_args(argv)
+    try:
+        hashes = git_hashes(a.git, a.repo) if a.git else {"code_hash": code_hash(),
+                                                          "classifier_hash": classifier_code_hash()}
+    except subprocess.CalledProcessError as e:
+        print(f"error: --git {a.git}: {e.stderr.decode(errors='replace').strip()}", file=sys.stderr)
+        return 2
+    for k, v in hashes.items():
+        print(f"{k} {v}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
