@@ -217,7 +217,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
 
     camp = load_twin_campaign(campaign) if not isinstance(campaign, dict) else campaign
     spec = spec_from_dict(camp["spec"])
-    n_jobs = spec.wf("n_jobs") if n_jobs is None else int(n_jobs)
+    n_jobs = spec.fit.n_jobs if n_jobs is None else int(n_jobs)
     dat = camp["data"]
     a, b, n = dat["times"]
     times = np.linspace(float(a), float(b), int(n))
