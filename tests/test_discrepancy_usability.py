@@ -64,6 +64,8 @@ def test_every_option_has_a_rule_and_its_default_passes_it():
     assert opts.fit.max_nfev == 20 and opts.profile.fine is True and opts.noise.model_jitter == "none"
     with pytest.raises(dataclasses.FrozenInstanceError):
         opts.fit.max_nfev = 3
+    with pytest.raises(ValueError, match=r"fit\.max_nfev=0 is not allowed: an integer >= 1"):
+        OPTION_TABLES["fit"](max_nfev=0)             # built directly, checked alike
     for key in REMOVED_WORKFLOW_KEYS:            # removed settings exist in no table
         assert all(key not in {f.name for f in dataclasses.fields(c)} for c in OPTION_TABLES.values())
 
@@ -143,3 +145,15 @@ def test_init_refuses_to_overwrite_and_needs_two_conditions(tmp_path, capsys):
     one = _folder(tmp_path / "one", cond="id,w_i\na,35\n", obs="condition,observable,time,value,uncertainty\na,p_inj,0.1,1,1\n")
     assert main(["discrepancy", "init", "--measured", str(one), "--out", str(tmp_path / "x.toml")]) == 2
     assert "at least 2 conditions" in capsys.readouterr().err
+
+
+def test_random_starts_lie_inside_the_bounds_and_repeat_with_the_seed():
+    from sweep.discrepancy.problem import random_starts
+    from sweep.discrepancy.spec import CalibParam
+
+    params = (CalibParam("kbar", 5e-4, 5e-3, 1e-3), CalibParam("E", 150.0, 700.0, 331.0, scale="linear"))
+    xs = random_starts(params, 50, seed=3)
+    lo, hi = np.array([p.x_bounds for p in params]).T
+    assert len(xs) == 50 and all(np.all((lo <= x) & (x <= hi)) for x in xs)
+    assert np.array_equal(np.vstack(xs), np.vstack(random_starts(params, 50, seed=3)))
+    assert random_starts(params, 0, 3) == [] and random_starts(params, -2, 3) == []

@@ -11,7 +11,7 @@ import numpy as np
 
 from . import stats
 from .observables import CURVES
-from .problem import Fit, Problem
+from .problem import Fit, Problem, random_starts
 
 log = logging.getLogger("dchfrac.discrepancy")
 
@@ -130,10 +130,7 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
     x_init = np.array([p.to_x(p.initial) for p in base_fit.params] + [probe])
     if not any(np.allclose(x_init, s_) for s_ in starts):
         starts.append(x_init)
-    rng = np.random.default_rng(spec.fit.seed)
-    for _ in range(max(0, spec.fit.starts - len(starts))):
-        lb = np.array([p.x_bounds[0] for p in params]); ub = np.array([p.x_bounds[1] for p in params])
-        starts.append(lb + rng.random(len(params)) * (ub - lb))
+    starts += random_starts(params, spec.fit.starts - len(starts), spec.fit.seed)
     f = problem.fit(params, starts, train)
     ser = problem.series[problem.mask(train)]
     w = stats.series_weights(f.r, ser)        # weights from the richer model, applied to both

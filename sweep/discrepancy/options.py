@@ -28,9 +28,26 @@ def _rule(default, kind: str, lo=None, hi=None, lo_open=False, hi_open=False, ch
                                             "hi_open": hi_open, "choices": tuple(choices), "odd": odd, "doc": doc})
 
 
+class _Checked:
+    """Validation of every field by its rule on construction (one loop, as solver.options.RunOptions); a
+    float field given as an int is stored as a float.  ``TABLE``: the SPEC table, for the messages."""
+
+    TABLE = ""
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not _ok(f, v):
+                raise ValueError(f"discrepancy spec: {self.TABLE}.{f.name}={v!r} is not allowed: {_allowed(f)}")
+            if f.metadata["kind"] == "float":
+                object.__setattr__(self, f.name, float(v))
+
+
 @dataclass(frozen=True)
-class FitOptions:
+class FitOptions(_Checked):
     """Bounded robust least squares (scipy TRF) on standardized residuals."""
+
+    TABLE = "fit"
 
     loss: str = _rule("soft_l1", "choice", choices=("soft_l1", "linear", "huber", "cauchy", "arctan"),
                       doc="robust loss of scipy.optimize.least_squares")
@@ -44,8 +61,10 @@ class FitOptions:
 
 
 @dataclass(frozen=True)
-class AcceptanceOptions:
+class AcceptanceOptions(_Checked):
     """When an effect is named or tied: evidence, screening and the residual test."""
+
+    TABLE = "acceptance"
 
     delta_bic: float = _rule(-10.0, "float", hi=0.0, doc="BIC change a candidate's refit must reach (<=)")
     tie_bic: float = _rule(10.0, "float", 0.0, doc="passing candidates within this BIC (common weights) tie")
@@ -62,8 +81,10 @@ class AcceptanceOptions:
 
 
 @dataclass(frozen=True)
-class NoiseOptions:
+class NoiseOptions(_Checked):
     """The error model beside the measured uncertainties (noise.py)."""
+
+    TABLE = "noise"
 
     disc_error_fraction: float = _rule(0.5, "float", 0.0, 1.0,
                                        doc="this fraction of the discretization correction added to sigma")
@@ -79,8 +100,10 @@ class NoiseOptions:
 
 
 @dataclass(frozen=True)
-class ProfileOptions:
+class ProfileOptions(_Checked):
     """The named strength's profile-likelihood interval (profile.py)."""
+
+    TABLE = "profile"
 
     expand: int = _rule(3, "int", 0, 10, doc="doublings of the bracket beyond the Wald bound")
     refine: int = _rule(2, "int", 0, 10, doc="evaluations refining each bound (regula falsi in sqrt(delta chi2))")
@@ -151,15 +174,12 @@ def _ok(f, v) -> bool:
 
 
 def _table(name: str, cls, d: dict):
-    """One option table: unknown keys named, every field checked by its rule (one loop)."""
+    """One option table: unknown keys named; the values checked by the dataclass itself."""
     known = {f.name: f for f in fields(cls)}
     unknown = sorted(set(d) - set(known))
     if unknown:
         raise ValueError(f"discrepancy spec: [{name}] {unknown} unknown; keys allowed: {sorted(known)}")
-    for key, f in known.items():
-        if key in d and not _ok(f, d[key]):
-            raise ValueError(f"discrepancy spec: {name}.{key}={d[key]!r} is not allowed: {_allowed(f)}")
-    return cls(**{k: (float(v) if known[k].metadata["kind"] == "float" else v) for k, v in d.items()})
+    return cls(**d)                              # every field checked by __post_init__
 
 
 def _reject_workflow_table(wf: dict) -> None:

@@ -24,7 +24,7 @@ from .noise import NoiseModel
 from .observables import CURVES
 from .spec import DiscrepancySpec
 
-__all__ = ["Fit", "Problem", "values_to_overrides"]
+__all__ = ["Fit", "Problem", "values_to_overrides", "random_starts"]
 
 
 @dataclass
@@ -62,6 +62,15 @@ def values_to_overrides(spec: DiscrepancySpec, base: dict, condition: dict, valu
             o[k] = v
     o.update(condition)
     return o
+
+
+def random_starts(params, n: int, seed: int) -> list:
+    """``n`` (<= 0: none) start points drawn uniformly inside the bounds of ``params`` (internal coordinates),
+    from a generator seeded with ``seed``."""
+    rng = np.random.default_rng(seed)
+    lb = np.array([p.x_bounds[0] for p in params])
+    ub = np.array([p.x_bounds[1] for p in params])
+    return [lb + rng.random(len(params)) * (ub - lb) for _ in range(max(0, n))]
 
 
 def _phases(data: MeasuredData, cond, obs, t, y) -> np.ndarray:

@@ -7,7 +7,6 @@ correlated in time (:class:`RealizationCovariance`).  Units those of the observa
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np

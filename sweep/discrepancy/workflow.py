@@ -22,7 +22,7 @@ from .data import MeasuredData
 from .evidence import compare_passing, free_columns, gap, localize, refit, screen, wald_bounds
 from .ledger import RunLedger
 from .noise import add_discretization_error, add_model_jitter, rms_per_observable
-from .problem import Fit, Problem
+from .problem import Fit, Problem, random_starts
 from .profile import profile_recentred
 from .realizations import realizations
 from .report import build_report, jsonable, write_report
@@ -106,12 +106,8 @@ def calibrate(run: WorkflowRun) -> None:
     """Fit the baseline parameters on the training conditions (the spec's initial values, then random
     starts); its held-out gap and where it misses."""
     spec, params = run.spec, tuple(run.spec.calibrate)
-    starts = [np.array([p.to_x(p.initial) for p in params])]
-    rng = np.random.default_rng(spec.fit.seed)
-    lb = np.array([p.x_bounds[0] for p in params])
-    ub = np.array([p.x_bounds[1] for p in params])
-    for _ in range(spec.fit.starts - 1):
-        starts.append(lb + rng.random(len(params)) * (ub - lb))
+    starts = [np.array([p.to_x(p.initial) for p in params])] + random_starts(params, spec.fit.starts - 1,
+                                                                           spec.fit.seed)
     run.fit0 = run.current = run.problem.fit(params, starts, run.train)
     run.gap_before = run.gap_cur = gap(run.problem, run.fit0.params, run.fit0.x, run.holdout)
     run.loc0 = run.loc = localize(run.problem, run.fit0, run.train)
