@@ -48,6 +48,12 @@ def test_registry_is_the_loaders_and_the_forward_models_list(tmp_path):
         observables_from_timeseries(ts.drop(columns="front_radius_branches"), {"front_radius_branches": [0.1]}, 5.0)
     d = load_measured(_folder(tmp_path))
     assert d.times("w50", "front_radius_branches").tolist() == [0.2]
+    from sweep.discrepancy.twins import twin_observables
+
+    camp = {"data": {"observables": ["p_inj", "front_radius_branches"]}}
+    assert twin_observables(camp, {"name": "t"}) == ("p_inj", "front_radius_branches")
+    with pytest.raises(ValueError, match=r"\['front_radius'\] not among the registered"):
+        twin_observables({"data": {"observables": ["p_inj", "front_radius"]}}, {"name": "t"})
 
 
 # ----------------------------------------------------------------------------- option tables
