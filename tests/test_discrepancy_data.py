@@ -100,6 +100,6 @@ def test_spec_validation():
                        ({"candidates": {"effects": ["crack_permeability"]}}, "off in the baseline"),
                        ({"holdout": {}}, "whole conditions"),
                        ({"options": {"h": -1.0}}, r"\[options\]"),
-                       ({"workflow": {"delta_bik": -10}}, "keys among")]:
+                       ({"fit": {"delta_bik": -10}}, r"\[fit\] \[.delta_bik.\] unknown")]:
         with pytest.raises(ValueError, match=match):
             spec_from_dict({**BASE_SPEC, **bad})

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from sweep.discrepancy import ToyForward, run_workflow, spec_from_dict, stats
-from sweep.discrepancy.jitter import estimate_model_jitter, step_values
+from sweep.discrepancy.jitter import step_values
+from sweep.discrepancy.noise import model_jitter_at as estimate_model_jitter
 from sweep.discrepancy.realizations import RealizationCovariance, _mixture_with_jitter
-from test_discrepancy_workflow import OFF, _JitteryToy, _spec, _twin
+from test_discrepancy_workflow import OFF, _JitteryToy, _spec_with, _twin
 
 A = 1.5   # kPa: the sd of the pseudo-random jitter below
 
@@ -40,11 +41,10 @@ class _NoisyToy(ToyForward):
 
 
 def _problem(tmp_path, fwd, observables=("p_inj", "front_radius_mean")):
-    from sweep.discrepancy.workflow import Problem
+    from sweep.discrepancy.problem import Problem
 
     data = _twin(tmp_path, {"beta": 40.0}, observables=observables)
-    spec = _spec(cands=["damage_viscosity"], calibrate=("E",))
-    spec.workflow.update(max_nfev=50)
+    spec = _spec_with({"fit": {"max_nfev": 50}}, cands=["damage_viscosity"], calibrate=("E",))
     prob = Problem(data, spec, fwd)
     params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
     return prob, params
@@ -103,10 +103,11 @@ def test_covariance_with_jitter_whitens_to_the_gls_chi2(tmp_path):
     n = prob.y.size
     rng = np.random.default_rng(5)
     fines = prob.y[None, :] + rng.normal(scale=0.5, size=(4, n)).cumsum(axis=1) * 0.1
-    rc = RealizationCovariance.estimate(fines, prob)
+    rc = RealizationCovariance.estimate(fines, prob.layout)
     mj = ModelJitter(variance=rng.uniform(0.5, 2.0, n), tau={"p_inj": 0.05, "front_radius_mean": 0.0},
                      rho={}, per_parameter_rms={}, at={})
-    prob.real_cov = rc.with_jitter(mj.blocks(prob))
+    prob.noise.set_discretization(np.zeros(n), fines, 0.5)     # the realization covariance rc, no correction
+    prob.noise.set_jitter(mj)
     diff = rng.normal(size=n)
     mask = np.ones(n, bool)
     r = prob.standardize(diff, mask, 50.0)
@@ -138,7 +139,7 @@ def test_jitter_in_the_likelihood_brings_the_truth_back_into_the_profile_interva
     """The toy whose p_inj jitters with β (amplitude 2 kPa, period 3 kPa·s): without the jitter term the
     profile interval is falsely narrow and misses β = 40 (and is flagged rough); with it, the interval
     contains 40 and is wider."""
-    from sweep.discrepancy.workflow import _attach_jitter, profile_interval
+    from sweep.discrepancy.profile import profile_interval
 
     out = {}
     for mode in ("none", "estimated"):
@@ -146,8 +147,7 @@ def test_jitter_in_the_likelihood_brings_the_truth_back_into_the_profile_interva
         train = ["a", "b", "c"]
         x0 = np.array([params[0].to_x(params[0].initial), 40.0])
         if mode == "estimated":
-            prob.jitter = estimate_model_jitter(prob, {"E": 331.0, "effect:damage_viscosity": 40.0}, params)
-            _attach_jitter(prob)
+            prob.noise.set_jitter(estimate_model_jitter(prob, {"E": 331.0, "effect:damage_viscosity": 40.0}, params))
         fit = prob.fit(params, [x0], train)
         out[mode] = profile_interval(prob, fit, 1, train)
     lo0, hi0 = out["none"]["lower"], out["none"]["upper"]
@@ -165,7 +165,7 @@ def test_workflow_reports_the_jitter_and_the_spec_checks_its_options(tmp_path):
     d = {"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
          "candidates": {"effects": ["damage_viscosity", "compliant_boundary"]}, "holdout": {"ids": ["d"]},
          "options": {"h": 8.0, "t_end": 1.0}}
-    reps = {mode: run_workflow(data, spec_from_dict({**d, "workflow": {"model_jitter": mode}}),
+    reps = {mode: run_workflow(data, spec_from_dict({**d, "noise": {"model_jitter": mode}}),
                                _NoisyToy({}, h=8.0, white=False), figures=False) for mode in ("none", "estimated")}
     for rep in reps.values():
         assert rep["verdict"] == "named" and rep["named_effect"] == "damage_viscosity"
@@ -183,7 +183,7 @@ def test_workflow_reports_the_jitter_and_the_spec_checks_its_options(tmp_path):
     for key, bad, msg in [("model_jitter", "yes", '"none" or "estimated"'), ("model_jitter_steps", 6, "odd integer"),
                           ("model_jitter_rel_step", 0.0, r"\(0, 0.5\)")]:
         with pytest.raises(ValueError, match=msg):
-            spec_from_dict({**d, "workflow": {key: bad}})
+            spec_from_dict({**d, "noise": {key: bad}})
 
 
 # ----------------------------------------------------------------------------- smoothed (MCAP) profile
@@ -240,7 +240,7 @@ def test_smoothed_profile_in_the_workflow(tmp_path):
     d = {"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
          "candidates": {"effects": ["damage_viscosity", "compliant_boundary"]}, "holdout": {"ids": ["d"]},
          "options": {"h": 8.0, "t_end": 1.0},
-         "workflow": {"model_jitter": "estimated", "profile_smoothing": "quadratic", "profile_grid": 3}}
+         "noise": {"model_jitter": "estimated"}, "profile": {"smoothing": "quadratic", "grid": 3}}
     rep = run_workflow(data, sfd(d), _NoisyToy({}, h=8.0, white=False), out_dir=tmp_path / "out", figures=False)
     md = (tmp_path / "out" / "report.md").read_text()
     assert "Smoothed profile (quadratic" in md and "Coarse model's jitter in its parameters (named" in md
@@ -257,9 +257,9 @@ def test_smoothed_profile_in_the_workflow(tmp_path):
     lo, hi = rep["strength_interval"]
     assert (lo, hi) == (pr["lower"], pr["upper"]) == (pytest.approx(max(q["lower"], 0.0)), pytest.approx(q["upper"]))
     assert rep["accepted"][0]["strength_interval_raw"] == pr["raw"]
-    for key, bad in (("profile_smoothing", "loess"), ("profile_grid", 1)):
-        with pytest.raises(ValueError, match=key):
-            sfd({**d, "workflow": {key: bad}})
+    for key, bad in (("smoothing", "loess"), ("grid", 1)):
+        with pytest.raises(ValueError, match=f"profile.{key}"):
+            sfd({**d, "profile": {key: bad}})
 
 
 def test_passing_candidates_are_compared_under_common_weights():
@@ -268,7 +268,7 @@ def test_passing_candidates_are_compared_under_common_weights():
     the common (per-series minimum) weights they are equal to rounding, so the tie rule sees a tie."""
     from types import SimpleNamespace
 
-    from sweep.discrepancy.workflow import compare_passing
+    from sweep.discrepancy.evidence import compare_passing
 
     rng = np.random.default_rng(4)
     n = 60
@@ -289,7 +289,7 @@ def test_recentring_ignores_a_dip_within_the_profiles_scatter():
     """A smoothed profile whose lowest point lies below the fit by less than twice the points' scatter about
     the quadratic is noise: no re-centring.  The same dip without smoothing, or a dip deeper than the scatter,
     re-centres."""
-    from sweep.discrepancy.workflow import recentre_target
+    from sweep.discrepancy.profile import recentre_target
 
     v = np.linspace(0.6, 1.1, 11)
     d = 40.0 * (v - 0.85) ** 2 + np.array([0.0, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5, 0.0])

@@ -118,7 +118,7 @@ def test_effect_outside_the_catalogue_is_unexplained(tmp_path):
 def test_catalogue_effect_plus_an_outside_effect_is_a_partial_explanation_not_a_name(tmp_path):
     """Hidden β = 40 plus a small anomaly outside the catalogue (6 kPa sine): β passes every acceptance test,
     but the model with it still misses systematically, so nothing is named (never a confident wrong name);
-    the report keeps β as a partial explanation.  With the rule switched off the same run names β."""
+    the report keeps β as a partial explanation."""
     data = _twin(tmp_path, {"beta": 40.0}, anomaly=0.2)
     rep = run_workflow(data, _spec(), ToyForward({}, h=8.0), out_dir=tmp_path / "out", figures=False)
     assert rep["verdict"] == "unexplained_discrepancy" and rep["named_effect"] is None
@@ -127,11 +127,6 @@ def test_catalogue_effect_plus_an_outside_effect_is_a_partial_explanation_not_a_
     assert pe["gap_after"]["total"] < 0.6 * rep["gap_before"]["total"]
     assert any(v["systematic"] for v in pe["localization_after"]["series"].values())
     assert "Partial explanation only" in (tmp_path / "out" / "report.md").read_text()
-    spec = _spec()
-    spec.workflow.update(named_needs_noise_level=False)
-    rep2 = run_workflow(data, spec, ToyForward({}, h=8.0))
-    assert rep2["verdict"] == "named" and rep2["named_effect"] == "damage_viscosity"
-    assert rep2["partial_explanation"] is None
 
 
 def test_confounded_with_a_baseline_parameter_is_not_identifiable(tmp_path):
@@ -222,7 +217,7 @@ def test_discretization_correction_is_refreshed_at_the_named_model(tmp_path):
                                   "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
                                   "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
                                                 {"name": "E", "lower": 150.0, "upper": 700.0}]},
-                               "workflow": {"disc_refresh": n, "profile_fine": False}})
+                               "noise": {"disc_refresh": n}, "profile": {"fine": False}})
         reps[n] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.05),
                                fine_forward=ToyForward({}, h=2.0, beta_mesh=0.05))
         assert reps[n]["named_effect"] == "damage_viscosity"
@@ -250,7 +245,7 @@ def test_profile_points_corrected_where_they_are(tmp_path):
                                "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
                                "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
                                              {"name": "E", "lower": 150.0, "upper": 700.0}],
-                               "workflow": {"disc_refresh": 0, "profile_fine": pf}})
+                               "noise": {"disc_refresh": 0}, "profile": {"fine": pf}})
         reps[pf] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.05),
                                 fine_forward=ToyForward({}, h=2.0, beta_mesh=0.05))
         assert reps[pf]["named_effect"] == "damage_viscosity"
@@ -277,7 +272,7 @@ def test_discretization_refresh_iterates_to_its_fixed_point(tmp_path):
                                "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
                                "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
                                              {"name": "E", "lower": 150.0, "upper": 700.0}],
-                               "workflow": {"disc_refresh": n, "disc_refresh_tol": 0.01}})
+                               "noise": {"disc_refresh": n, "disc_refresh_tol": 0.01}})
         reps[n] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.1),
                                fine_forward=ToyForward({}, h=2.0, beta_mesh=0.1))
         assert reps[n]["named_effect"] == "damage_viscosity"
@@ -304,8 +299,8 @@ def test_discretization_refresh_iterates_to_its_fixed_point(tmp_path):
 @pytest.mark.parametrize("key, value", [("disc_refresh", -1), ("disc_refresh", 2.5), ("disc_refresh", True),
                                         ("disc_refresh_tol", 0.0), ("disc_refresh_tol", 1.5), ("disc_refresh_tol", "x")])
 def test_spec_rejects_bad_refresh_settings(key, value):
-    with pytest.raises(ValueError, match=f"workflow.{key}"):
-        spec_from_dict({**_DISC_SPEC, "workflow": {key: value}})
+    with pytest.raises(ValueError, match=f"noise.{key}={value!r} is not allowed"):
+        spec_from_dict({**_DISC_SPEC, "noise": {key: value}})
 
 
 # ----------------------------------------------------------------------------- mesh realizations
@@ -329,26 +324,26 @@ class _Offset(ToyForward):
 
 
 def _problem(tmp_path, spec=None):
-    from sweep.discrepancy.workflow import Problem
+    from sweep.discrepancy.problem import Problem
 
     return Problem(_twin(tmp_path, {"beta": 40.0}), spec or _spec(), ToyForward({}, h=8.0))
 
 
-def _spec_with(workflow: dict, **kw):
+def _spec_with(tables: dict, **kw):
+    """The toy spec with option tables {table: {key: value}} ([fit], [acceptance], [noise], [profile])."""
     spec = _spec(**kw)
     return spec_from_dict({"baseline": {"effects_off": OFF},
                            "calibrate": [{"name": p.name, "lower": p.lower, "upper": p.upper} for p in spec.calibrate],
                            "candidates": {"effects": list(spec.candidates)}, "holdout": {"ids": ["d"]},
-                           "options": {"h": 8.0, "t_end": 1.0}, "workflow": workflow})
+                           "options": {"h": 8.0, "t_end": 1.0}, **tables})
 
 
-@pytest.mark.parametrize("cov", ["diagonal", "correlated"])
-def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread(tmp_path, cov):
+def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread(tmp_path):
     import statistics
 
-    from sweep.discrepancy.workflow import add_discretization_error
+    from sweep.discrepancy.noise import add_discretization_error
 
-    prob = _problem(tmp_path, _spec_with({"realization_covariance": cov}))
+    prob = _problem(tmp_path, _spec_with({}))
     y0, s0 = prob.y.copy(), prob.sig.copy()
     offsets = {"p_inj": [0.3, -0.1, 0.7], "front_radius_mean": [0.05, 0.0, 0.1], "crack_length": [0.0, 0.02, -0.02]}
     # realization k fails (NaN) after fail_after s in the conditions with these w_i: in a (w_i = 30) two are
@@ -356,7 +351,7 @@ def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread
     rules = [((70.0,), 0.95), ((50.0, 70.0), 0.9), ((30.0, 50.0, 70.0), 0.8)]
     fines = [_Offset({o: d[k] for o, d in offsets.items()}, fail_w=w, fail_after=ta) for k, (w, ta) in enumerate(rules)]
     rms = add_discretization_error(prob, fines)
-    frac = prob.spec.wf("disc_error_fraction")
+    frac = prob.spec.noise.disc_error_fraction
     counts = {0: 0, 1: 0, 2: 0, 3: 0}
     for n in range(y0.size):
         d, w_i, t = offsets[prob.obs[n]], CONDS[prob.cond[n]]["w_i"], prob.t[n]
@@ -365,14 +360,12 @@ def test_mesh_realizations_correct_by_their_mean_and_widen_sigma_by_their_spread
         err = statistics.mean(used) if used else 0.0
         sd = statistics.stdev(used) if len(used) >= 2 else 0.0
         assert prob.y[n] == pytest.approx(y0[n] - err, rel=0, abs=1e-9)
-        if cov == "diagonal":
-            assert prob.sig[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2 + sd**2), rel=1e-9)
-        else:   # the realization term is a covariance (see the GLS test below); σ_diag has the rest
-            assert prob.sig_diag[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2), rel=1e-9)
-            assert prob.sig[n] >= prob.sig_diag[n]
+        # the realization term is a covariance (see the GLS test below); σ_diag has the rest
+        assert prob.sig_diag[n] == pytest.approx(np.sqrt(s0[n] ** 2 + (frac * err) ** 2), rel=1e-9)
+        assert prob.sig[n] >= prob.sig_diag[n]
         assert prob.realization_spread[n] == pytest.approx(sd, rel=1e-9, abs=1e-12)
     assert min(counts.values()) > 0                           # 0, 1, 2 and 3 finite realizations all occur
-    assert (prob.real_cov is None) == (cov == "diagonal")
+    assert prob.real_cov is not None and prob.real_cov.k == 3
     assert set(rms) == {"p_inj", "front_radius_mean", "crack_length"} and rms["p_inj"] > 0
 
 
@@ -396,7 +389,7 @@ class _Wander(ToyForward):
 def test_correlated_realizations_give_the_generalized_least_squares_residual(tmp_path):
     """r·r = dᵀ Σ⁻¹ d with the dense Σ = diag(σ_diag²) + C (per-series blocks), on any subset of conditions;
     the correlation time comes out long for smooth deviations and zero for memoryless ones."""
-    from sweep.discrepancy.workflow import add_discretization_error
+    from sweep.discrepancy.noise import add_discretization_error
 
     prob = _problem(tmp_path)
     devs = [(3.0, -2.0, 0.5, 1), (-4.0, 5.0, 0.5, 2), (1.0, 9.0, 0.5, 3), (6.0, -1.0, 0.5, 4)]
@@ -432,7 +425,7 @@ def test_correlated_realizations_give_the_generalized_least_squares_residual(tmp
 
 
 def test_one_forward_or_a_list_of_one_is_the_unchanged_correction(tmp_path):
-    from sweep.discrepancy.workflow import add_discretization_error
+    from sweep.discrepancy.noise import add_discretization_error
 
     fine = ToyForward({}, h=2.0)
     ref = _problem(tmp_path)
@@ -446,7 +439,7 @@ def test_one_forward_or_a_list_of_one_is_the_unchanged_correction(tmp_path):
     err = vec(fine) - vec(ToyForward({}, h=8.0))
     err = np.where(np.isfinite(err), err, 0.0)
     y_exp = y0 - err
-    s_exp = np.sqrt(s0**2 + (ref.spec.wf("disc_error_fraction") * err) ** 2)
+    s_exp = np.sqrt(s0**2 + (ref.spec.noise.disc_error_fraction * err) ** 2)
     for arg in (fine, [fine], (fine,)):
         prob = _problem(tmp_path / type(arg).__name__)
         add_discretization_error(prob, arg)
@@ -486,9 +479,22 @@ def test_spec_rejects_bad_mesh_seeds(seeds):
 
 
 @pytest.mark.parametrize("value", ["yes", 1, None])
-def test_spec_rejects_a_non_boolean_noise_level_rule(value):
-    with pytest.raises(ValueError, match="named_needs_noise_level.*true or false"):
-        spec_from_dict({**_DISC_SPEC, "workflow": {"named_needs_noise_level": value}})
+def test_spec_rejects_a_non_boolean_profile_fine(value):
+    with pytest.raises(ValueError, match=r"profile.fine=.* is not allowed: true or false"):
+        spec_from_dict({**_DISC_SPEC, "profile": {"fine": value}})
+
+
+def test_spec_refuses_the_former_workflow_table_naming_where_each_key_went():
+    """The string-keyed [workflow] table is gone: each key is named with its new table, or why it was removed."""
+    with pytest.raises(ValueError) as exc:
+        spec_from_dict({**_DISC_SPEC, "workflow": {"max_nfev": 8, "profile_fine": False, "diff_step": 0.02,
+                                                   "interval": "wald", "bogus": 1}})
+    msg = str(exc.value)
+    for part in ("max_nfev -> [fit] max_nfev", "profile_fine -> [profile] fine", "diff_step -> removed",
+                 "interval -> removed", "bogus -> unknown"):
+        assert part in msg
+    with pytest.raises(ValueError, match=r"\[acceptance\] \['tie_bik'\] unknown"):
+        spec_from_dict({**_DISC_SPEC, "acceptance": {"tie_bik": 10.0}})
 
 
 def test_spec_rejects_mesh_seed_with_mesh_seeds():
@@ -582,11 +588,10 @@ def test_twins_refuse_data_on_a_checked_mesh_realization(tmp_path):
 
 # ----------------------------------------------------------------------------- profile-likelihood interval
 def _named_fit(tmp_path, calibrate, train=("a", "b", "c"), observables=("p_inj", "front_radius_mean"), loss="soft_l1"):
-    from sweep.discrepancy.workflow import Problem
+    from sweep.discrepancy.problem import Problem
 
     data = _twin(tmp_path, {"beta": 40.0}, observables=observables)
-    spec = _spec(cands=["damage_viscosity"], calibrate=calibrate)
-    spec.workflow.update(loss=loss, max_nfev=50)
+    spec = _spec_with({"fit": {"loss": loss, "max_nfev": 50}}, cands=["damage_viscosity"], calibrate=calibrate)
     prob = Problem(data, spec, ToyForward({}, h=2.0))
     params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
     x0 = [p.to_x(p.initial) for p in spec.calibrate] + [30.0]
@@ -594,7 +599,7 @@ def _named_fit(tmp_path, calibrate, train=("a", "b", "c"), observables=("p_inj",
 
 
 def test_profile_interval_equals_wald_for_a_model_linear_in_the_strength(tmp_path):
-    from sweep.discrepancy.workflow import profile_interval
+    from sweep.discrepancy.profile import profile_interval
 
     # nothing else calibrated, one series (p_inj of one condition, so one weight) fitted by plain least
     # squares, p_inj linear in β: Δχ²(β) is exactly the Wald parabola about the fit
@@ -638,11 +643,11 @@ def test_profile_interval_flags_a_rough_profile(tmp_path, jittery):
     """The profile of a smooth model is monotone away from its minimum (roughness 0, not flagged); with the
     output jittering in the strength it falls away from the fit by more than profile_rough_tol of its
     threshold, and the flag says so."""
-    from sweep.discrepancy.workflow import Problem, profile_interval
+    from sweep.discrepancy.problem import Problem
+    from sweep.discrepancy.profile import profile_interval
 
     data = _twin(tmp_path, {"beta": 40.0}, observables=("p_inj",))
-    spec = _spec(cands=["damage_viscosity"], calibrate=("E",))
-    spec.workflow.update(max_nfev=50)
+    spec = _spec_with({"fit": {"max_nfev": 50}}, cands=["damage_viscosity"], calibrate=("E",))
     fwd = _JitteryToy({}, h=2.0) if jittery else ToyForward({}, h=2.0)
     prob = Problem(data, spec, fwd)
     params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
@@ -658,18 +663,20 @@ def test_profile_interval_flags_a_rough_profile(tmp_path, jittery):
 def test_profile_recentres_a_fit_that_stopped_short_of_the_minimum(tmp_path):
     """A budget-limited joint fit (2 evaluations from β = 10, truth 40) leaves the profile a lower χ²
     elsewhere; the re-centred fit must sit at the profile's minimum (no point below it) and be reported."""
-    from sweep.discrepancy.workflow import Problem, profile_interval, profile_recentred
+    from dataclasses import replace
+
+    from sweep.discrepancy.problem import Problem
+    from sweep.discrepancy.profile import profile_interval, profile_recentred
 
     data = _twin(tmp_path, {"beta": 40.0})
-    spec = _spec(cands=["damage_viscosity"], calibrate=("E",))
-    spec.workflow.update(max_nfev=2)
+    spec = _spec_with({"fit": {"max_nfev": 2}}, cands=["damage_viscosity"], calibrate=("E",))
     prob = Problem(data, spec, ToyForward({}, h=2.0))
     params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
     train = ["a", "b", "c"]
     short = prob.fit(params, [np.array([params[0].to_x(params[0].initial), 10.0])], train)
     first = profile_interval(prob, short, 1, train)
     assert min(q["delta_chi2"] for q in first["points"]) < -0.01 * first["threshold"]   # the premise
-    spec.workflow.update(max_nfev=50)
+    prob.spec = replace(spec, fit=replace(spec.fit, max_nfev=50))
     fit, pr = profile_recentred(prob, short, 1, train)
     assert pr["recentred"] and pr["recentred"][0]["strength"] == pytest.approx(short.values()["effect:damage_viscosity"])
     assert min(q["delta_chi2"] for q in pr["points"]) >= -0.01 * pr["threshold"]
@@ -682,7 +689,7 @@ def test_profile_recentres_a_fit_that_stopped_short_of_the_minimum(tmp_path):
 
 
 def test_profile_interval_matches_a_brute_force_profile(tmp_path):
-    from sweep.discrepancy.workflow import profile_interval
+    from sweep.discrepancy.profile import profile_interval
 
     prob, fit, train = _named_fit(tmp_path, calibrate=("E",))
     pr = profile_interval(prob, fit, 1, train)
@@ -728,13 +735,10 @@ _CHECKS6 = _CHECKS + [(-0.5, 0.4), (1.0, -0.9), (-1.0, 0.5)]   # six, as the sol
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_realization_shaped_deviation_is_not_a_missing_effect(tmp_path, seed):
     """The negative control of the solver twins in miniature: data from the baseline on another mesh
-    realization.  Per-point variances read its curve-wide front shift as systematic in every condition
-    (unexplained_discrepancy, the failure measured with the solver); the correlated covariance does not."""
+    realization: its curve-wide front shift, which per-point variances read as systematic in every condition,
+    is one realization's wander under the correlated covariance, not a missing effect."""
     fines = [_Family(a, c) for a, c in _CHECKS]
     data = load_measured(make_twin(tmp_path / "data", _Family(*_DATA_REAL), CONDS, TIMES, DATA_BASE, seed=seed))
-    diag = run_workflow(data, _spec_with({"realization_covariance": "diagonal"}), ToyForward({}, h=8.0), fine_forward=fines)
-    assert diag["verdict"] == "unexplained_discrepancy"
-    assert all(diag["localization_before"]["series"][f"{c}/front_radius_mean"]["systematic"] for c in "abc")
     corr = run_workflow(data, _spec_with({}), ToyForward({}, h=8.0), fine_forward=fines)
     assert corr["verdict"] == "no_missing_effect" and corr["named_effect"] is None
     assert not corr["localization_before"]["systematic"]
@@ -751,21 +755,6 @@ def test_correlated_realizations_still_name_a_hidden_effect(tmp_path, hidden, ef
     lo, hi = rep["strength_interval"]
     assert lo <= truth <= hi and lo > 0
     assert rep["gap_after"]["total"] <= 0.5 * rep["gap_before"]["total"]
-
-
-def test_correlated_realizations_leave_an_out_of_catalogue_effect_unexplained(tmp_path):
-    """Three realizations, the residual test taking their covariance as known ("known_covariance"): flagged.
-    (With the calibrated test three realizations leave the scale too uncertain, λ ~ 2/χ²₂, to flag the
-    6 kPa sine: the six-realization test below.)"""
-    fines = [_Family(a, c) for a, c in _CHECKS]
-    data = load_measured(make_twin(tmp_path / "data", _Family(*_DATA_REAL, anomaly=0.2), CONDS, TIMES, DATA_BASE, seed=1))
-    rep = run_workflow(data, _spec_with({"systematic_null": "known_covariance"}), ToyForward({}, h=8.0), fine_forward=fines)
-    assert rep["verdict"] == "unexplained_discrepancy" and rep["named_effect"] is None
-
-
-def test_spec_rejects_a_bad_realization_covariance():
-    with pytest.raises(ValueError, match="realization_covariance='full'"):
-        spec_from_dict({**_DISC_SPEC, "workflow": {"realization_covariance": "full"}})
 
 
 def test_a_profile_reaching_off_reports_the_effect_not_identifiable(tmp_path, monkeypatch):
@@ -842,11 +831,10 @@ def test_twin_observable_subsets_and_summary_merge(tmp_path):
     assert not list(f.parent.glob(".summary.json.*.tmp"))
 
 
-@pytest.mark.parametrize("interval", ["profile", "wald"])
-def test_off_is_excluded_by_the_likelihood_ratio_with_profile_intervals(tmp_path, monkeypatch, interval):
-    """With profile intervals "the interval excludes off" is the profile at off (the baseline fit: the
-    calibrated parameters refitted without the effect) against 3.84 × scale, not the Wald bound, which a
-    curved valley makes wrong either way.  A Wald sd made 100x too wide does not stop the profile rule."""
+def test_off_is_excluded_by_the_likelihood_ratio(tmp_path, monkeypatch):
+    """"The interval excludes off" is the profile at off (the baseline fit: the calibrated parameters refitted
+    without the effect) against 3.84 × scale, not the Wald bound, which a curved valley makes wrong either way.
+    A Wald sd made 100x too wide does not stop the rule."""
     from sweep.discrepancy import stats as st
 
     real = st.wald_interval
@@ -856,25 +844,21 @@ def test_off_is_excluded_by_the_likelihood_ratio_with_profile_intervals(tmp_path
         return x_hat - 100 * (x_hat - lo), x_hat + 100 * (hi - x_hat), 100 * sd
 
     monkeypatch.setattr(st, "wald_interval", wide)
-    spec = _spec_with({"interval": interval})
-    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), spec, ToyForward({}, h=8.0))
+    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), _spec_with({}), ToyForward({}, h=8.0))
     row = {c["effect"]: c for c in rep["candidates"]}["damage_viscosity"]
     assert row["lr_off"] > 100.0
-    if interval == "profile":
-        assert row["excludes_off"] and rep["named_effect"] == "damage_viscosity"
-        lo, hi = rep["strength_interval"]
-        assert lo <= 40.0 <= hi
-    else:
-        assert not row["excludes_off"] and rep["named_effect"] is None
+    assert row["excludes_off"] and rep["named_effect"] == "damage_viscosity"
+    lo, hi = rep["strength_interval"]
+    assert lo <= 40.0 <= hi
 
 
 # ----------------------------------------------------------------------------- estimated realization covariance
 def _ou_series_problem(n=15, n_series=2):
-    """Rows of ``n_series`` series of one observable at n times (s): the attributes RealizationCovariance reads."""
-    from types import SimpleNamespace
+    """Rows of ``n_series`` series of one observable at n times (s): the layout RealizationCovariance reads."""
+    from sweep.discrepancy.layout import CurveLayout
 
     t = np.tile(np.linspace(0.02, 0.3, n), n_series)
-    return SimpleNamespace(series=np.repeat(np.arange(n_series), n), obs=np.array(["front_radius_mean"] * t.size), t=t)
+    return CurveLayout(series=np.repeat(np.arange(n_series), n), obs=np.array(["front_radius_mean"] * t.size), t=t)
 
 
 @pytest.mark.parametrize("k", [3, 6])
@@ -958,18 +942,14 @@ def test_six_realizations_leave_an_out_of_catalogue_effect_unexplained_with_the_
     assert run_workflow(data, _spec_with({}), ToyForward({}, h=8.0), fine_forward=fines)["verdict"] == "no_missing_effect"
 
 
-def test_spec_rejects_a_bad_systematic_null():
-    with pytest.raises(ValueError, match="systematic_null='exact'"):
-        _spec_with({"systematic_null": "exact"})
-
-
 def test_profile_bounds_are_refined_to_the_threshold():
     """A bound interpolated from one bracketing point assumes a quadratic profile.  On a profile that is not,
     Δχ²(β) = u² (1 + u²) with u = β − 10 (exact 95 % bounds 10 ± 1.2338; Wald sd 1, so the bracket closes at
     u = 1.96 where Δχ² = 18.6 and the √-interpolation alone gives u = 0.891), two regula-falsi evaluations bring
     each bound to within 0.03 of the exact one."""
     from sweep.discrepancy.spec import CalibParam
-    from sweep.discrepancy.workflow import Fit, profile_interval
+    from sweep.discrepancy.problem import Fit
+    from sweep.discrepancy.profile import profile_interval
 
     cp = CalibParam("effect:damage_viscosity", 0.0, 100.0, 10.0, scale="linear")
 
@@ -992,7 +972,7 @@ def test_profile_bounds_are_refined_to_the_threshold():
     at_fit = Fit((cp,), np.array([10.0]), np.array([0.0]), np.array([[1.0]]), 0.0, 1)
     got = {}
     for refine in (0, 2):
-        prob = Profile1D(_spec_with({"profile_refine": refine}))
+        prob = Profile1D(_spec_with({"profile": {"refine": refine}}))
         pr = profile_interval(prob, at_fit, 0, ["a"])
         got[refine] = (pr["lower"], pr["upper"])
     assert got[0][1] - 10.0 == pytest.approx(1.96 * 1.96 / np.sqrt(1.96**2 * (1 + 1.96**2)), abs=1e-3)   # 0.891
@@ -1000,12 +980,11 @@ def test_profile_bounds_are_refined_to_the_threshold():
     assert abs(got[0][1] - 10.0 - exact) > 0.3
 
 
-@pytest.mark.parametrize("key, value", [("profile_refine", -1), ("profile_refine", 1.5), ("profile_refine_tol", 0.0),
-                                        ("profile_refine_tol", 1.0), ("profile_rough_tol", 0.0),
-                                        ("profile_rough_tol", "0.25")])
+@pytest.mark.parametrize("key, value", [("refine", -1), ("refine", 1.5), ("refine_tol", 0.0),
+                                        ("refine_tol", 1.0), ("rough_tol", 0.0), ("rough_tol", "0.25")])
 def test_spec_rejects_bad_profile_refinement(key, value):
-    with pytest.raises(ValueError, match=f"workflow.{key}"):
-        _spec_with({key: value})
+    with pytest.raises(ValueError, match=f"profile.{key}={value!r} is not allowed"):
+        _spec_with({"profile": {key: value}})
 
 
 @pytest.mark.slow

@@ -2,7 +2,10 @@
 (from solver.effects.EFFECTS), add it, show the held-out gap shrink.  Units mm, s, kPa.
 
     from sweep.discrepancy import load_measured, load_spec, SolverForward, run_workflow
-    CLI: dchfrac discrepancy run --measured DIR --model SPEC --out DIR
+    CLI: dchfrac discrepancy init --measured DIR [--out SPEC]       (a commented starting SPEC from the data)
+         dchfrac discrepancy run --measured DIR --model SPEC --out DIR
+
+How a run goes through the code (stages in workflow.py, pieces in their modules): results/discrepancy/DESIGN_NOTES.md.
 """
 from .cli import add_discrepancy_commands
 from .data import OBSERVABLES, MeasuredData, load_measured, write_measured

@@ -1,4 +1,5 @@
-"""``dchfrac discrepancy run --measured DIR --model SPEC --out DIR`` (argparse), added by the main CLI."""
+"""``dchfrac discrepancy run --measured DIR --model SPEC --out DIR`` and ``dchfrac discrepancy init --measured DIR``
+(argparse), added by the main CLI."""
 from __future__ import annotations
 
 import argparse
@@ -22,21 +23,40 @@ def show_progress(quiet: bool = False) -> None:
 
 
 def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
-    """Add ``discrepancy run`` to an argparse subparsers object; the leaf sets ``func(args) -> int``."""
+    """Add ``discrepancy run`` and ``discrepancy init`` to an argparse subparsers object; each leaf sets
+    ``func(args) -> int``."""
     d = subparsers.add_parser("discrepancy", help="name the missing effect between simulation and measured data",
                               description="Discrepancy workflow (see sweep/discrepancy).")
-    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run}")
+    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init}")
     sub.required = True
     r = sub.add_parser("run", help="calibrate, localize, screen, refit, report")
     r.add_argument("--measured", required=True, help="measured-data folder (conditions.csv, observations.csv)")
     r.add_argument("--model", required=True, help="model SPEC (TOML)")
     r.add_argument("--out", required=True, help="output folder (report.md, report.json, figures, run cache)")
-    r.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: spec workflow.n_jobs)")
+    r.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: the spec's [fit] n_jobs)")
     r.add_argument("--cache", default=None, help="forward-run cache folder (default: OUT/cache)")
     r.add_argument("--no-figures", action="store_true")
     r.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     r.set_defaults(func=cmd_run)
+    i = sub.add_parser("init", help="write a commented starting SPEC from a measured-data folder")
+    i.add_argument("--measured", required=True, help="measured-data folder (conditions.csv, observations.csv)")
+    i.add_argument("--out", default="discrepancy_spec.toml", help="SPEC file to write (default: %(default)s)")
+    i.add_argument("--force", action="store_true", help="overwrite an existing SPEC file")
+    i.set_defaults(func=cmd_init)
     return d
+
+
+def cmd_init(args) -> int:
+    """Validate the measured data and write a starting SPEC (exit 2 with one line on bad input)."""
+    from .init_spec import write_starting_spec
+
+    try:
+        path = write_starting_spec(args.measured, args.out, force=args.force)
+    except ValueError as exc:
+        print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {path}: edit it, then dchfrac discrepancy run --measured {args.measured} --model {path} --out OUT")
+    return 0
 
 
 def cmd_run(args) -> int:
@@ -46,6 +66,7 @@ def cmd_run(args) -> int:
 
     from .data import load_measured
     from .forward import SolverForward, fine_forwards
+    from .observables import ObservableUnavailable
     from .report import ROUGH_NOTE
     from .spec import load_spec
     from .workflow import run_workflow
@@ -59,10 +80,14 @@ def cmd_run(args) -> int:
     show_progress(args.quiet)
     out = Path(args.out)
     cache = Path(args.cache) if args.cache else out / "cache"
-    jobs = args.jobs if args.jobs is not None else spec.wf("n_jobs")
+    jobs = args.jobs if args.jobs is not None else spec.fit.n_jobs
     fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
     fine = fine_forwards(spec, cache, jobs)          # one per mesh realization ([discretization] mesh_seeds)
-    rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
+    try:
+        rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
+    except ObservableUnavailable as exc:       # the solver's time series lacks an observable's column
+        print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
+        return 2
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
                                           f"{rep['strength_interval']}"
                                           + (f" ({ROUGH_NOTE})" if rep.get("strength_interval_rough") else "")

@@ -7,16 +7,18 @@ Format (a folder, units mm, s, kPa)::
                       differ between experiments; empty cells take the model's value.
     observations.csv  columns ``condition, observable, time, value, uncertainty``:
                       condition  an ``id`` of conditions.csv
-                      observable one of OBSERVABLES
+                      observable one of OBSERVABLES (the registry, observables.py:
+                                 p_inj kPa; front_radius_mean, front_radius_branches,
+                                 crack_length mm; regime a label)
                       time       s (finite, >= 0)
-                      value      p_inj in kPa, front_radius_mean and crack_length in mm;
-                                 for ``regime`` a label (e.g. "fracturing"), its time the
-                                 moment of classification
+                      value      in the observable's unit; for ``regime`` a label
+                                 (e.g. "fracturing"), its time the moment of classification
                       uncertainty one standard deviation, same unit as value (> 0; ignored
                                  and may be 0 for regime)
 
 Every problem (missing file or column, unknown observable or condition, NaN,
-negative or zero uncertainty, a condition without observations, duplicated ids)
+negative or zero uncertainty, a condition without observations, duplicated ids,
+a pressure that looks like Pa instead of kPa)
 is a ValueError naming the file, the row (line number in the file, header = line 1)
 and the column.
 """
@@ -31,11 +33,12 @@ import pandas as pd
 
 from solver.params import CHOICE_FIELDS
 
+from .observables import CURVES, LABELS, UNITS
+
 __all__ = ["OBSERVABLES", "CURVE_OBSERVABLES", "UNITS", "MeasuredData", "load_measured", "write_measured"]
 
-CURVE_OBSERVABLES = ("p_inj", "front_radius_mean", "crack_length")
-OBSERVABLES = CURVE_OBSERVABLES + ("regime",)
-UNITS = {"p_inj": "kPa", "front_radius_mean": "mm", "crack_length": "mm", "regime": "label"}
+CURVE_OBSERVABLES = CURVES                 # from the observable registry (observables.py)
+OBSERVABLES = CURVES + LABELS
 OBS_COLUMNS = ("condition", "observable", "time", "value", "uncertainty")
 
 
@@ -200,6 +203,7 @@ def load_measured(folder) -> MeasuredData:
             _err(opath, line, "uncertainty", "zero uncertainty (a standard deviation > 0 is required)")
         recs.append((cid, obs, t, v, u))
     curves = pd.DataFrame(recs, columns=list(OBS_COLUMNS))
+    check_units(opath, odf)
     for cid in ids:
         if not (curves.condition == cid).any() and cid not in regimes:
             line = ids.index(cid) + 2
@@ -210,6 +214,26 @@ def load_measured(folder) -> MeasuredData:
         _err(opath, None, "time", f"duplicated (condition, observable, time) {tuple(curves.iloc[i][:3])}")
     curves = curves.sort_values(["condition", "observable", "time"], kind="stable").reset_index(drop=True)
     return MeasuredData(conditions, curves, regimes)
+
+
+# ------------------------------------------------------------------------------ unit plausibility checks
+# A measured injection pressure above this (kPa) is read as a value given in Pa: the experiments' peak injection
+# pressure is of order 500 kPa (the paper's reference, Sec. 3.5), and 10 MPa is beyond any annulus of the model's.
+PA_SUSPECT_KPA = 1.0e4
+
+
+def check_units(path: Path, odf: pd.DataFrame) -> None:
+    """Reject pressures that look like Pa instead of kPa: the first p_inj row whose value or uncertainty exceeds
+    PA_SUSPECT_KPA is named with its file, row and column.  ``odf``: observations.csv as read (strings; rows
+    already validated)."""
+    rows = odf["observable"].astype(str).str.strip() == "p_inj"
+    for col in ("value", "uncertainty"):
+        v = pd.to_numeric(odf[col].where(rows), errors="coerce").abs()
+        bad = np.flatnonzero((v > PA_SUSPECT_KPA).to_numpy())
+        if bad.size:
+            i = int(bad[0])
+            _err(path, i + 2, col, f"p_inj {col} {odf.at[i, col].strip()} is above {PA_SUSPECT_KPA:g} kPa: a "
+                 "pressure in Pa? The workflow reads kPa (divide Pa by 1000)")
 
 
 def write_measured(folder, conditions: dict, curves: pd.DataFrame, regimes: dict | None = None) -> Path:

@@ -6,7 +6,7 @@ observation times to predicted observables::
 
     predict_many([(overrides, {"p_inj": times, ...}), ...]) -> [{"p_inj": array, ..., "regime": label}, ...]
 
-Units: times s, p_inj kPa, front_radius_mean and crack_length mm.  A failed or
+Units: times s, each observable in its unit (sweep.discrepancy.observables).  A failed or
 short run gives NaN where it has no value (the workflow turns NaN into a large
 residual, never silently into agreement).
 """
@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+
+from .observables import get_observable, read_curves
 
 __all__ = ["ForwardModel", "SolverForward", "fine_forwards", "finished", "params_hash", "observables_from_timeseries"]
 
@@ -52,27 +53,22 @@ def params_hash(params_dict: dict, options_dict: dict) -> str:
 
 
 def observables_from_timeseries(ts: pd.DataFrame, times: dict, r_inner: float, t_reached: float | None = None) -> dict:
-    """Interpolate solver time-series columns at the observation times.
+    """Interpolate the curve observables (:mod:`.observables`) at the observation times ``times``
+    ({observable: times s}; "regime" is skipped: it is classified from the last snapshot).
 
-    ``crack_length`` (mm) = open_tip_radius − r_inner where a crack is open (open_tip_radius > 0), else 0.
-    Times before the first step take the first stored value; times after the last step are NaN.
+    r_inner : the run's inner radius, mm.  Times before the first step take the first stored value; times
+    after the last step (or after ``t_reached`` s, a failed run's last time) are NaN.  An observable whose
+    column the time series lacks raises :class:`.observables.ObservableUnavailable` naming it.
     """
-    out = {}
     if ts is None or len(ts) == 0:
         return {k: (np.full(len(v), np.nan) if k != "regime" else None) for k, v in times.items()}
     t = ts["t"].to_numpy(float)
     tmax = t[-1] if t_reached is None else t_reached
-    cols = {
-        "p_inj": ts["p_inj"].to_numpy(float),
-        "front_radius_mean": ts["front_radius_mean"].to_numpy(float),
-        "crack_length": np.where(ts["open_tip_radius"].to_numpy(float) > 0,
-                                 np.maximum(ts["open_tip_radius"].to_numpy(float) - r_inner, 0.0), 0.0),
-    }
-    for obs, tq in times.items():
-        if obs == "regime":
-            continue
-        tq = np.asarray(tq, float)
-        v = np.interp(tq, t, cols[obs])
+    cols = read_curves(ts, [o for o in times if get_observable(o).kind == "curve"], r_inner)
+    out = {}
+    for obs, v_rows in cols.items():
+        tq = np.asarray(times[obs], float)
+        v = np.interp(tq, t, v_rows)
         v[tq > tmax * (1 + 1e-9) + 1e-12] = np.nan
         out[obs] = v
     return out

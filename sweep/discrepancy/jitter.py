@@ -2,13 +2,9 @@
 
 A forward model on a mesh that barely resolves the front is not a smooth function of its parameters: the
 S = 0.5 contour jumps from node to node, fingers connect or not, and the outputs move by a mesh-scale amount
-when a parameter moves a little.  Measured with the solver at h = 4 mm (twins_tie, w65, fixed mesh): the front
-radius at 0.3 s for c_v = 0.9, 0.96, ..., 1.4 is 14.70, 15.47, 15.29, 15.22, 16.29, 16.21, 14.72, 15.55,
-15.29 mm, not monotone, ±0.6 mm against a measurement σ of 0.2 mm, while the injection pressure is smooth.
-A least-squares fit on such a model settles in whichever dip of the jitter lies nearest; its χ² carries the
-jitter (Δχ² floor 13–20 per condition around the fit there), so profile intervals come out falsely narrow and
-the BIC margin between two candidates can be pure jitter (a confident wrong name, measured in
-twins_tie/coupling_vs_compliance_front_rates).
+when a parameter moves a little.  A least-squares fit on such a model settles in whichever dip of the jitter
+lies nearest and its χ² carries the jitter, so profile intervals come out falsely narrow and the BIC margin
+between two candidates can be pure jitter.  This module makes the jitter an error term of the comparison.
 
 Model: y_coarse(θ) = m(θ) + ε(θ), with m smooth and ε a random field in θ with a correlation length shorter
 than the steps below; the data are compared with m, so ε is an error of the comparison with
@@ -28,14 +24,7 @@ parameters (as :class:`~.realizations.RealizationCovariance`).  Units: v in kPa�
 
 Cost: (m − 1) coarse runs per condition and stepped parameter (the centre run is usually cached).
 
-Measured with the solver (results/discrepancy/twins_tie_jitter, h = 4 mm, t ≤ 0.3 s): RMS 0.26 mm in the front
-radius (0.68 mm late at w65) and 0.58 kPa in p_inj at the baseline (E stepped), 0.29–0.31 mm and 0.29–0.99 kPa at
-the named fits; correlation times 0.03–0.10 s.  Beside the mesh-realization spread already in the covariance
-(0.49 mm, 3.85 kPa) it changed no verdict by itself; it widened the named coupling's interval (with the smoothed
-profile, 1.130 [1.088, 1.250] against 1.199 [1.183, 1.215]) without reaching the truth 1.0.  A jitter that is white
-in time is not tamed by any covariance: χ² then fluctuates by ~√(2n)·v/(σ² + v) between neighbouring parameter
-values (see tests/test_discrepancy_jitter.py); the profile smoothing (stats.quadratic_profile_interval) is the
-answer there.
+Measured sizes and their effect on the twins: results/discrepancy/DESIGN_NOTES.md.
 """
 from __future__ import annotations
 
@@ -45,6 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import stats
+from .layout import CurveLayout, correlation_time
 
 __all__ = ["ModelJitter", "estimate_model_jitter", "step_values"]
 
@@ -68,26 +58,23 @@ class ModelJitter:
     dof: dict = field(default_factory=dict)
     runs: int = 0
 
-    def blocks(self, problem) -> dict:
-        """series -> (rows in time order, C_j) on the rows of ``problem`` (a workflow ``Problem``)."""
+    def blocks(self, layout: CurveLayout) -> dict:
+        """series -> (rows in time order, C_j) on the rows of ``layout``."""
         out = {}
-        for s in np.unique(problem.series):
-            rows = np.flatnonzero(problem.series == s)
-            rows = rows[np.argsort(problem.t[rows], kind="stable")]
+        for s, rows in layout.series_rows().items():
             v = self.variance[rows]
-            ta = self.tau.get(str(problem.obs[rows[0]]), 0.0)
-            lag = np.abs(problem.t[rows][:, None] - problem.t[rows][None, :])
-            corr = np.exp(-lag / ta) if ta > 0 else np.eye(rows.size)
-            out[int(s)] = (rows, np.sqrt(np.outer(v, v)) * corr)
+            corr = layout.exp_correlation(rows, self.tau.get(str(layout.obs[rows[0]]), 0.0))
+            out[s] = (rows, np.sqrt(np.outer(v, v)) * corr)
         return out
 
-    def rms(self, problem) -> dict:
+    def rms(self, layout: CurveLayout) -> dict:
         """RMS jitter (√ mean v) per observable, kPa / mm."""
-        return {str(o): float(math.sqrt(np.mean(self.variance[problem.obs == o])))
-                for o in np.unique(problem.obs)}
+        return {str(o): float(math.sqrt(np.mean(self.variance[layout.obs == o])))
+                for o in np.unique(layout.obs)}
 
-    def summary(self, problem) -> dict:
-        return {"rms": self.rms(problem), "correlation_time": self.tau, "lag1": self.rho,
+    def summary(self, layout: CurveLayout) -> dict:
+        """The jitter's RMS per observable (kPa, mm), correlation times (s), where and how it was estimated."""
+        return {"rms": self.rms(layout), "correlation_time": self.tau, "lag1": self.rho,
                 "per_parameter_rms": self.per_parameter_rms, "at": self.at, "steps": self.steps,
                 "dof": self.dof, "runs": self.runs}
 
@@ -121,46 +108,35 @@ def _residuals(u: np.ndarray, Y: np.ndarray, degree: int) -> tuple[np.ndarray, n
     return res, rss, u.size - degree - 1
 
 
-def estimate_model_jitter(problem, values: dict, params, n_steps: int = 7, rel_step: float = 0.05,
-                          degree: int = 2, window: int = 5) -> ModelJitter | None:
-    """Jitter of ``problem``'s forward model at ``values`` ({name: value}, names as the fit's: calibrated
-    Parameters fields and 'effect:<name>'; units theirs) in the directions of ``params`` (CalibParam: name,
-    lower, upper).  Parameters at 0 are not stepped (an effect off).  None when nothing can be stepped.
-    Runs every condition of the data (training and held out: the held-out gap is measured with the same σ)."""
-    ids = problem.data.ids
-    allm = np.ones(problem.y.size, bool)
-    before = int(getattr(problem.forward, "n_runs", 0))
+def estimate_model_jitter(evaluate, layout: CurveLayout, values: dict, params, n_steps: int = 7,
+                          rel_step: float = 0.05, degree: int = 2, window: int = 5) -> ModelJitter | None:
+    """Jitter of a forward model at ``values`` ({name: value}, names as the fit's: calibrated Parameters fields
+    and 'effect:<name>'; units theirs) in the directions of ``params`` (CalibParam: name, lower, upper).
+
+    evaluate(list of values dicts) -> array (runs × curve rows): the model on every row of ``layout``.
+    Parameters at 0 are not stepped (an effect off).  None when nothing can be stepped.  ``runs`` of the
+    result is left 0: the caller knows what the evaluations cost."""
+    series_rows = layout.series_rows()
     per_q, by_obs, per_rms, steps, dofs = {}, {}, {}, {}, {}
-    series_rows = {}
-    for s in np.unique(problem.series):
-        rows = np.flatnonzero(problem.series == s)
-        series_rows[int(s)] = rows[np.argsort(problem.t[rows], kind="stable")]
     for p in params:
         v0 = float(values[p.name])
         if v0 == 0.0:
             continue
         u = step_values(v0, n_steps, rel_step, p.lower, p.upper)
-        runs = problem.predict([{**values, p.name: float(x)} for x in u], ids)
-        Y = np.vstack([problem.model_vector(pr, allm) for pr in runs])
+        Y = np.asarray(evaluate([{**values, p.name: float(x)} for x in u]), float)
         res, rss, dof = _residuals(u, Y, degree)
         raw = np.where(np.isfinite(rss), rss / dof, 0.0)
         vq = np.zeros_like(raw)
         for rows in series_rows.values():
             vq[rows] = stats.moving_average(raw[rows], window)
-            by_obs.setdefault(str(problem.obs[rows[0]]), []).append(res[:, rows])
+            by_obs.setdefault(str(layout.obs[rows[0]]), []).append(res[:, rows])
         per_q[p.name] = vq
-        per_rms[p.name] = {str(o): float(math.sqrt(np.mean(raw[problem.obs == o]))) for o in np.unique(problem.obs)}
+        per_rms[p.name] = {str(o): float(math.sqrt(np.mean(raw[layout.obs == o]))) for o in np.unique(layout.obs)}
         steps[p.name] = [float(x) for x in u]
         dofs[p.name] = dof
     if not per_q:
         return None
     var = np.max(np.vstack(list(per_q.values())), axis=0)
-    tau, rho = {}, {}
-    for o, curves in by_obs.items():
-        rho[o] = stats.pooled_lag1(curves)
-        steps_t = np.concatenate([np.diff(problem.t[rows]) for rows in series_rows.values()
-                                  if problem.obs[rows[0]] == o])
-        dt = float(np.median(steps_t)) if steps_t.size else 0.0
-        tau[o] = -dt / math.log(rho[o]) if rho[o] > 0 and dt > 0 else 0.0
-    return ModelJitter(var, tau, rho, per_rms, {k_: float(v) for k_, v in values.items()}, steps, dofs,
-                       int(getattr(problem.forward, "n_runs", 0)) - before)
+    rho = {o: stats.pooled_lag1(curves) for o, curves in by_obs.items()}
+    tau = {o: correlation_time(rho[o], layout, o) for o in rho}
+    return ModelJitter(var, tau, rho, per_rms, {k_: float(v) for k_, v in values.items()}, steps, dofs)

@@ -7,12 +7,12 @@ correlated in time (:class:`RealizationCovariance`).  Units those of the observa
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from . import stats
+from .layout import CurveLayout, correlation_time
 
 __all__ = ["realizations", "realization_mean_spread", "RealizationCovariance", "SeriesNull"]
 
@@ -29,12 +29,10 @@ class RealizationCovariance:
     """Covariance of the data's mesh-realization deviation, one block per series (condition × observable).
 
     The data are one realization of mesh and porosity field; its deviation from the k check realizations'
-    mean is a random curve.  Measured with the solver (twins, h = 3 mm): the front radius of a realization
-    wanders from the others by ~1 mm, with jumps where fingers connect, over stretches of several
-    observation times; per-point variances read such a stretch as a systematic misfit, and k = 3 curves
-    are far too few to estimate its covariance freely (their rank-2 sample covariance gives no variance
-    at all to a deviation outside their span: tried, the solver negative control got worse, χ² excess
-    z 11 -> 27).  So a model with few parameters, estimated from the k curves:
+    mean is a random curve that wanders over stretches of several observation times, which per-point
+    variances read as a systematic misfit.  Few curves (k = 3 to 6) cannot estimate its covariance freely (a
+    rank-(k − 1) sample covariance gives no variance to a deviation outside their span), so a model with few
+    parameters, estimated from the k curves:
 
         C_s[i, j] = √(v_i v_j) exp(−|t_i − t_j| / τ_o),
 
@@ -49,22 +47,17 @@ class RealizationCovariance:
     tau: dict           # observable -> correlation time, s
     rho: dict           # observable -> pooled lag-1 autocorrelation of the deviations
     k: int = 0          # number of realizations the covariance was estimated from
-    t: np.ndarray | None = None     # time of each row (s) and its observable: the series' correlation
-    obs: np.ndarray | None = None   # structure, for the scale's degrees of freedom (scale_dof)
+    layout: CurveLayout | None = None   # the rows' series, observables and times (s): for scale_dof
     window: int = 5                 # points the per-point variance was averaged over
     # the coarse model's jitter in its parameters (sweep/discrepancy/jitter.py), series -> (rows, C_j): a known
     # covariance added to the realizations' (not scaled by their estimate's uncertainty); None: not modelled
     jitter: dict | None = None
 
     @classmethod
-    def empty(cls, problem) -> "RealizationCovariance":
-        """No realization term (k = 0): zero blocks on the series of ``problem``, to carry a jitter term alone."""
-        blocks = {}
-        for s in np.unique(problem.series):
-            rows = np.flatnonzero(problem.series == s)
-            rows = rows[np.argsort(problem.t[rows], kind="stable")]
-            blocks[int(s)] = (rows, np.zeros((rows.size, rows.size)))
-        return cls(blocks, {}, {}, 0, np.asarray(problem.t, float), np.asarray(problem.obs))
+    def empty(cls, layout: CurveLayout) -> "RealizationCovariance":
+        """No realization term (k = 0): zero blocks on the series of ``layout``, to carry a jitter term alone."""
+        blocks = {s: (rows, np.zeros((rows.size, rows.size))) for s, rows in layout.series_rows().items()}
+        return cls(blocks, {}, {}, 0, layout)
 
     def with_jitter(self, jitter_blocks: dict | None) -> "RealizationCovariance":
         """This covariance plus the jitter term ``jitter_blocks`` (series -> (rows, C_j), the same rows)."""
@@ -79,9 +72,8 @@ class RealizationCovariance:
         return C + self.jitter[s][1] if self.jitter and s in self.jitter else C
 
     @classmethod
-    def estimate(cls, fines: np.ndarray, problem, window: int = 5) -> "RealizationCovariance":
-        """From the realizations' predictions ``fines`` (k, n) on the rows of ``problem`` (a workflow
-        ``Problem``: its ``series``, ``obs`` and ``t`` (s) per row)."""
+    def estimate(cls, fines: np.ndarray, layout: CurveLayout, window: int = 5) -> "RealizationCovariance":
+        """From the realizations' predictions ``fines`` (k, n) on the rows of ``layout``."""
         fines = np.atleast_2d(np.asarray(fines, float))
         ok = np.isfinite(fines)
         cnt = ok.sum(axis=0)
@@ -89,25 +81,16 @@ class RealizationCovariance:
         with np.errstate(invalid="ignore", divide="ignore"):
             var = np.where(cnt >= 2, (1.0 + 1.0 / cnt) * spread**2, 0.0)
         dev = np.where(ok & (cnt >= 2), fines - np.where(np.isfinite(mean), mean, 0.0), 0.0)
-        series_rows = {}
-        for s in np.unique(problem.series):
-            rows = np.flatnonzero(problem.series == s)
-            series_rows[int(s)] = rows[np.argsort(problem.t[rows], kind="stable")]
-        tau, rho = {}, {}
-        for o in np.unique(problem.obs):
-            rs = [r for r in series_rows.values() if problem.obs[r[0]] == o]
-            rho[str(o)] = stats.pooled_lag1([dev[:, r] for r in rs])
-            steps = np.concatenate([np.diff(problem.t[r]) for r in rs])
-            dt = float(np.median(steps)) if steps.size else 0.0
-            tau[str(o)] = -dt / math.log(rho[str(o)]) if rho[str(o)] > 0 and dt > 0 else 0.0
+        series_rows = layout.series_rows()
+        rho = {str(o): stats.pooled_lag1([dev[:, r] for r in series_rows.values() if layout.obs[r[0]] == o])
+               for o in np.unique(layout.obs)}
+        tau = {o: correlation_time(rho[o], layout, o) for o in rho}
         blocks = {}
         for s, rows in series_rows.items():
             v = stats.moving_average(var[rows], window)
-            ta = tau[str(problem.obs[rows[0]])]
-            lag = np.abs(problem.t[rows][:, None] - problem.t[rows][None, :])
-            corr = np.exp(-lag / ta) if ta > 0 else np.eye(rows.size)
+            corr = layout.exp_correlation(rows, tau[str(layout.obs[rows[0]])])
             blocks[s] = (rows, np.sqrt(np.outer(v, v)) * corr)
-        return cls(blocks, tau, rho, int(fines.shape[0]), np.asarray(problem.t, float), np.asarray(problem.obs), window)
+        return cls(blocks, tau, rho, int(fines.shape[0]), layout, window)
 
     def variance(self, n: int) -> np.ndarray:
         """Per-point realization variance (the blocks' diagonals) on n rows, kPa² / mm²."""
@@ -156,9 +139,8 @@ class RealizationCovariance:
         # the share of each point in the series' mean of the smoothed variances: column sums of the
         # moving-average matrix (stats.moving_average applied to the unit vectors)
         c = np.apply_along_axis(stats.moving_average, 0, np.eye(n), self.window).sum(axis=0) / n
-        ta = self.tau.get(str(self.obs[rows[0]]), 0.0) if self.obs is not None else 0.0
-        lag = np.abs(self.t[rows][:, None] - self.t[rows][None, :]) if self.t is not None else None
-        rho2 = np.exp(-2.0 * lag / ta) if (ta > 0 and lag is not None) else np.eye(n)
+        ta = self.tau.get(str(self.layout.obs[rows[0]]), 0.0) if self.layout is not None else 0.0
+        rho2 = self.layout.exp_correlation(rows, ta / 2.0) if self.layout is not None else np.eye(n)
         return float((self.k - 1) / (c @ rho2 @ c))
 
     def null_calibration(self, mask: np.ndarray, sig_diag: np.ndarray, n_draws: int = 4000, seed: int = 0) -> dict:

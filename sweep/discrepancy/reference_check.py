@@ -74,7 +74,7 @@ def reference_models(spec, rep: dict, truth_overrides: dict, conditions: dict) -
     truth_overrides : the data-generating model's overrides (baseline with the hidden effects on; a
     parameter following its law of C is absent); rep : the workflow's report (its calibrated baseline and
     final values)."""
-    from .workflow import values_to_overrides
+    from .problem import values_to_overrides
 
     base = spec.baseline_overrides()
     out = {"truth": {**truth_overrides, **conditions},

@@ -1,15 +1,82 @@
-"""report.json, report.md and figures (before/after curves, residual maps) of a workflow run."""
+"""The report of a workflow run: its dict (report.json), report.md and figures (before/after curves,
+residual maps).  Units: mm, s, kPa; residuals and gaps standardized (dimensionless)."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 
 from . import stats
-from .data import CURVE_OBSERVABLES, UNITS
+from .observables import CURVES as CURVE_OBSERVABLES
+from .observables import UNITS
+from .problem import Fit
 
-__all__ = ["write_report", "ROUGH_NOTE"]
+__all__ = ["build_report", "write_report", "jsonable", "ROUGH_NOTE"]
+
+
+def jsonable(o):
+    """``o`` with numpy scalars as Python numbers, non-finite floats as None and fitted models dropped."""
+    if isinstance(o, dict):
+        return {str(k): jsonable(v) for k, v in o.items() if not isinstance(v, Fit)}
+    if isinstance(o, (list, tuple)):
+        return [jsonable(v) for v in o]
+    if isinstance(o, np.floating):
+        return float(o)
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return o
+
+
+def _named_fields(named: dict | None) -> dict:
+    """The verdict's headline: the named effect, its strength, interval (rough: the interval's width reflects
+    the coarse model's jitter, a lower bound on the uncertainty) and scaling."""
+    return {"named_effect": named["effect"] if named else None,
+            "strength": named["strength"] if named else None,
+            "strength_interval": named["strength_interval"] if named else None,
+            "strength_interval_rough": bool(named.get("strength_interval_rough", False)) if named else None,
+            "strength_scaling": named["scaling"] if named else None}
+
+
+def _noise_fields(run) -> dict:
+    """The noise model's summary: discretization correction, realization spread and covariance, jitter."""
+    problem, fine = run.problem, run.fine
+    rc = problem.real_cov
+    has_rc = rc is not None and rc.k >= 2
+    return {"discretization_error_rms": run.disc_err, "realization_spread_rms": run.spread_rms,
+            "discretization_realizations": len(fine) if fine is not None else 0,
+            "realization_covariance": ("correlated" if has_rc else "diagonal") if fine is not None else None,
+            "realization_correlation_time": rc.tau if has_rc else None,
+            "realization_lag1": rc.rho if has_rc else None,
+            "model_jitter": run.jitter or None, "discretization_refresh": run.refresh}
+
+
+def build_report(run, forward) -> dict:
+    """The report dict of a finished :class:`~.workflow.WorkflowRun` (JSON-ready)."""
+    named_ok = run.verdict == "named"
+    named = run.accepted[0] if run.accepted and named_ok else None
+    cands = run.first_candidates or []
+    report = {"verdict": run.verdict, **_named_fields(named), "accepted": run.accepted, "tie": run.tie,
+              "candidates": cands,
+              # by the linear screen (signature inside the calibrated parameters' reach) or by the profile
+              "not_identifiable": [c["effect"] for c in cands if not c["identifiable"]]
+                                  + [u["effect"] for u in run.profile_unidentified],
+              "profile_not_identifiable": run.profile_unidentified,
+              "gap_before": run.gap_before, "gap_after": run.gap_cur if named_ok else run.gap_before,
+              "calibrated_baseline": run.fit0.values(),
+              "final_values": run.current.values() if named_ok else run.fit0.values(),
+              "train": run.train, "holdout": run.holdout,
+              "localization_before": run.loc0, "localization_after": run.loc if named_ok else None,
+              "residuals_systematic_after": bool(run.loc["systematic"] if named_ok else run.loc0["systematic"]),
+              "rounds": run.rounds, "forward_runs": int(getattr(forward, "n_runs", 0)),
+              "forward_runs_by_stage": run.ledger.stages, **_noise_fields(run),
+              "profiles": run.profiles, "partial_explanation": run.partial}
+    return jsonable(report)
 
 # what a rough profile means for the named strength's interval (report.md verdict line, CLI)
 ROUGH_NOTE = "rough profile: a lower bound on the uncertainty"
@@ -116,6 +183,157 @@ def _f(v):
     return str(v)
 
 
+def _verdict_lines(report: dict) -> list[str]:
+    """The title and the verdict line."""
+    L = ["# Discrepancy report", "",
+         f"**Verdict: {report['verdict']}**" + (f" — named effect `{report['named_effect']}`, strength "
+                                                f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
+                                                f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''}"
+                                                f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''})"
+                                                if report["named_effect"] else ""), ""]
+    return L
+
+
+def _caveat_lines(report: dict) -> list[str]:
+    """Partial explanation, tie, not identifiable, refresh convergence: what qualifies the verdict."""
+    L = []
+    pe = report.get("partial_explanation")
+    if pe:
+        eff = ", ".join(f"`{a['effect']}` {a['strength']:.4g} (95 % interval {_f(a['strength_interval'])})" for a in pe["effects"])
+        L += [f"Partial explanation only: {eff} passed every acceptance test and cut the held-out gap from "
+              f"{report['gap_before']['total']:.3g} to {pe['gap_after']['total']:.3g} RMS σ, but the model with it still "
+              f"misses systematically (series: {[k for k, v in pe['localization_after']['series'].items() if v['systematic']]}), "
+              f"so no effect is named: the cause may lie outside the catalogue.", ""]
+    if report["tie"]:
+        L += [f"Tie between {report['tie']}: the data cannot tell them apart; add a discriminating condition.", ""]
+    if report["not_identifiable"]:
+        L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null, "
+              f"or a profile interval reaching off): {report['not_identifiable']}", ""]
+    for a in report.get("accepted") or []:
+        if "refresh_converged" in a:
+            traj = " → ".join(f"{v:.4g}" for v in a["refresh_trajectory"])
+            L += [f"{a['effect']}: discretization correction re-estimated at the fit, strength {traj}: "
+                  + ("converged." if a["refresh_converged"] else
+                     "NOT converged (the corrected model is not yet the fine model at the fitted values): the strength "
+                     "and its interval are not reliable; raise [noise] disc_refresh."), ""]
+    for u in report.get("profile_not_identifiable") or []:
+        n = u["nearest_off"]
+        L += [f"{u['effect']}: improved the joint fit, but its profile-likelihood interval {_f(u['interval'])} reaches "
+              f"off: at strength {_f(n['strength'])} the calibrated parameters ({_f(n['others'])}) refit to within "
+              f"Δχ² = {_f(n['delta_chi2'])}.  A discriminating condition (another injection rate, a later time) "
+              f"is needed to tell it from them.", ""]
+    return L
+
+
+def _noise_lines(report: dict) -> list[str]:
+    """The discretization correction, realization spread and model jitter used."""
+    L = []
+    if report.get("discretization_error_rms") is not None:
+        def units(d):
+            return ", ".join(f"{o} {v:.3g} {UNITS.get(o, '')}" for o, v in (d or {}).items())
+
+        L += [f"Discretization correction at the initial baseline (RMS of fine − coarse): "
+              f"{units(report['discretization_error_rms'])}; spread over the "
+              f"{report.get('discretization_realizations', 1)} fine mesh realization(s) (RMS of their sample std): "
+              f"{units(report.get('realization_spread_rms'))}, "
+              + (f"a covariance correlated in time (correlation time per observable, s: "
+                 f"{_f(report.get('realization_correlation_time'))}; residuals whitened)."
+                 if report.get("realization_covariance") == "correlated" else "added in quadrature to σ."), ""]
+    for where, mj in (report.get("model_jitter") or {}).items():
+        if mj:
+            L += [f"Coarse model's jitter in its parameters ({where}, estimated at {_f(mj['at'])} from "
+                  f"{len(next(iter(mj['steps'].values())))} runs per parameter of {sorted(mj['steps'])}; "
+                  f"sweep/discrepancy/jitter.py): RMS {_f(mj['rms'])} (kPa, mm), correlation time "
+                  f"{_f(mj['correlation_time'])} s; added to the covariance the residuals are whitened with.", ""]
+    return L
+
+
+def _candidate_lines(report: dict) -> list[str]:
+    """Where the runs went, the calibrated baseline and the first round's candidates."""
+    L = []
+    by_stage = "; ".join(f"{k} {v['coarse']}" + (f" + {v['fine']} fine" if v.get("fine") else "")
+                         for k, v in (report.get("forward_runs_by_stage") or {}).items() if v["coarse"] or v.get("fine"))
+    L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}"
+          + (f" (by stage: {by_stage})" if by_stage else "") + ".", "",
+          "## Calibrated baseline", "", _f(report["calibrated_baseline"]), "",
+          "## Candidates (first round)", "",
+          "| effect | score | ΔBIC | identifiable | tied with | strength | interval | explained | passed |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for c in report["candidates"]:
+        L.append(f"| {c['effect']} | {_f(c['score'])} | {_f(c['delta_bic'])} | {c['identifiable']} | {c['tied_with']} | "
+                 f"{_f(c['strength'])} | {_f(c['strength_interval'])} | {_f(c['explained_fraction'])} | {c['passed']} |")
+    common = {c["effect"]: c.get("bic_common") for c in report["candidates"] if c.get("passed") and c.get("bic_common") is not None}
+    if len(common) > 1:
+        L += ["", "Passing candidates compared under common series weights (the per-series minimum of theirs; each "
+                  "ΔBIC above uses its own): BIC " + ", ".join(f"{k} {v:.4g}" for k, v in common.items())
+              + f"; a tie when they differ by less than tie_bic."]
+    return L
+
+
+def _profile_lines(report: dict) -> list[str]:
+    """Each named strength's profile likelihood."""
+    L = []
+    for eff, pr in (report.get("profiles") or {}).items():
+        L += ["", f"## Profile likelihood of `{eff}` (named model, training conditions)", "",
+              f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "
+              f"the linearized (Wald) interval was {_f(pr['wald'])}.", "", "| strength | Δχ² |", "|---|---|"]
+        L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
+        qd = pr.get("quadratic")
+        if pr.get("smoothing") == "quadratic":
+            if qd is None:
+                L += ["", "Smoothing (`[profile] smoothing = \"quadratic\"`) not applied: fewer than 5 points in the "
+                          "quadratic region; the interval is the raw crossings'."]
+            elif qd.get("unbounded"):
+                L += ["", f"Smoothed profile (quadratic, MCAP): no minimum inside the points, so none of them is excluded: "
+                          f"interval {_f([pr['lower'], pr['upper']])} (their span; raw crossings {_f(pr['raw'])})."]
+            else:
+                L += ["", f"Smoothed profile (quadratic through {qd['n']} points with the Monte-Carlo-adjusted cutoff, MCAP, "
+                          f"Ionides et al. 2017): centre {qd['center']:.4g}, statistical se {qd['se_stat']:.3g}, "
+                          f"Monte-Carlo se {qd['se_mc']:.3g} (points' scatter about the quadratic {qd['residual_sd']:.3g} "
+                          f"in Δχ²); interval {_f([pr['lower'], pr['upper']])} (raw crossings {_f(pr['raw'])})."]
+        if pr.get("rough"):
+            L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
+                      f"(more than `[profile] rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
+                      "monotonically; this one jitters with the strength (the coarse model's outputs, typically the "
+                      "front radius, are not smooth in it), so the bounds are set by that jitter: read the interval "
+                      "as a lower bound on the uncertainty."]
+        for h in pr.get("recentred", []):
+            L += ["", f"Re-centred: the profile found Δχ² = {h['min_delta_chi2']:.3g} at {h['at']:.4g} below the fit at "
+                      f"{h['strength']:.4g} (the joint fit had stopped short of the minimum); refitted from there."]
+    return L
+
+
+def _gap_and_localization_lines(report: dict) -> list[str]:
+    """The held-out gap before/after and where the calibrated baseline misses."""
+    L = []
+    L += ["", "## Held-out gap (RMS standardized residual)", "", "| observable | before | after |", "|---|---|---|"]
+    for k, v in report["gap_before"].items():
+        L.append(f"| {k} | {v:.4g} | {report['gap_after'].get(k, float('nan')):.4g} |")
+    lb = report["localization_before"]
+    L += ["", "## Where the calibrated baseline misses (training conditions)", "",
+          f"Residuals systematic: {lb['systematic']}; regime misclassifications: {lb['regime_misclassified']}", ""]
+    L += _table(lb["per_observable"], ["rms", "mean", "n"]) + [""]
+    L += _table(lb["per_phase"], ["rms", "mean", "n"]) + [""]
+    cal = any("chi2_excess_z_raw" in v for v in lb["series"].values())
+    L += _table(lb["series"], ["n", "rho1", "chi2_excess_z", "mean_z", "systematic"]
+                + (["chi2_excess_z_raw", "mean_z_raw"] if cal else [])) + [""]
+    if cal:
+        L += ["Series statistics calibrated for the estimated mesh-realization covariance (its scale has few "
+              "degrees of freedom; `_raw`: taken as known).", ""]
+    return L
+
+
+_METHOD = ["## Method", "",
+           "Calibration: scipy least_squares (TRF, bounds, robust loss) on whole training conditions. Evidence is "
+           "counted with per-series weights n_eff/n from the lag-1 autocorrelation of the residuals. An effect is "
+           "accepted when ΔBIC <= threshold, its likelihood ratio against 'off' (the baseline refit) exceeds 3.84 × the "
+           "misfit scale (for the named effect, then also its profile-likelihood interval excludes 'off': the others "
+           "refitted at fixed strength), it explains at "
+           "least the required fraction of the excess χ², and it shrinks the held-out gap; candidates whose signature "
+           "lies in the span of the calibrated parameters' sensitivities are not identifiable; candidates with "
+           "collinear projected signatures, or passing refits within the tie threshold in ΔBIC, are ties.", ""]
+
+
 def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures: bool = True) -> Path:
     """Write report.json, report.md and (optionally) the figures into ``out_dir``."""
     out = Path(out_dir)
@@ -135,120 +353,10 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
                 figs.append(("Residual map, final model", "residuals_after.png"))
         except Exception as exc:  # figures are optional; the verdict is not
             figs.append((f"figures failed: {type(exc).__name__}: {exc}", None))
-    L = ["# Discrepancy report", "",
-         f"**Verdict: {report['verdict']}**" + (f" — named effect `{report['named_effect']}`, strength "
-                                                f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
-                                                f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''}"
-                                                f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''})"
-                                                if report["named_effect"] else ""), ""]
-    pe = report.get("partial_explanation")
-    if pe:
-        eff = ", ".join(f"`{a['effect']}` {a['strength']:.4g} (95 % interval {_f(a['strength_interval'])})" for a in pe["effects"])
-        L += [f"Partial explanation only: {eff} passed every acceptance test and cut the held-out gap from "
-              f"{report['gap_before']['total']:.3g} to {pe['gap_after']['total']:.3g} RMS σ, but the model with it still "
-              f"misses systematically (series: {[k for k, v in pe['localization_after']['series'].items() if v['systematic']]}), "
-              f"so no effect is named: the cause may lie outside the catalogue.", ""]
-    if report["tie"]:
-        L += [f"Tie between {report['tie']}: the data cannot tell them apart; add a discriminating condition.", ""]
-    if report["not_identifiable"]:
-        L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null, "
-              f"or a profile interval reaching off): {report['not_identifiable']}", ""]
-    for a in report.get("accepted") or []:
-        if "refresh_converged" in a:
-            traj = " → ".join(f"{v:.4g}" for v in a["refresh_trajectory"])
-            L += [f"{a['effect']}: discretization correction re-estimated at the fit, strength {traj}: "
-                  + ("converged." if a["refresh_converged"] else
-                     "NOT converged (the corrected model is not yet the fine model at the fitted values): the strength "
-                     "and its interval are not reliable; raise workflow.disc_refresh."), ""]
-    for u in report.get("profile_not_identifiable") or []:
-        n = u["nearest_off"]
-        L += [f"{u['effect']}: improved the joint fit, but its profile-likelihood interval {_f(u['interval'])} reaches "
-              f"off: at strength {_f(n['strength'])} the calibrated parameters ({_f(n['others'])}) refit to within "
-              f"Δχ² = {_f(n['delta_chi2'])}.  A discriminating condition (another injection rate, a later time) "
-              f"is needed to tell it from them.", ""]
-    if report.get("discretization_error_rms") is not None:
-        def units(d):
-            return ", ".join(f"{o} {v:.3g} {UNITS.get(o, '')}" for o, v in (d or {}).items())
-
-        L += [f"Discretization correction at the initial baseline (RMS of fine − coarse): "
-              f"{units(report['discretization_error_rms'])}; spread over the "
-              f"{report.get('discretization_realizations', 1)} fine mesh realization(s) (RMS of their sample std): "
-              f"{units(report.get('realization_spread_rms'))}, "
-              + (f"a covariance correlated in time (correlation time per observable, s: "
-                 f"{_f(report.get('realization_correlation_time'))}; residuals whitened)."
-                 if report.get("realization_covariance") == "correlated" else "added in quadrature to σ."), ""]
-    for where, mj in (report.get("model_jitter") or {}).items():
-        if mj:
-            L += [f"Coarse model's jitter in its parameters ({where}, estimated at {_f(mj['at'])} from "
-                  f"{len(next(iter(mj['steps'].values())))} runs per parameter of {sorted(mj['steps'])}; "
-                  f"sweep/discrepancy/jitter.py): RMS {_f(mj['rms'])} (kPa, mm), correlation time "
-                  f"{_f(mj['correlation_time'])} s; added to the covariance the residuals are whitened with.", ""]
-    by_stage = "; ".join(f"{k} {v['coarse']}" + (f" + {v['fine']} fine" if v.get("fine") else "")
-                         for k, v in (report.get("forward_runs_by_stage") or {}).items() if v["coarse"] or v.get("fine"))
-    L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}"
-          + (f" (by stage: {by_stage})" if by_stage else "") + ".", "",
-          "## Calibrated baseline", "", _f(report["calibrated_baseline"]), "",
-          "## Candidates (first round)", "",
-          "| effect | score | ΔBIC | identifiable | tied with | strength | interval | explained | passed |",
-          "|---|---|---|---|---|---|---|---|---|"]
-    for c in report["candidates"]:
-        L.append(f"| {c['effect']} | {_f(c['score'])} | {_f(c['delta_bic'])} | {c['identifiable']} | {c['tied_with']} | "
-                 f"{_f(c['strength'])} | {_f(c['strength_interval'])} | {_f(c['explained_fraction'])} | {c['passed']} |")
-    common = {c["effect"]: c.get("bic_common") for c in report["candidates"] if c.get("passed") and c.get("bic_common") is not None}
-    if len(common) > 1:
-        L += ["", "Passing candidates compared under common series weights (the per-series minimum of theirs; each "
-                  "ΔBIC above uses its own): BIC " + ", ".join(f"{k} {v:.4g}" for k, v in common.items())
-              + f"; a tie when they differ by less than tie_bic."]
-    for eff, pr in (report.get("profiles") or {}).items():
-        L += ["", f"## Profile likelihood of `{eff}` (named model, training conditions)", "",
-              f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "
-              f"the linearized (Wald) interval was {_f(pr['wald'])}.", "", "| strength | Δχ² |", "|---|---|"]
-        L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
-        qd = pr.get("quadratic")
-        if pr.get("smoothing") == "quadratic":
-            if qd is None:
-                L += ["", "Smoothing (`profile_smoothing = \"quadratic\"`) not applied: fewer than 5 points in the "
-                          "quadratic region; the interval is the raw crossings'."]
-            elif qd.get("unbounded"):
-                L += ["", f"Smoothed profile (quadratic, MCAP): no minimum inside the points, so none of them is excluded: "
-                          f"interval {_f([pr['lower'], pr['upper']])} (their span; raw crossings {_f(pr['raw'])})."]
-            else:
-                L += ["", f"Smoothed profile (quadratic through {qd['n']} points with the Monte-Carlo-adjusted cutoff, MCAP, "
-                          f"Ionides et al. 2017): centre {qd['center']:.4g}, statistical se {qd['se_stat']:.3g}, "
-                          f"Monte-Carlo se {qd['se_mc']:.3g} (points' scatter about the quadratic {qd['residual_sd']:.3g} "
-                          f"in Δχ²); interval {_f([pr['lower'], pr['upper']])} (raw crossings {_f(pr['raw'])})."]
-        if pr.get("rough"):
-            L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
-                      f"(more than `profile_rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
-                      "monotonically; this one jitters with the strength (the coarse model's outputs, typically the "
-                      "front radius, are not smooth in it), so the bounds are set by that jitter: read the interval "
-                      "as a lower bound on the uncertainty."]
-        for h in pr.get("recentred", []):
-            L += ["", f"Re-centred: the profile found Δχ² = {h['min_delta_chi2']:.3g} at {h['at']:.4g} below the fit at "
-                      f"{h['strength']:.4g} (the joint fit had stopped short of the minimum); refitted from there."]
-    L += ["", "## Held-out gap (RMS standardized residual)", "", "| observable | before | after |", "|---|---|---|"]
-    for k, v in report["gap_before"].items():
-        L.append(f"| {k} | {v:.4g} | {report['gap_after'].get(k, float('nan')):.4g} |")
-    lb = report["localization_before"]
-    L += ["", "## Where the calibrated baseline misses (training conditions)", "",
-          f"Residuals systematic: {lb['systematic']}; regime misclassifications: {lb['regime_misclassified']}", ""]
-    L += _table(lb["per_observable"], ["rms", "mean", "n"]) + [""]
-    L += _table(lb["per_phase"], ["rms", "mean", "n"]) + [""]
-    cal = any("chi2_excess_z_raw" in v for v in lb["series"].values())
-    L += _table(lb["series"], ["n", "rho1", "chi2_excess_z", "mean_z", "systematic"]
-                + (["chi2_excess_z_raw", "mean_z_raw"] if cal else [])) + [""]
-    if cal:
-        L += ["Series statistics calibrated for the estimated mesh-realization covariance (its scale has few "
-              "degrees of freedom; `_raw`: taken as known; `workflow.systematic_null`).", ""]
+    L = (_verdict_lines(report) + _caveat_lines(report) + _noise_lines(report) + _candidate_lines(report)
+         + _profile_lines(report) + _gap_and_localization_lines(report))
     for cap, f in figs:
         L += [f"![{cap}]({f})" if f else cap, ""]
-    L += ["## Method", "",
-          "Calibration: scipy least_squares (TRF, bounds, robust loss) on whole training conditions. Evidence is "
-          "counted with per-series weights n_eff/n from the lag-1 autocorrelation of the residuals. An effect is "
-          "accepted when ΔBIC <= threshold, its Wald 95 % interval (widened by misfit) excludes 'off' (for the named "
-          "effect, then also its profile-likelihood interval: the others refitted at fixed strength), it explains at "
-          "least the required fraction of the excess χ², and it shrinks the held-out gap; candidates whose signature "
-          "lies in the span of the calibrated parameters' sensitivities are not identifiable; candidates with "
-          "collinear projected signatures, or passing refits within the tie threshold in ΔBIC, are ties.", ""]
+    L += _METHOD
     write_text_atomic(out / "report.md", "\n".join(L) + "\n")
     return out

@@ -4,7 +4,7 @@ Example (units mm, s, kPa)::
 
     [baseline]                       # solver.Parameters fields common to every condition
     kbar = 0.0015
-    effects_off = ["damage_viscosity", "outer_compliance"]   # effect names set to their off values
+    effects_off = ["damage_viscosity", "compliant_boundary"]   # effect names set to their off values
 
     [[calibrate]]                    # baseline parameters fitted on the training conditions
     name = "kbar"; lower = 5e-4; upper = 5e-3; scale = "log"     # initial = baseline value
@@ -31,46 +31,27 @@ Example (units mm, s, kPa)::
                                      # (mesh_seed = s: perturbed mesh and its element-wise porosity field),
                                      # distinct integers >= 0, at least 2.  The data are one realization the
                                      # model cannot know: the mean over realizations is the correction and
-                                     # their sample std (kPa, mm) is added in quadrature to σ
+                                     # their deviations a covariance per series correlated in time
 
-    [workflow]                       # criteria (defaults shown); passing candidates are ranked, and tied
-                                     # within tie_bic, by their BICs under common series weights
-    delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5
-    min_ratio = 0.15; tie_cos = 0.95; max_rounds = 3; max_refits = 2; starts = 1
-    loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; n_jobs = 1; seed = 0
-    disc_error_fraction = 0.5; disc_refresh = 1   # at most this many refresh passes (0: none) ...
-    disc_refresh_tol = 0.05          # ... stopping once every named strength moves by <= this (relative) in a pass
-    interval = "profile"             # the named strength's interval: "profile" (likelihood) or "wald"
-    profile_expand = 3               # doublings of the profile bracket beyond the Wald bound
-    profile_refine = 2               # evaluations refining each bound (regula falsi in √Δχ²) ...
-    profile_refine_tol = 0.15        # ... until Δχ² there is within this fraction of the threshold
-    profile_rough_tol = 0.25         # flag the interval when the profile falls by more than this fraction of
-                                     # its threshold walking away from the fit (a jagged coarse model)
-    profile_fine = true              # with [discretization]: correct each profile point where it is (the
-                                     # correction is a constant vector; false keeps the fit's along the profile)
-    named_needs_noise_level = true   # name an effect only if the named model's residuals are at noise level
-    realization_covariance = "correlated"   # how mesh realizations' deviations enter the residuals: "correlated"
-                                     # (per series, correlated in time, estimated from the realizations;
-                                     # residuals whitened) or "diagonal" (the simplification: per-point
-                                     # sample std in quadrature)
-    systematic_null = "estimated_covariance"   # the residual test's null with a correlated realization
-                                     # covariance: "estimated_covariance" (its scale has k − 1 degrees of
-                                     # freedom: statistics mapped to the known-covariance scale by simulation)
-                                     # or "known_covariance" (the simplification: the estimate taken as exact)
-    model_jitter = "none"            # the coarse model's jitter in its parameters as an error term
-                                     # (sweep/discrepancy/jitter.py): "estimated" (runs at model_jitter_steps
-                                     # values q (1 + model_jitter_rel_step j) of each free parameter, at the
-                                     # initial baseline and again at a named model's fit; the polynomial
-                                     # residuals' variance is added to the covariance the residuals are
-                                     # whitened with) or "none" (not modelled: right for a model smooth in its
-                                     # parameters; campaigns run before 2026-11-25's third sitting)
-    model_jitter_steps = 7; model_jitter_rel_step = 0.05
-    profile_smoothing = "none"       # "quadratic": the named strength's interval from a quadratic fitted to the
-                                     # profile points with a Monte-Carlo-adjusted cutoff (MCAP, Ionides et al.
-                                     # 2017; stats.quadratic_profile_interval), for a model whose profile
-                                     # points are noisy (model_jitter); "none": the raw crossings
-    profile_grid = 4                 # with "quadratic": this many more profile points per side, evenly out to
-                                     # twice the raw bound's distance from the fit (the quadratic's span)
+    [fit]                            # optional tables of settings, defaults shown (sweep/discrepancy/options.py)
+    loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; starts = 1; seed = 0; n_jobs = 1
+    [acceptance]                     # passing candidates are ranked, and tied within tie_bic, by their BICs
+    delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5    # under common weights
+    min_ratio = 0.15; tie_cos = 0.95; z_crit = 3.0; rho_crit = 0.3; max_rounds = 3; max_refits = 2
+    [noise]                          # with [discretization]: disc_error_fraction of the correction added to σ;
+    disc_error_fraction = 0.5        # once an effect is named the correction is re-estimated at its fit and
+    disc_refresh = 1                 # the model refitted, at most disc_refresh passes, until every named
+    disc_refresh_tol = 0.05          # strength moves by <= disc_refresh_tol (relative) in a pass
+    model_jitter = "none"            # "estimated": the coarse model's jitter in its parameters is an error term
+    model_jitter_steps = 7; model_jitter_rel_step = 0.05    # (sweep/discrepancy/jitter.py)
+    [profile]                        # the named strength's profile-likelihood interval
+    expand = 3; refine = 2; refine_tol = 0.15; rough_tol = 0.25
+    fine = true                      # with [discretization]: correct each profile point where it is
+    smoothing = "none"               # "quadratic": interval from a quadratic through noisy points (MCAP)
+    grid = 4                         # with "quadratic": extra profile points per side
+
+The former ``[workflow]`` table is refused with each of its keys named and where it went
+(:data:`.options.REMOVED_WORKFLOW_KEYS`).
 """
 from __future__ import annotations
 
@@ -81,21 +62,12 @@ from pathlib import Path
 from solver.effects import EFFECTS, get_effect
 from solver.params import CHOICE_FIELDS
 
+from .options import (OPTION_TABLES, AcceptanceOptions, FitOptions, NoiseOptions, ProfileOptions,
+                      parse_options)
+
 __all__ = ["CalibParam", "DiscrepancySpec", "load_spec", "spec_from_dict", "fine_options", "SCALINGS"]
 
 SCALINGS = ("none", "sqrt_cement")
-_WF_DEFAULTS = dict(delta_bic=-10.0, tie_bic=10.0, min_gap_reduction=0.1, min_explained=0.5, min_ratio=0.15,
-                    tie_cos=0.95, max_rounds=3, max_refits=2, starts=1, loss="soft_l1", f_scale=3.0,
-                    max_nfev=20, n_jobs=1, seed=0, diff_step=0.02, z_crit=3.0, rho_crit=0.3, nan_residual=50.0,
-                    disc_error_fraction=0.5, disc_refresh=1, disc_refresh_tol=0.05, profile_fine=True, interval="profile", profile_expand=3,
-                    profile_refine=2, profile_refine_tol=0.15, profile_rough_tol=0.25,
-                    named_needs_noise_level=True, realization_covariance="correlated",
-                    systematic_null="estimated_covariance", model_jitter="none", model_jitter_steps=7,
-                    model_jitter_rel_step=0.05, profile_smoothing="none", profile_grid=4)
-
-_WF_CHOICES = {"interval": ("profile", "wald"), "realization_covariance": ("correlated", "diagonal"),
-               "systematic_null": ("estimated_covariance", "known_covariance"), "model_jitter": ("none", "estimated"),
-               "profile_smoothing": ("none", "quadratic")}
 
 
 @dataclass(frozen=True)
@@ -128,6 +100,9 @@ class CalibParam:
 
 @dataclass(frozen=True)
 class DiscrepancySpec:
+    """A validated SPEC (see the module docstring): the baseline, what is calibrated, the candidate effects,
+    the held-out conditions, the solver options of the runs and the workflow's settings by concern."""
+
     baseline: dict
     effects_off: tuple
     calibrate: tuple
@@ -138,11 +113,11 @@ class DiscrepancySpec:
     holdout_ids: tuple | None
     holdout_every: int | None
     options: dict
-    workflow: dict = field(default_factory=dict)
     discretization: dict | None = None
-
-    def wf(self, key):
-        return self.workflow.get(key, _WF_DEFAULTS[key])
+    fit: FitOptions = field(default_factory=FitOptions)
+    acceptance: AcceptanceOptions = field(default_factory=AcceptanceOptions)
+    noise: NoiseOptions = field(default_factory=NoiseOptions)
+    profile: ProfileOptions = field(default_factory=ProfileOptions)
 
     def baseline_overrides(self) -> dict:
         """Baseline parameter overrides with the off effects at their off values."""
@@ -177,7 +152,7 @@ def fine_options(spec: DiscrepancySpec) -> list[dict]:
     ``[options]`` overridden by ``[discretization]`` without ``mesh_seeds`` (not a RunOptions field): one
     entry, or with ``mesh_seeds`` one entry per seed s with ``mesh_seed = s``.  The measured data are one
     realization of mesh and porosity field, which the model cannot know; the realizations' mean is the
-    better correction and their spread an uncertainty of the comparison (see workflow.add_discretization_error).
+    better correction and their spread an uncertainty of the comparison (see noise.add_discretization_error).
     """
     if not spec.discretization:    # absent (or empty, as before: no fine runs)
         return []
@@ -210,8 +185,8 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     """Validate a parsed TOML spec (see the module docstring)."""
     from solver import Parameters, RunOptions
 
-    known = {"baseline", "calibrate", "candidates", "holdout", "options", "workflow", "discretization"}
-    extra = sorted(set(d) - known)
+    known = {"baseline", "calibrate", "candidates", "holdout", "options", "discretization", *OPTION_TABLES}
+    extra = sorted(set(d) - known - {"workflow"})      # [workflow]: refused by parse_options, naming its keys
     if extra:
         _bad("tables", extra, f"only {sorted(known)}")
     base = dict(d.get("baseline", {}))
@@ -274,47 +249,10 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
             RunOptions.from_dict({**opts, **{k: v for k, v in disc.items() if k != "mesh_seeds"}})
         except ValueError as exc:
             raise ValueError(f"discrepancy spec [discretization]: {exc}") from None
-    wf = dict(d.get("workflow", {}))
-    unknown = sorted(set(wf) - set(_WF_DEFAULTS))
-    if unknown:
-        _bad("workflow", unknown, f"keys among {sorted(_WF_DEFAULTS)}")
-    for key, allowed in _WF_CHOICES.items():      # the enumerated options, checked alike
-        v = wf.get(key, _WF_DEFAULTS[key])
-        if v not in allowed:
-            _bad(f"workflow.{key}", v, " or ".join(f'"{c}"' for c in allowed))
-    for key in ("profile_fine", "named_needs_noise_level"):
-        if not isinstance(wf.get(key, True), bool):
-            _bad(f"workflow.{key}", wf[key], "true or false")
-    pg = wf.get("profile_grid", 4)
-    if not isinstance(pg, int) or isinstance(pg, bool) or not 2 <= pg <= 20:
-        _bad("workflow.profile_grid", pg, "an integer in [2, 20] (profile points per side for the quadratic)")
-    ms = wf.get("model_jitter_steps", 7)
-    if not isinstance(ms, int) or isinstance(ms, bool) or ms < 5 or ms % 2 == 0 or ms > 21:
-        _bad("workflow.model_jitter_steps", ms, "an odd integer in [5, 21] (runs per stepped parameter)")
-    mr = wf.get("model_jitter_rel_step", 0.05)
-    if not isinstance(mr, (int, float)) or isinstance(mr, bool) or not 0 < mr < 0.5:
-        _bad("workflow.model_jitter_rel_step", mr, "a number in (0, 0.5) (relative step of a parameter)")
-    pr = wf.get("profile_refine", 2)
-    if not isinstance(pr, int) or isinstance(pr, bool) or not 0 <= pr <= 10:
-        _bad("workflow.profile_refine", pr, "an integer in [0, 10]")
-    prt = wf.get("profile_refine_tol", 0.15)
-    if not isinstance(prt, (int, float)) or isinstance(prt, bool) or not 0 < prt < 1:
-        _bad("workflow.profile_refine_tol", prt, "a number in (0, 1)")
-    prr = wf.get("profile_rough_tol", 0.25)
-    if not isinstance(prr, (int, float)) or isinstance(prr, bool) or not 0 < prr <= 10:
-        _bad("workflow.profile_rough_tol", prr, "a number in (0, 10]")
-    pe = wf.get("profile_expand", 3)
-    if not isinstance(pe, int) or isinstance(pe, bool) or not 0 <= pe <= 10:
-        _bad("workflow.profile_expand", pe, "an integer in [0, 10]")
-    dr = wf.get("disc_refresh", 1)
-    if not isinstance(dr, int) or isinstance(dr, bool) or not 0 <= dr <= 20:
-        _bad("workflow.disc_refresh", dr, "an integer in [0, 20] (refresh passes at most)")
-    dt = wf.get("disc_refresh_tol", 0.05)
-    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not 0 < dt < 1:
-        _bad("workflow.disc_refresh_tol", dt, "a number in (0, 1) (relative change of a named strength)")
+    wo = parse_options(d)
     return DiscrepancySpec(base, off, tuple(cal), names, scaling, upper, probe,
-                           tuple(ids) if ids is not None else None, every, opts, wf,
-                           dict(disc) if disc is not None else None)
+                           tuple(ids) if ids is not None else None, every, opts,
+                           dict(disc) if disc is not None else None, wo.fit, wo.acceptance, wo.noise, wo.profile)
 
 
 def load_spec(path) -> DiscrepancySpec:

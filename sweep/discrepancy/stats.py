@@ -141,9 +141,8 @@ def profile_roughness(values, delta_chi2, center: float) -> float:
     here), 0 for a profile monotone on each side.
 
     A true profile rises monotonically away from its minimum.  A coarse forward model whose outputs jitter with
-    the parameter (the front radius of a fingering front: measured ±0.6 mm at t = 0.3 s for volumetric_coupling
-    0.9–1.4 at a fixed mesh, against σ ≈ 0.6 mm) gives a jagged profile whose threshold crossings are set by
-    the jitter, not by the data: the interval can be far too narrow.  The drop measures that jitter in Δχ² units.
+    the parameter (the front radius of a fingering front jumps from node to node) gives a jagged profile whose
+    threshold crossings are set by the jitter, not by the data: the interval can be far too narrow.  The drop measures that jitter in Δχ² units.
     """
     v = np.asarray(values, float)
     d = np.asarray(delta_chi2, float)

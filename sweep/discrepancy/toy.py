@@ -67,4 +67,7 @@ class ToyForward(ForwardModel):
                 out[obs] = crack(t)
             elif obs == "regime":
                 out[obs] = "fracturing" if crack(t.max()) > 1.0 else "porous_invasion"
+            else:
+                raise ValueError(f"ToyForward: observable {obs!r} is not modelled (p_inj, front_radius_mean, "
+                                 "crack_length, regime)")
         return out

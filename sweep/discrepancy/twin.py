@@ -10,10 +10,11 @@ import numpy as np
 import pandas as pd
 
 from .data import OBS_COLUMNS, write_measured
+from .observables import REGISTRY
 
 __all__ = ["make_twin", "DEFAULT_NOISE"]
 
-DEFAULT_NOISE = {"p_inj": 2.0, "front_radius_mean": 0.2, "crack_length": 0.3}
+DEFAULT_NOISE = {n: o.default_noise for n, o in REGISTRY.items() if o.kind == "curve"}
 
 
 def make_twin(folder, forward, conditions: dict, times, hidden: dict, noise: dict | None = None,
@@ -22,7 +23,8 @@ def make_twin(folder, forward, conditions: dict, times, hidden: dict, noise: dic
 
     conditions : {id: {parameter: value}}; times : observation times, s (same for every curve);
     hidden : parameter overrides of the data-generating model (never told to the workflow);
-    noise : {observable: sd} (also written as the uncertainty column).
+    noise : {observable: sd} in the observable's unit (also written as the uncertainty column; default
+        the registry's default noise, observables.py).
     """
     noise = dict(DEFAULT_NOISE, **(noise or {}))
     rng = np.random.default_rng(seed)

@@ -114,7 +114,13 @@ def twin_conditions(camp: dict, twin: dict, spec) -> dict:
 
 def twin_observables(camp: dict, twin: dict) -> tuple:
     """The twin's measured observables: its ``observables`` subset of ``[data] observables``, or all of them."""
+    from .observables import CURVES
+
     allo = tuple(camp["data"].get("observables", ("p_inj", "front_radius_mean")))
+    unknown = [o for o in allo if o not in CURVES]
+    if unknown:
+        raise ValueError(f"twin campaign: [data] observables={list(allo)}: {unknown} not among the registered curve "
+                         f"observables {list(CURVES)} (sweep/discrepancy/observables.py)")
     obs = twin.get("observables")
     if obs is None:
         return allo
@@ -205,7 +211,7 @@ def _link_resolutions(summary: dict) -> None:
 def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
     """Run the twin experiments of ``campaign`` (path or dict); returns the summary dict.
 
-    n_jobs : parallel solver runs (default: the spec's ``workflow.n_jobs``).
+    n_jobs : parallel solver runs (default: the spec's ``[fit] n_jobs``).
     """
     from solver import RunOptions
 
@@ -217,7 +223,7 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
 
     camp = load_twin_campaign(campaign) if not isinstance(campaign, dict) else campaign
     spec = spec_from_dict(camp["spec"])
-    n_jobs = spec.wf("n_jobs") if n_jobs is None else int(n_jobs)
+    n_jobs = spec.fit.n_jobs if n_jobs is None else int(n_jobs)
     dat = camp["data"]
     a, b, n = dat["times"]
     times = np.linspace(float(a), float(b), int(n))

@@ -1,0 +1,127 @@
+"""``dchfrac discrepancy init``: a commented starting SPEC (TOML) written from a measured-data folder.
+
+The SPEC lists the folder's conditions and observables, makes every catalogue effect (solver.effects.EFFECTS)
+a candidate switched off in the baseline, calibrates the stiffness E and the permeability scale k̄ (unless the
+conditions set them), holds out the last condition, runs the solver on a coarse mesh up to the last
+observation time, and spells out every workflow setting at its default with what it does
+(:mod:`.options`).  It loads with :func:`.spec.load_spec` as written; the user edits it from there.
+Units: mm, s, kPa.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import fields
+from pathlib import Path
+
+from solver.effects import EFFECTS
+
+from .data import MeasuredData, load_measured
+from .observables import REGISTRY
+from .options import OPTION_TABLES
+
+__all__ = ["starting_spec", "write_starting_spec", "DEFAULT_CALIBRATE"]
+
+# the baseline parameters calibrated by default: name -> (lower, upper, scale); units those of solver.Parameters
+DEFAULT_CALIBRATE = {"E": (150.0, 700.0, "log"), "kbar": (5e-4, 5e-3, "log")}
+
+
+def _toml(v) -> str:
+    """A TOML literal of a number, bool, string or list of them."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml(x) for x in v) + "]"
+    if isinstance(v, str):
+        return json.dumps(v)
+    return repr(v)
+
+
+def _header(data: MeasuredData, folder: Path) -> list[str]:
+    """What the folder holds: its conditions (their parameters) and observables (unit, points per condition)."""
+    L = [f"# Starting SPEC for the discrepancy workflow, written by `dchfrac discrepancy init` from {folder}.",
+         "# Units: mm, s, kPa.  Edit, then: dchfrac discrepancy run --measured DIR --model THIS_FILE --out OUT",
+         "#", "# Conditions (conditions.csv):"]
+    for cid in data.ids:
+        L.append(f"#   {cid}: {data.condition_params(cid) or 'the model defaults'}")
+    L.append("# Observables (observations.csv):")
+    for name in dict.fromkeys(data.curves.observable):
+        n = {cid: int(((data.curves.observable == name) & (data.curves.condition == cid)).sum()) for cid in data.ids}
+        L.append(f"#   {name} ({REGISTRY[name].unit}): {REGISTRY[name].doc}; points per condition {n}")
+    if data.regimes:
+        L.append(f"#   regime (label) in {sorted(data.regimes)}")
+    return L + [""]
+
+
+def _model_tables(data: MeasuredData) -> list[str]:
+    """[baseline], [[calibrate]], [candidates], [holdout], [options] and a commented [discretization]."""
+    names = list(EFFECTS)
+    set_by_conditions = set(data.conditions.columns)
+    L = ["[baseline]                       # solver.Parameters fields common to every condition (model defaults",
+         "                                 # otherwise); the effects listed here are off in the baseline",
+         f"effects_off = {_toml(names)}", ""]
+    for name, (lo, hi, scale) in DEFAULT_CALIBRATE.items():
+        if name in set_by_conditions:
+            L.append(f"# {name} is set per condition in conditions.csv: not calibrated")
+            continue
+        L += ["[[calibrate]]                    # fitted on the training conditions (initial: the model default)",
+              f"name = {_toml(name)}", f"lower = {lo!r}", f"upper = {hi!r}", f"scale = {_toml(scale)}", ""]
+    L += ["[candidates]                     # the effects the workflow may name (off in the baseline):"]
+    for n in names:
+        e = EFFECTS[n]
+        L.append(f"#   {n}: strength {e.parameter} in [{e.off}, {e.upper}] {e.unit}, probe {e.probe}")
+    L += [f"effects = {_toml(names)}",
+          "# upper = { damage_viscosity = 300.0 }       # optional: a candidate's upper bound / probe strength",
+          "# scaling = { damage_viscosity = \"sqrt_cement\" }   # optional: parameter = strength * sqrt(C)", ""]
+    L += ["[holdout]                        # whole conditions the fit never sees: the held-out gap is measured there",
+          f"ids = {_toml(data.ids[-1:])}", ""]
+    t_end = float(max(data.curves.time.max() if len(data.curves) else 0.0,
+                      max((t for t, _ in data.regimes.values()), default=0.0)))
+    t_end = math.ceil(t_end * 100.0) / 100.0
+    L += ["[options]                        # solver.RunOptions of the workflow's runs: a coarse mesh keeps a run",
+          "h = 4.0                          # to minutes; check it with [discretization]",
+          f"t_end = {t_end!r}".ljust(33) + "# s: the last observation time",
+          "dt_max = 0.02", "",
+          "# [discretization]               # optional: finer check runs correcting the coarse model's mesh error",
+          "# h = 3.0",
+          "# dt_max = 0.01",
+          "# mesh_seeds = [1, 2, 3]         # one fine run per mesh realization (distinct integers >= 0)", ""]
+    return L
+
+
+def _option_tables() -> list[str]:
+    """[fit], [acceptance], [noise], [profile] at their defaults, each key with what it does."""
+    L = []
+    for table, cls in OPTION_TABLES.items():
+        L.append(f"[{table}]".ljust(33) + "# " + cls.__doc__.splitlines()[0])
+        for f in fields(cls):
+            L.append(f"{f.name} = {_toml(f.default)}".ljust(33) + f"# {f.metadata['doc']}")
+        L.append("")
+    return L
+
+
+def starting_spec(data: MeasuredData, folder) -> str:
+    """The commented starting SPEC (TOML text) for ``data`` (read from ``folder``)."""
+    if len(data.ids) < 2:
+        raise ValueError(f"{folder}: the workflow needs at least 2 conditions (one is held out); "
+                         f"conditions.csv has {len(data.ids)}")
+    return "\n".join(_header(data, Path(folder)) + _model_tables(data) + _option_tables())
+
+
+def write_starting_spec(measured, out, force: bool = False) -> Path:
+    """Validate the measured-data folder ``measured``, write its starting SPEC to ``out`` (atomically; an
+    existing file only with ``force``) and check that it loads.  Returns the path."""
+    from sweep.store import write_text_atomic
+
+    from .spec import spec_from_dict
+
+    out = Path(out)
+    if out.exists() and not force:
+        raise ValueError(f"{out} exists (use --force to overwrite it)")
+    data = load_measured(measured)
+    text = starting_spec(data, measured)
+    import tomllib
+
+    spec_from_dict(tomllib.loads(text))          # what is written loads as written
+    write_text_atomic(out, text)
+    return out

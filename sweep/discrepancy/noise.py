@@ -1,0 +1,193 @@
+"""The noise model of the discrepancy workflow: what the coarse model is compared with, and with which
+covariance.
+
+The comparison is y − err against the coarse model, with err the discretization correction (fine − coarse
+at one set of parameter values, the mean over the fine mesh realizations), and the residuals are whitened
+with
+
+    Σ_s = diag(σ_diag²) + C_s,     σ_diag² = σ_measured² + (disc_error_fraction · err)²,
+
+per series s (condition × observable), C_s the mesh-realization covariance (realizations.py) plus the
+coarse model's jitter (jitter.py) when those are modelled.  :class:`NoiseModel` holds this state and is
+owned by the fitting problem; every change to it bumps ``version``, which the problem's residual cache is
+keyed on.  The functions below compute its pieces from forward runs.  Units: kPa, mm (observables), s.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .jitter import ModelJitter, estimate_model_jitter
+from .layout import CurveLayout
+from .observables import CURVES
+from .realizations import RealizationCovariance, realization_mean_spread, realizations
+
+__all__ = ["NoiseModel", "add_discretization_error", "correction_at", "add_model_jitter", "model_jitter_at",
+           "rms_per_observable"]
+
+
+class NoiseModel:
+    """The data the coarse model is compared with and their covariance (see the module docstring).
+
+    y : corrected data (y_measured − err); sig_diag : σ without the realization and jitter terms; sig :
+    marginal σ of each point (all terms; figures and held-out gaps); real_cov : the per-series covariance
+    (:class:`RealizationCovariance`, jitter included) or None; jitter : :class:`ModelJitter` or None;
+    realization_spread : per-point sample std of the fine realizations (0 without them)."""
+
+    def __init__(self, y: np.ndarray, sig: np.ndarray, layout: CurveLayout):
+        self.layout = layout
+        self.y_measured, self.sig_measured = np.asarray(y, float), np.asarray(sig, float)
+        self.y, self.sig, self.sig_diag = self.y_measured, self.sig_measured, self.sig_measured
+        self.real_cov: RealizationCovariance | None = None
+        self.jitter: ModelJitter | None = None
+        self.realization_spread = np.zeros(self.y.size)
+        self.version = 0
+        self._whiteners: dict = {}
+
+    def _changed(self, covariance: bool) -> None:
+        self.version += 1
+        if covariance:
+            self._whiteners.clear()
+
+    def set_discretization(self, err: np.ndarray, fines: np.ndarray, fraction: float) -> None:
+        """Compare with y_measured − ``err`` (0 where not finite) and widen σ by ``fraction``·err; ``fines``
+        (k, n): the realizations' predictions.  With k >= 2 their deviations enter as a covariance per series
+        correlated in time (:meth:`RealizationCovariance.estimate`), else their per-point spread (0 for one
+        model) in quadrature.  Replaces any earlier correction; keeps the jitter term."""
+        fines = np.atleast_2d(np.asarray(fines, float))
+        err = np.where(np.isfinite(err), err, 0.0)
+        spread = realization_mean_spread(fines)[1]
+        self.y = self.y_measured - err
+        sig_diag = np.sqrt(self.sig_measured**2 + (fraction * err) ** 2)
+        if fines.shape[0] >= 2:
+            self.real_cov = RealizationCovariance.estimate(fines, self.layout)
+            self.sig_diag = sig_diag
+        else:
+            self.real_cov = None
+            self.sig_diag = np.sqrt(sig_diag**2 + spread**2)
+        self.realization_spread = spread
+        self._attach()
+
+    def set_jitter(self, jitter: ModelJitter | None) -> None:
+        """Use ``jitter``'s covariance (None: no jitter term) beside the realization covariance."""
+        self.jitter = jitter
+        self._attach()
+
+    def _attach(self) -> None:
+        """The covariance: the realizations' term (or an empty one, k = 0) plus the jitter term; marginal σ."""
+        rc = self.real_cov
+        if rc is not None and rc.k == 0:
+            rc = None                                 # a jitter-only covariance from an earlier call
+        if self.jitter is not None:
+            rc = (rc if rc is not None else RealizationCovariance.empty(self.layout)).with_jitter(
+                self.jitter.blocks(self.layout))
+        elif rc is not None:
+            rc = rc.with_jitter(None)
+        self.real_cov = rc
+        self.sig = (np.sqrt(self.sig_diag**2 + rc.variance(self.sig_diag.size)) if rc is not None
+                    else self.sig_diag)
+        self._changed(covariance=True)
+
+    def shift_correction(self, err: np.ndarray | None) -> np.ndarray:
+        """Compare with y_measured − ``err`` (σ and the covariance unchanged); None changes nothing.
+        Returns the correction in use before (to restore it)."""
+        old = self.y_measured - self.y
+        if err is not None:
+            self.y = self.y_measured - err
+            self._changed(covariance=False)
+        return old
+
+    def standardize(self, diff: np.ndarray, mask: np.ndarray, nan_value: float) -> np.ndarray:
+        """Standardized residuals of differences ``diff`` (data − model, kPa / mm) on the rows of ``mask``.
+
+        e = diff/σ_diag (non-finite entries set to ``nan_value``), whitened per series when a covariance is
+        modelled: with Σ_s = diag(σ_diag²) + C_s, r_s = (D^(−1/2) Σ_s D^(−1/2))^(−1/2) e_s, so
+        r·r = diffᵀ Σ⁻¹ diff (generalized least squares).  Without it this is e itself."""
+        e = diff / self.sig_diag[mask]
+        e = np.where(np.isfinite(e), e, nan_value)
+        if self.real_cov is None:
+            return e
+        key = mask.tobytes()
+        if key not in self._whiteners:
+            self._whiteners[key] = self.real_cov.whiteners(mask, self.sig_diag)
+        out = e.copy()
+        for pos, W in self._whiteners[key]:
+            out[pos] = W @ e[pos]
+        return out
+
+    def null_calibration(self, mask: np.ndarray, seed: int) -> dict | None:
+        """The residual test's null for the estimated realization covariance on ``mask``'s rows (None
+        without one): :meth:`RealizationCovariance.null_calibration`."""
+        if self.real_cov is None:
+            return None
+        return self.real_cov.null_calibration(mask, self.sig_diag, seed=seed)
+
+
+def rms_per_observable(layout: CurveLayout, v: np.ndarray) -> dict:
+    """RMS of the per-row values ``v`` per observable (their unit)."""
+    return {o: float(np.sqrt(np.mean(v[layout.obs == o] ** 2))) for o in CURVES if np.any(layout.obs == o)}
+
+
+def _coarse_and_fines(problem, fines_fw: list, values: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The coarse model (n,) and each fine model (k, n) at ``values`` on every curve row of ``problem``."""
+    ids = problem.data.ids
+    allm = np.ones(problem.y.size, bool)
+    coarse = problem.model_vector(problem.predict([values], ids)[0], allm)
+    jobs = [(problem.overrides(cid, values), problem.times[cid]) for cid in ids]
+    fines = np.vstack([problem.model_vector(dict(zip(ids, f.predict_many(jobs))), allm) for f in fines_fw])
+    return coarse, fines
+
+
+def correction_at(problem, fine_forward, values: dict) -> np.ndarray:
+    """Mesh correction err = mean_k(fine_k) − coarse at ``values`` on every curve row (0 where not finite)."""
+    coarse, fines = _coarse_and_fines(problem, realizations(fine_forward), values)
+    err = realization_mean_spread(fines)[0] - coarse
+    return np.where(np.isfinite(err), err, 0.0)
+
+
+def add_discretization_error(problem, fine_forward, values: dict | None = None) -> dict:
+    """Correct ``problem``'s data for the model's discretization error and widen the uncertainties.
+
+    err = mean_k(fine_k) − coarse per point, at ``values`` (default: the baseline at its initial values),
+    over ``fine_forward`` (one forward model or a list of k mesh realizations: other perturbed meshes and
+    element-wise porosity fields).  The data are one such realization and the model cannot know which, so
+    the mean is the correction and the realizations' deviations are an uncertainty of the comparison
+    (:meth:`NoiseModel.set_discretization`).  Non-finite values are left out per point.  Always applied to
+    the data as measured: a second call replaces the first.  Returns the RMS of err per observable."""
+    fines_fw = realizations(fine_forward)
+    if not fines_fw:
+        raise ValueError("add_discretization_error: no fine forward model")
+    vals = values if values is not None else {p.name: p.initial for p in problem.spec.calibrate}
+    coarse, fines = _coarse_and_fines(problem, fines_fw, vals)
+    err = realization_mean_spread(fines)[0] - coarse
+    err = np.where(np.isfinite(err), err, 0.0)
+    problem.noise.set_discretization(err, fines, problem.spec.noise.disc_error_fraction)
+    return rms_per_observable(problem.layout, err)
+
+
+def model_jitter_at(problem, values: dict, params, n_steps: int | None = None,
+                    rel_step: float | None = None) -> ModelJitter | None:
+    """The coarse model's jitter at ``values`` in the directions of ``params`` (CalibParam), over every
+    condition (training and held out: the held-out gap is measured with the same σ); ``runs`` booked.
+    ``n_steps``, ``rel_step``: the spec's ``[noise] model_jitter_steps``, ``model_jitter_rel_step`` unless given."""
+    opts = problem.spec.noise
+    allm = np.ones(problem.y.size, bool)
+    before = int(getattr(problem.forward, "n_runs", 0))
+
+    def evaluate(vlist):
+        return np.vstack([problem.model_vector(pr, allm) for pr in problem.predict(vlist, problem.data.ids)])
+
+    mj = estimate_model_jitter(evaluate, problem.layout, values, params,
+                               n_steps=opts.model_jitter_steps if n_steps is None else n_steps,
+                               rel_step=opts.model_jitter_rel_step if rel_step is None else rel_step)
+    if mj is not None:
+        mj.runs = int(getattr(problem.forward, "n_runs", 0)) - before
+    return mj
+
+
+def add_model_jitter(problem, values: dict, params) -> dict | None:
+    """Estimate the coarse model's jitter at ``values`` (:func:`model_jitter_at`) and whiten with it.
+    Returns its summary (RMS per observable in kPa / mm, correlation times in s, runs spent), None when
+    nothing could be stepped."""
+    problem.noise.set_jitter(model_jitter_at(problem, values, params))
+    j = problem.noise.jitter
+    return j.summary(problem.layout) if j is not None else None

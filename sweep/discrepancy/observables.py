@@ -1,0 +1,93 @@
+"""The observable registry: the one place an observable of the discrepancy workflow is defined.
+
+An observable has a name (the ``observable`` column of observations.csv), a unit, how it is read from a
+solver run's time series (``timeseries.csv``, one row per time step) and a default noise (one standard
+deviation, in its unit, used by the twin experiments).  The measured-data loader, the forward model, the
+twins, the residual maps and the report all take their observables from :data:`REGISTRY`; adding one means
+a new :class:`Observable` here and the column it reads in the solver's time series (solver/simulate.py).
+
+A "curve" observable is a number per observation time; a "label" observable (the regime) is one label per
+condition, classified from the run's last snapshot (sweep.classify), not from the time series.
+Units: mm, s, kPa.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["Observable", "REGISTRY", "CURVES", "LABELS", "UNITS", "get_observable", "read_curves",
+           "ObservableUnavailable"]
+
+
+class ObservableUnavailable(ValueError):
+    """A run's time series lacks the column an observable is read from."""
+
+
+@dataclass(frozen=True)
+class Observable:
+    """name; unit ("kPa", "mm", "label"); kind "curve" | "label"; columns: the time-series columns it reads;
+    read(ts, r_inner) -> values per time-series row (None for a label); default_noise: one sd in ``unit``
+    (None for a label); doc: what it measures."""
+
+    name: str
+    unit: str
+    kind: str
+    columns: tuple
+    read: Callable | None
+    default_noise: float | None
+    doc: str
+
+
+def _column(name: str) -> Callable:
+    return lambda ts, r_inner: ts[name].to_numpy(float)
+
+
+def _crack_length(ts, r_inner: float) -> np.ndarray:
+    """open_tip_radius − r_inner where a crack is open (open_tip_radius > 0), else 0 (mm)."""
+    tip = ts["open_tip_radius"].to_numpy(float)
+    return np.where(tip > 0, np.maximum(tip - r_inner, 0.0), 0.0)
+
+
+REGISTRY: dict[str, Observable] = {o.name: o for o in (
+    Observable("p_inj", "kPa", "curve", ("p_inj",), _column("p_inj"), 2.0,
+               "injection pressure: mean pore pressure on the inner circle"),
+    Observable("front_radius_mean", "mm", "curve", ("front_radius_mean",), _column("front_radius_mean"), 0.2,
+               "angular mean radius of the S = 0.5 invasion front connected to the inlet"),
+    Observable("front_radius_branches", "mm", "curve", ("front_radius_branches",),
+               _column("front_radius_branches"), 0.3,
+               "mean radius of the three main (farthest) invasion branches: the paper's front measure "
+               "(Sec. 3.5); noisier than the angular mean, it follows three tips"),
+    Observable("crack_length", "mm", "curve", ("open_tip_radius",), _crack_length, 0.3,
+               "length of the open crack beyond the inner radius (0 before initiation)"),
+    Observable("regime", "label", "label", (), None, None,
+               "regime label of the last snapshot (sweep.classify), e.g. fracturing"),
+)}
+
+CURVES = tuple(n for n, o in REGISTRY.items() if o.kind == "curve")
+LABELS = tuple(n for n, o in REGISTRY.items() if o.kind == "label")
+UNITS = {n: o.unit for n, o in REGISTRY.items()}
+
+
+def get_observable(name: str) -> Observable:
+    """The registered observable ``name``; ValueError naming the allowed ones otherwise."""
+    if name not in REGISTRY:
+        raise ValueError(f"unknown observable {name!r} (allowed: {list(REGISTRY)})")
+    return REGISTRY[name]
+
+
+def read_curves(ts, names, r_inner: float) -> dict:
+    """{name: values per time-series row} of the curve observables ``names`` from a run's time series
+    ``ts`` (DataFrame); r_inner: the run's inner radius, mm.  A missing column raises
+    :class:`ObservableUnavailable` naming the observable and the column."""
+    out = {}
+    for name in names:
+        o = get_observable(name)
+        missing = [c for c in o.columns if c not in ts.columns]
+        if missing:
+            raise ObservableUnavailable(
+                f"observable {name!r} is unavailable: the run's time series has no column {missing[0]!r} "
+                f"(columns: {sorted(ts.columns)})")
+        out[name] = o.read(ts, r_inner)
+    return out

@@ -1,0 +1,204 @@
+"""The workflow's settings: typed, frozen option dataclasses grouped by concern, validated in one loop.
+
+A SPEC (TOML) sets them in four tables, every key optional (defaults below)::
+
+    [fit]          how a model is fitted: robust least squares, starts, budget
+    [acceptance]   when a candidate effect is named, tied or refused
+    [noise]        the error model: discretization correction, its refresh, the coarse model's jitter
+    [profile]      the profile-likelihood interval of a named strength
+
+Each field declares its allowed values once (``_rule``); :func:`parse_options` checks every field of every
+table by one loop and names the table, key, value and what is allowed.  Units: mm, s, kPa where a value has
+one (most are dimensionless: standardized residuals, BIC, fractions).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+__all__ = ["FitOptions", "AcceptanceOptions", "NoiseOptions", "ProfileOptions", "WorkflowOptions",
+           "parse_options", "OPTION_TABLES", "REMOVED_WORKFLOW_KEYS"]
+
+
+def _rule(default, kind: str, lo=None, hi=None, lo_open=False, hi_open=False, choices=(), odd=False, doc=""):
+    """A field with its allowed values: kind "int" | "float" | "bool" | "choice", bounds [lo, hi] (open
+    ends with ``lo_open``/``hi_open``), ``choices`` for "choice", ``odd`` for odd integers; ``doc`` says
+    what it does (the SPEC template of ``dchfrac discrepancy init`` prints it)."""
+    return field(default=default, metadata={"kind": kind, "lo": lo, "hi": hi, "lo_open": lo_open,
+                                            "hi_open": hi_open, "choices": tuple(choices), "odd": odd, "doc": doc})
+
+
+class _Checked:
+    """Validation of every field by its rule on construction (one loop, as solver.options.RunOptions); a
+    float field given as an int is stored as a float.  ``TABLE``: the SPEC table, for the messages."""
+
+    TABLE = ""
+
+    def __post_init__(self):
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not _ok(f, v):
+                raise ValueError(f"discrepancy spec: {self.TABLE}.{f.name}={v!r} is not allowed: {_allowed(f)}")
+            if f.metadata["kind"] == "float":
+                object.__setattr__(self, f.name, float(v))
+
+
+@dataclass(frozen=True)
+class FitOptions(_Checked):
+    """Bounded robust least squares (scipy TRF) on standardized residuals."""
+
+    TABLE = "fit"
+
+    loss: str = _rule("soft_l1", "choice", choices=("soft_l1", "linear", "huber", "cauchy", "arctan"),
+                      doc="robust loss of scipy.optimize.least_squares")
+    f_scale: float = _rule(3.0, "float", 0.0, lo_open=True, doc="residual scale where the robust loss bends")
+    max_nfev: int = _rule(20, "int", 1, doc="function evaluations per least-squares start")
+    starts: int = _rule(1, "int", 1, 50, doc="starts per fit (the spec's initial values, then random ones)")
+    seed: int = _rule(0, "int", 0, doc="seed of the random starts and of the residual test's null draws")
+    nan_residual: float = _rule(50.0, "float", 0.0, lo_open=True,
+                                doc="standardized residual of a point the model could not compute (failed run)")
+    n_jobs: int = _rule(1, "int", 1, 256, doc="parallel solver runs")
+
+
+@dataclass(frozen=True)
+class AcceptanceOptions(_Checked):
+    """When an effect is named or tied: evidence, screening and the residual test."""
+
+    TABLE = "acceptance"
+
+    delta_bic: float = _rule(-10.0, "float", hi=0.0, doc="BIC change a candidate's refit must reach (<=)")
+    tie_bic: float = _rule(10.0, "float", 0.0, doc="passing candidates within this BIC (common weights) tie")
+    min_gap_reduction: float = _rule(0.1, "float", 0.0, 1.0, hi_open=True,
+                                     doc="relative shrink of the held-out gap a candidate needs")
+    min_explained: float = _rule(0.5, "float", 0.0, 1.0, doc="fraction of the excess chi2 a candidate must explain")
+    min_ratio: float = _rule(0.15, "float", 0.0, 1.0, hi_open=True,
+                             doc="signature left outside the calibrated parameters' span, below: not identifiable")
+    tie_cos: float = _rule(0.95, "float", 0.0, 1.0, doc="signatures this parallel are tied in the screen")
+    z_crit: float = _rule(3.0, "float", 0.0, lo_open=True, doc="residual test: chi2-excess z of a systematic series")
+    rho_crit: float = _rule(0.3, "float", 0.0, 1.0, doc="residual test: lag-1 autocorrelation of a systematic series")
+    max_rounds: int = _rule(3, "int", 1, 20, doc="effects named one after another at most")
+    max_refits: int = _rule(2, "int", 1, 50, doc="best-screened candidates refitted per round (plus their ties)")
+
+
+@dataclass(frozen=True)
+class NoiseOptions(_Checked):
+    """The error model beside the measured uncertainties (noise.py)."""
+
+    TABLE = "noise"
+
+    disc_error_fraction: float = _rule(0.5, "float", 0.0, 1.0,
+                                       doc="this fraction of the discretization correction added to sigma")
+    disc_refresh: int = _rule(1, "int", 0, 20,
+                              doc="passes re-estimating the correction at the named model's fit (0: none)")
+    disc_refresh_tol: float = _rule(0.05, "float", 0.0, 1.0, lo_open=True, hi_open=True,
+                                    doc="refresh stops once every named strength moves by <= this (relative)")
+    model_jitter: str = _rule("none", "choice", choices=("none", "estimated"),
+                              doc="the coarse model's jitter in its parameters as an error term")
+    model_jitter_steps: int = _rule(7, "int", 5, 21, odd=True, doc="runs per stepped parameter (odd)")
+    model_jitter_rel_step: float = _rule(0.05, "float", 0.0, 0.5, lo_open=True, hi_open=True,
+                                         doc="relative step of a parameter when estimating the jitter")
+
+
+@dataclass(frozen=True)
+class ProfileOptions(_Checked):
+    """The named strength's profile-likelihood interval (profile.py)."""
+
+    TABLE = "profile"
+
+    expand: int = _rule(3, "int", 0, 10, doc="doublings of the bracket beyond the Wald bound")
+    refine: int = _rule(2, "int", 0, 10, doc="evaluations refining each bound (regula falsi in sqrt(delta chi2))")
+    refine_tol: float = _rule(0.15, "float", 0.0, 1.0, lo_open=True, hi_open=True,
+                              doc="refinement stops when delta chi2 is within this fraction of the threshold")
+    rough_tol: float = _rule(0.25, "float", 0.0, 10.0, lo_open=True,
+                             doc="flag the interval when the profile falls by this fraction of its threshold")
+    fine: bool = _rule(True, "bool", doc="with [discretization]: correct each profile point where it is "
+                                         "(false: the fit's correction, far cheaper)")
+    smoothing: str = _rule("none", "choice", choices=("none", "quadratic"),
+                           doc="quadratic: the interval from a quadratic through noisy profile points (MCAP)")
+    grid: int = _rule(4, "int", 2, 20, doc="with quadratic smoothing: extra profile points per side")
+
+
+@dataclass(frozen=True)
+class WorkflowOptions:
+    """All four groups, as a SPEC holds them."""
+
+    fit: FitOptions = field(default_factory=FitOptions)
+    acceptance: AcceptanceOptions = field(default_factory=AcceptanceOptions)
+    noise: NoiseOptions = field(default_factory=NoiseOptions)
+    profile: ProfileOptions = field(default_factory=ProfileOptions)
+
+
+OPTION_TABLES = {"fit": FitOptions, "acceptance": AcceptanceOptions, "noise": NoiseOptions, "profile": ProfileOptions}
+
+# keys of the former string-keyed [workflow] table: where each went, or why it is gone (the loader's message)
+REMOVED_WORKFLOW_KEYS = {
+    "diff_step": "removed (never read: each calibrated parameter's step is its [[calibrate]] step)",
+    "interval": "removed: the named strength's interval is always the profile likelihood",
+    "realization_covariance": "removed: mesh realizations always enter as a covariance correlated in time",
+    "systematic_null": "removed: the residual test is always calibrated for the estimated covariance",
+    "named_needs_noise_level": "removed: an effect is named only when the named model's residuals are at noise level",
+}
+
+
+def _allowed(f) -> str:
+    m = f.metadata
+    if m["kind"] == "bool":
+        return "true or false"
+    if m["kind"] == "choice":
+        return " or ".join(f'"{c}"' for c in m["choices"])
+    what = "an odd integer" if m["odd"] else ("an integer" if m["kind"] == "int" else "a number")
+    lo, hi = (None if b is None else f"{b:g}" for b in (m["lo"], m["hi"]))
+    if lo is not None and hi is not None:
+        return f"{what} in {'(' if m['lo_open'] else '['}{lo}, {hi}{')' if m['hi_open'] else ']'}"
+    if lo is not None:
+        return f"{what} {'>' if m['lo_open'] else '>='} {lo}"
+    if hi is not None:
+        return f"{what} {'<' if m['hi_open'] else '<='} {hi}"
+    return what
+
+
+def _ok(f, v) -> bool:
+    m = f.metadata
+    if m["kind"] == "bool":
+        return isinstance(v, bool)
+    if m["kind"] == "choice":
+        return v in m["choices"]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (m["kind"] == "int" and not isinstance(v, int)):
+        return False
+    if not math.isfinite(v) or (m["odd"] and v % 2 == 0):
+        return False
+    lo, hi = m["lo"], m["hi"]
+    if lo is not None and (v <= lo if m["lo_open"] else v < lo):
+        return False
+    return not (hi is not None and (v >= hi if m["hi_open"] else v > hi))
+
+
+def _table(name: str, cls, d: dict):
+    """One option table: unknown keys named; the values checked by the dataclass itself."""
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(d) - set(known))
+    if unknown:
+        raise ValueError(f"discrepancy spec: [{name}] {unknown} unknown; keys allowed: {sorted(known)}")
+    return cls(**d)                              # every field checked by __post_init__
+
+
+def _reject_workflow_table(wf: dict) -> None:
+    """The former [workflow] table: refused, each key named with its new table or why it was removed."""
+    where = {f.name: f"[{t}] {f.name}" for t, cls in OPTION_TABLES.items() for f in fields(cls)}
+    where.update({f"profile_{f.name}": f"[profile] {f.name}" for f in fields(ProfileOptions)})
+    moves = [f"{k} -> {REMOVED_WORKFLOW_KEYS.get(k) or where.get(k) or 'unknown'}" for k in sorted(wf)]
+    raise ValueError("discrepancy spec: the [workflow] table is replaced by [fit], [acceptance], [noise] and "
+                     "[profile]; " + ("; ".join(moves) if moves else "remove it"))
+
+
+def parse_options(d: dict) -> WorkflowOptions:
+    """The four option tables of a parsed SPEC ``d`` (other tables ignored here), validated."""
+    if "workflow" in d:
+        _reject_workflow_table(dict(d["workflow"] or {}))
+    parts = {}
+    for name, cls in OPTION_TABLES.items():
+        t = d.get(name, {})
+        if not isinstance(t, dict):
+            raise ValueError(f"discrepancy spec: [{name}] must be a table, not {t!r}")
+        parts[name] = _table(name, cls, t)
+    return WorkflowOptions(**parts)

@@ -1,0 +1,208 @@
+"""The profile-likelihood interval of a named effect's strength, and the re-centring of a fit on the
+profile's minimum.
+
+The Wald interval trusts a linearization at the fit; when the effect's signature saturates or trades against
+a calibrated parameter along a curved valley (β against E: a smaller β with a stiffer E reproduces the early
+pressure) it is falsely narrow.  The profile refits the other parameters with the strength held at trial
+values; the interval is where the weighted χ² (the per-series weights n_eff/n and the misfit scale of the
+Wald interval) rises by less than ``level``·scale (3.84: 95 % for one parameter).  Settings:
+:class:`~.options.ProfileOptions`.  Units: each parameter's own; Δχ² dimensionless.
+"""
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from . import stats
+from .evidence import wald_bounds
+from .noise import correction_at
+from .problem import Fit, Problem
+from .realizations import realizations
+from .report import jsonable
+
+log = logging.getLogger("dchfrac.discrepancy")
+
+__all__ = ["profile_interval", "recentre_target", "profile_recentred"]
+
+
+class _Profile:
+    """The profile of parameter ``j`` of ``fit`` on the conditions ``ids``: its evaluated points and the
+    bracketing of each bound (see :func:`profile_interval`)."""
+
+    def __init__(self, problem, fit: Fit, j: int, ids, level: float, fine_forward):
+        self.problem, self.fit, self.j, self.ids, self.level = problem, fit, j, ids, level
+        self.po = problem.spec.profile
+        self.x_hat = np.asarray(fit.x, float)
+        self.p = fit.params[j]
+        self.free = fit.params[:j] + fit.params[j + 1:]
+        self.w = stats.series_weights(fit.r, problem.series[problem.mask(ids)])
+        self.chi2_hat, n = stats.effective_chi2(fit.r, self.w)
+        self.thr = level * max(1.0, self.chi2_hat / max(n - len(fit.params), 1.0))
+        self.x_lo, self.x_hi = self.p.x_bounds
+        self.wald = wald_bounds(fit, j, self.w)[:2]
+        self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
+        self.fines = realizations(fine_forward)
+
+    def dchi2(self, xj: float) -> float:
+        """Δχ² with the parameter held at ``xj`` (internal coordinates), the others refitted; with fine models
+        the correction is re-estimated at that point and the others refitted again (σ and the covariance stay
+        the fit's, so every Δχ² is on one scale)."""
+        problem, p = self.problem, self.p
+        problem.fixed = {p.name: p.from_x(xj)}
+        row = {"value": p.from_x(xj)}
+        try:
+            f = problem.fit(self.free, [np.delete(self.x_hat, self.j)], self.ids)
+            if self.fines:
+                row["delta_chi2_fit_correction"] = float(stats.effective_chi2(f.r, self.w)[0] - self.chi2_hat)
+                old = problem.noise.shift_correction(
+                    correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)}))
+                try:
+                    f = problem.fit(self.free, [np.array(f.x, float)], self.ids)
+                finally:
+                    problem.noise.shift_correction(old)
+        finally:
+            problem.fixed = {}
+        d = float(stats.effective_chi2(f.r, self.w)[0] - self.chi2_hat)
+        row.update({"delta_chi2": d, "others": jsonable(f.values())})
+        self.points.append(row)
+        log.info("profile %s = %.5g: delta chi2 %.2f (threshold %.2f), point %d", p.name, row["value"], d,
+                 self.thr, len(self.points) - 1)
+        return d
+
+    def cross(self, x_in: float, d_in: float, x_out: float, d_out: float) -> float:
+        """The threshold's crossing, √Δχ² interpolated linearly between an inside and an outside point (exact
+        for a quadratic profile; linear in Δχ² would put the bound too close to the fit in a wide bracket)."""
+        a, b = math.sqrt(max(d_in, 0.0)), math.sqrt(d_out)
+        return x_in + (math.sqrt(self.thr) - a) / (b - a) * (x_out - x_in)
+
+    def refine(self, x_in: float, d_in: float, x_out: float, d_out: float) -> float:
+        """The bound by regula falsi in √Δχ²: a bracket closed by a point far outside leaves the bound to the
+        quadratic assumption, so the profile is evaluated at the interpolated bound and re-bracketed until Δχ²
+        there is within ``refine_tol`` of the threshold, at most ``refine`` times."""
+        xb = self.cross(x_in, d_in, x_out, d_out)
+        for _ in range(self.po.refine):
+            db = self.dchi2(xb)
+            if db >= self.thr:
+                x_out, d_out = xb, db
+            else:
+                x_in, d_in = xb, db
+            xb = self.cross(x_in, d_in, x_out, d_out)     # the tightest bracket's bound, also when stopping
+            if abs(db - self.thr) <= self.po.refine_tol * self.thr:
+                break
+        return xb
+
+    def side(self, sign: int) -> float:
+        """One bound: from the Wald bound, doubling the distance from the fit (``expand`` times) until the
+        threshold is crossed; the parameter's bound when it never is within it."""
+        xh = float(self.x_hat[self.j])
+        bound = self.x_hi if sign > 0 else self.x_lo
+        step = max(abs(self.p.to_x(self.wald[1] if sign > 0 else self.wald[0]) - xh), 1e-6 * (self.x_hi - self.x_lo))
+        x_in, d_in = xh, 0.0
+        for _ in range(self.po.expand + 1):
+            xt = float(np.clip(xh + sign * step, self.x_lo, self.x_hi))
+            if xt == x_in:
+                return bound
+            d = self.dchi2(xt)
+            if d >= self.thr:
+                return self.refine(x_in, d_in, xt, d)
+            x_in, d_in = xt, d
+            if xt == bound:
+                return bound
+            step *= 2.0
+        return x_in   # not crossed within the bracket: the last point inside (a lower bound on the width)
+
+    def widen(self, lo: float, hi: float) -> None:
+        """``grid`` more points per side, evenly out to twice the raw bound's distance from the fit (where a
+        quadratic profile is at 4x the threshold): the raw bracket of a jittering model can stop just beside
+        the fit, too narrow a span for a quadratic to see the smooth trend."""
+        xh, span = float(self.x_hat[self.j]), self.x_hi - self.x_lo
+        for sign, b in ((-1, lo), (+1, hi)):
+            reach = 2.0 * abs(b - xh)
+            for k in range(1, self.po.grid + 1):
+                xt = float(np.clip(xh + sign * reach * k / self.po.grid, self.x_lo, self.x_hi))
+                if all(abs(xt - self.p.to_x(q["value"])) > 1e-9 * span for q in self.points):
+                    self.dchi2(xt)
+
+
+def _smoothed(out: dict, pts: list, thr: float, level: float, p) -> None:
+    """The interval from a quadratic through the noisy profile points with the Monte-Carlo-adjusted cutoff
+    (stats.quadratic_profile_interval), clipped to the parameter's bounds; the raw one kept as "raw"."""
+    q = stats.quadratic_profile_interval([r["value"] for r in pts], [r["delta_chi2"] for r in pts], thr, level,
+                                         cap=6.0)
+    out["raw"] = [out["lower"], out["upper"]]
+    out["quadratic"] = q
+    if q is not None:
+        out["lower"] = float(max(q["lower"], p.lower))
+        out["upper"] = float(min(q["upper"], p.upper))
+
+
+def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841, fine_forward=None) -> dict:
+    """Profile-likelihood interval of parameter ``j`` of ``fit`` (see the module docstring).
+
+    Each side starts at the Wald bound and doubles its distance from the fit until the threshold is crossed,
+    then the crossing is interpolated and refined (:class:`_Profile`); a side that never crosses ends at the
+    parameter's bound.  ``fine_forward`` (the fine check models): the discretization correction is a constant
+    vector estimated at the fit, so without them the profile has the coarse model's shape away from the fit;
+    with them each point is corrected where it is.  Returns lower/upper (parameter units), the threshold, the
+    Wald bounds, the roughness (a profile falling away from the fit: its crossings set by the model's jitter)
+    and the points (value, Δχ², the others' values)."""
+    pf = _Profile(problem, fit, j, ids, level, fine_forward)
+    lo, hi = pf.side(-1), pf.side(+1)
+    po = pf.po
+    if po.smoothing == "quadratic":
+        pf.widen(lo, hi)
+    points = sorted(pf.points, key=lambda q: q["value"])
+    rough = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
+                                    pf.p.from_x(pf.x_hat[j]))
+    out = {"lower": float(pf.p.from_x(lo)), "upper": float(pf.p.from_x(hi)), "threshold": float(pf.thr),
+           "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
+           "points": points, "smoothing": po.smoothing}
+    if po.smoothing == "quadratic":
+        _smoothed(out, points, pf.thr, level, pf.p)
+    return out
+
+
+def recentre_target(pr: dict, tol: float = 1e-2) -> dict | None:
+    """The profile point a fit should be re-centred on, or None: the lowest point, if it lies below the fit by
+    more than ``tol`` × the threshold and, for a smoothed profile (``smoothing = "quadratic"``), by more than
+    twice the points' scatter about the quadratic.  With a jittering model every point is a noisy evaluation,
+    and the lowest of ~15 points with scatter σ lies about 2σ below the smooth curve by chance alone: a point
+    below the fit by less than that is the noise, not a fit that stopped short, and chasing it re-runs the
+    whole profile about a luckier point.  The scatter is taken about the quadratic, so it also holds the
+    profile's departure from a quadratic: over a wide, saturating profile the rule re-centres less."""
+    best = min(pr["points"], key=lambda q: q["delta_chi2"])
+    floor = tol * pr["threshold"]
+    q = pr.get("quadratic")
+    if q and q.get("residual_sd") is not None:
+        floor = max(floor, 2.0 * float(q["residual_sd"]))
+    return best if best["delta_chi2"] < -floor else None
+
+
+def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int = 2, fine_forward=None) -> tuple:
+    """Profile interval of parameter ``j``, re-centred when the profile finds a better fit than ``fit``.
+
+    A point with Δχ² < 0 means the joint fit stopped short of the minimum (a budget-limited least squares,
+    ``max_nfev``, in a curved valley).  Then the fit is redone from the best profile point
+    (:func:`recentre_target`) and the profile recomputed about it, so the strength reported is the profile's
+    minimum and the interval is measured from it.  At most ``max_passes`` re-centrings; with
+    ``fine_forward`` a re-centring also re-estimates the correction at the new fit.
+    Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima)."""
+    history = []
+    pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward)
+    for _ in range(max_passes):
+        best = recentre_target(pr)
+        if best is None:
+            break
+        history.append({"strength": float(fit.params[j].from_x(fit.x[j])), "min_delta_chi2": best["delta_chi2"],
+                        "at": best["value"]})
+        vals = {**best.get("others", {}), fit.params[j].name: best["value"]}
+        x0 = np.array([p.to_x(vals[p.name]) for p in fit.params])
+        if fine_forward is not None:
+            problem.noise.shift_correction(correction_at(problem, fine_forward, {**problem.fixed, **{
+                q.name: q.from_x(v) for q, v in zip(fit.params, x0)}}))
+        fit = problem.fit(fit.params, [x0], ids)
+        pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward)
+    pr["recentred"] = history
+    return fit, pr
