@@ -29,6 +29,7 @@ class RunOptions:
     dt0, dt_min, dt_max : initial, minimum and maximum time step, s.
     dt_grow : factor on dt after an easy step (<= ``easy_newton_its`` Newton iterations).
     dt_cut : factor on dt after a rejected step.
+    easy_newton_its : Newton iterations per stagger iteration up to which a step counts as easy.
     stop_front_radius : stop when the S = 0.5 front connected to the inlet reaches this radius, mm (None: never).
     snapshot_times : times at which fields are written, s (the last state is always written).
     newton_rtol : relative Newton tolerance on every field's update (dimensionless; 1e-6: with a reused
@@ -149,3 +150,25 @@ def _check(o: RunOptions) -> None:
         _fail("linear_solver", o.linear_solver, f"one of {_LINEAR_SOLVERS}")
     if any((not math.isfinite(t)) or t < 0 for t in o.snapshot_times):
         _fail("snapshot_times", list(o.snapshot_times), "finite times >= 0")
+
+
+# unit of every run option ("-": dimensionless; "" for counts, switches and labels): the one declaration the
+# campaign column dictionary reads; the meanings are the RunOptions docstring's
+OPTION_UNITS = {
+    "h": "mm", "h_inner": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
+    "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "stop_front_radius": "mm", "snapshot_times": "s",
+    "newton_rtol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
+    "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "",
+}
+
+
+def option_docs() -> dict[str, str]:
+    """Meaning of each run option, parsed from the Attributes section of the RunOptions docstring."""
+    import re
+
+    out: dict[str, str] = {}
+    text = (RunOptions.__doc__ or "").split("----------", 1)[-1]
+    for m in re.finditer(r"^    ([a-z_0-9, ]+) : (.+?)(?=^    [a-z_0-9, ]+ : |\Z)", text, re.M | re.S):
+        for name in m.group(1).split(","):
+            out[name.strip()] = " ".join(m.group(2).split())
+    return out

@@ -24,6 +24,46 @@ from pathlib import Path
 import numpy as np
 
 
+# columns of timeseries.csv (one row per accepted step): name -> (unit, meaning). The one declaration
+# of their units: the campaign column dictionary and the figures' axis labels read it.
+TIMESERIES_COLUMNS = {
+    "t": ("s", "time at the end of the step"),
+    "dt": ("s", "time step"),
+    "p_inj": ("kPa", "injection pressure: mean p on the inner circle"),
+    "injected_volume": ("mm²", "cumulative injected volume w_i x inner length x t (per unit cell height)"),
+    "invading_volume": ("mm²", "invading fluid in the pores: integral of phi S"),
+    "water_inflow_volume": ("mm²", "cumulative invading-fluid inflow through the inner circle"),
+    "water_outflow_volume": ("mm²", "cumulative invading-fluid outflow through the outer circle"),
+    "outflow_volume": ("mm²", "cumulative total outflow through the outer circle"),
+    "mass_error": ("-", "relative error of the total mass balance since t = 0"),
+    "mean_damage": ("-", "area-weighted mean damage d"),
+    "max_damage": ("-", "largest nodal damage d"),
+    "max_hoop_stress": ("kPa", "largest element hoop (circumferential) effective stress"),
+    "front_radius_mean": ("mm", "mean radius of the S = 0.5 front connected to the inlet"),
+    "front_radius_max": ("mm", "largest radius of the S = 0.5 front connected to the inlet"),
+    "open_tip_radius": ("mm", "largest radius of the open region (phi >= 0.99) connected to the inlet"),
+    "outer_layer_area": ("mm²", "invaded area not connected to the inlet (outer water layer)"),
+    "newton_its": ("", "Newton iterations of the step (all stagger iterations)"),
+    "stagger_its": ("", "stagger iterations of the step"),
+    "damage_kkt": ("-", "KKT residual of the damage bound constraints"),
+    "factorizations": ("", "cumulative sparse factorizations of the run"),
+}
+
+# fields of a snapshot (snapshots/snap_*.npz, fields.xdmf): name -> (unit, meaning, "node" | "element")
+SNAPSHOT_FIELDS = {
+    "S": ("-", "saturation of the invading fluid", "node"),
+    "mu": ("kPa", "chemical potential", "node"),
+    "p": ("kPa", "pore pressure", "node"),
+    "d": ("-", "damage", "node"),
+    "u": ("mm", "displacement (u_x, u_y)", "node"),
+    "phi": ("-", "porosity", "element"),
+    "eps_v": ("-", "volumetric strain", "element"),
+    "hoop_stress": ("kPa", "hoop (circumferential) effective stress", "element"),
+    "k": ("mm²", "permeability", "element"),
+    "w1_mag": ("mm/s", "Darcy speed of the invading fluid", "element"),
+}
+
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

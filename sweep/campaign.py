@@ -256,7 +256,7 @@ def write_table(spec, root=DEFAULT_ROOT, *, version: str | None = None, plan: Pl
     """Rebuild the campaign table from the run records and write it (CSV, Parquet with pyarrow)."""
     spec = as_spec(spec)
     df = build_table(spec, root, version=version, plan=plan)
-    return ResultsStore(root, spec.name).write_table(df)
+    return ResultsStore(root, spec.name).write_table(df, swept=spec.axis_names)
 
 
 # ---------------------------------------------------------------------------
@@ -410,7 +410,7 @@ def run_campaign(
                             result.aborted = True
                             break
                     if time.perf_counter() - last_write > table_interval:
-                        store.write_table(build_table(spec, root, version=version, plan=plan))
+                        store.write_table(build_table(spec, root, version=version, plan=plan), swept=spec.axis_names)
                         last_write = time.perf_counter()
             finally:
                 gen.close()
@@ -755,7 +755,7 @@ def write_report(spec, root=DEFAULT_ROOT, *, version: str | None = None, plot: b
     table = build_table(spec, root, plan=plan)
     figs = plot_campaign(spec, root, version=version, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
     if not table.empty:
-        store.write_table(table)
+        store.write_table(table, swept=spec.axis_names)
     L = [f"# Campaign `{spec.name}`", ""]
     if spec.description:
         L += [spec.description.strip(), ""]

@@ -6,6 +6,7 @@
     dchfrac campaign plot SPEC [--results DIR]
     dchfrac campaign report SPEC [--results DIR]
     dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
+    dchfrac campaign columns SPEC [--results DIR] [--timeseries]   (column dictionary: name, unit, meaning)
 
 Also runnable alone: ``python -m sweep.campaign_cli run campaigns/demo.toml``.
 Exit codes: 0 success, 1 failed runs (run) or errors, 2 bad arguments or spec, 130 interrupted.
@@ -32,7 +33,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify}")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -55,10 +56,13 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         ("plot", cmd_plot, "draw the campaign's diagrams from its table"),
         ("report", cmd_report, "write a Markdown summary with the figures"),
         ("classify", cmd_classify, "rerun the classifier on the finished runs (no simulation)"),
+        ("columns", cmd_columns, "the column dictionary of the campaign table: name, unit, dtype, meaning"),
     ):
         q = sub.add_parser(name, help=helptext)
         _common(q)
         q.set_defaults(func=fn)
+        if name == "columns":
+            q.add_argument("--timeseries", action="store_true", help="the columns of the runs' timeseries.csv instead")
     return camp
 
 
@@ -181,6 +185,30 @@ def cmd_classify(args) -> int:
 
     n = reclassify(_spec(args), args.results)
     print(f"reclassified {n} runs")
+    return 0
+
+
+@_guarded
+def cmd_columns(args) -> int:
+    from sweep.columns import column_dictionary, timeseries_dictionary
+    from sweep.load import load_campaign
+
+    spec = _spec(args)
+    if args.timeseries:
+        cols = timeseries_dictionary()
+    else:
+        try:
+            table = load_campaign(spec, args.results)
+        except FileNotFoundError:
+            table = None
+        if table is None or table.empty:
+            print(f"campaign {spec.name}: no finished runs yet, so no table", file=sys.stderr)
+            return 1
+        cols = column_dictionary(table)
+    width = max(len(n) for n in cols["name"])
+    uw = max(len(u) for u in cols["unit"])
+    for name, unit, meaning in zip(cols["name"], cols["unit"], cols["meaning"]):
+        print(f"{name:<{width}}  {unit:<{uw}}  {meaning}")
     return 0
 
 

@@ -111,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("kind", choices=["reference", "convergence"])
     rp.add_argument("runs", nargs="+", help="run folder(s)")
     rp.add_argument("--out", required=True)
-    rp.add_argument("--paper", help="path to paper_reported.toml (default: ../shared/data/)")
+    rp.add_argument("--paper", help="path to paper_reported.toml (default: the shared file beside the project, else the copy shipped with the package)")
     rp.set_defaults(func=cmd_report)
     try:
         from .campaign_cli import add_campaign_commands

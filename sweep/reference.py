@@ -16,6 +16,9 @@ import numpy as np
 import pandas as pd
 
 PAPER_TOML_CANDIDATES = ("../shared/data/paper_reported.toml", "shared/data/paper_reported.toml")
+# the copy shipped with the package (sweep/data/), so that an installed copy finds the figures;
+# tests/test_reference_data.py holds it equal to the shared file whenever that is present
+PACKAGED_PAPER_TOML = Path(__file__).resolve().parent / "data" / "paper_reported.toml"
 
 
 def _figure(nrows=1, ncols=1, size=(6, 4.5)):
@@ -27,14 +30,20 @@ def _figure(nrows=1, ncols=1, size=(6, 4.5)):
 
 
 def paper_reported(path=None) -> dict:
-    """The paper's reported figures (TOML), searched beside the project when no path is given."""
+    """The paper's reported figures (TOML): ``path`` when given, else the shared file beside the project,
+    else the copy shipped with the package (``sweep/data/paper_reported.toml``)."""
     from solver.tomlio import read_toml
 
-    cands = [Path(path)] if path else [Path(p) for p in PAPER_TOML_CANDIDATES] + [Path(__file__).resolve().parents[2] / "shared/data/paper_reported.toml"]
+    if path:
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"paper figures {str(path)!r} not found")
+        return read_toml(path)
+    cands = [Path(p) for p in PAPER_TOML_CANDIDATES] + [Path(__file__).resolve().parents[2] / "shared/data/paper_reported.toml",
+                                                        PACKAGED_PAPER_TOML]
     for c in cands:
-        if c.exists():
+        if c.is_file():
             return read_toml(c)
-    raise FileNotFoundError("paper_reported.toml not found; pass --paper PATH")
+    raise FileNotFoundError(f"paper_reported.toml not found (not even the packaged {PACKAGED_PAPER_TOML}); pass --paper PATH")
 
 
 def plateau_onset(t: np.ndarray, p: np.ndarray, fraction: float = 0.3) -> float:
