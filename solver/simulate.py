@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -178,7 +177,8 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     mesh : optional mesh with ``points`` (mm), ``triangles`` and ``boundary_edges``
         tags "inner" and "outer" (default: the paper's annulus at size ``options.h``).
     phi0 : optional initial porosity per element (default: ``params.porosity_field``).
-    progress : print a live progress line (simulated time, dt, iterations) to stderr.
+    progress : report progress (``solver.progress.StepProgress``: a bar with % of t_end and ETA on a
+        terminal, periodic INFO lines of the logger ``dchfrac.solver`` otherwise); or a StepProgress.
     """
     from .params import Parameters
 
@@ -188,6 +188,10 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     if not isinstance(options, RunOptions):
         raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
     t_wall = time.perf_counter()
+    if progress is True:
+        from .progress import StepProgress
+
+        progress = StepProgress(options.t_end)
     writer = RunWriter(out_dir) if out_dir is not None else None
     if writer:
         writer.start(params, options)
@@ -218,7 +222,7 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     if writer:
         writer.finish(ts, status, reason, wall, rows[-1]["t"] if rows else 0.0, rejected, nfact, xdmf=options.write_xdmf)
     if progress:
-        print(file=sys.stderr)
+        progress.close()
     return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact)
 
 
@@ -265,7 +269,8 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
             if writer:
                 writer.log(f"WARNING: invaded layer not connected to the inlet at the outer circle (area {row['outer_layer_area']:.3g} mm^2) at t={sim.t:.4g} s; see mu_outer_bc")
         if progress:
-            print(f"\r t={sim.t:.4f} s  dt={dt_try:.2e}  newton={info['newton_its']}  stagger={info['stagger_its']}  p_inj={row['p_inj']:.1f} kPa  front={row['front_radius_mean']:.1f} mm   ", end="", file=sys.stderr, flush=True)
+            progress.update(sim.t, f"dt = {dt_try:.2e} s, newton {info['newton_its']}, stagger {info['stagger_its']}, "
+                                   f"p_inj = {row['p_inj']:.1f} kPa, front = {row['front_radius_mean']:.1f} mm")
         if pending and abs(sim.t - pending[0]) < 1e-9:
             pending.pop(0)
             _snapshot(sim, snaps, writer)

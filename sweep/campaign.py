@@ -306,12 +306,9 @@ class Progress:
 
 
 def _hms(s: float) -> str:
-    if not math.isfinite(s):
-        return "?"
-    s = int(round(s))
-    h, r = divmod(s, 3600)
-    m, sec = divmod(r, 60)
-    return f"{h}h{m:02d}m{sec:02d}s" if h else f"{m}m{sec:02d}s"
+    from solver.progress import format_duration
+
+    return format_duration(s)
 
 
 def _make_runner(spec: CampaignSpec, runner) -> Callable:

@@ -14,8 +14,10 @@ Exit codes: 0 success, 1 failed runs (run) or errors, 2 bad arguments or spec, 1
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
+from sweep.logs import LogStream, end_logging, setup_logging
 from sweep.scheduler import BACKENDS
 
 __all__ = ["add_campaign_commands", "main"]
@@ -48,7 +50,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="wall-time limit per run, s (default: spec [run] timeout, else none); the run is killed")
     p.add_argument("--retries", type=int, default=None, help="extra attempts after a failure (default: spec or 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument("--quiet", action="store_true", help="no progress lines (as -q)")
     p.set_defaults(func=cmd_run)
 
     for name, fn, helptext in (
@@ -128,9 +130,9 @@ def cmd_run(args) -> int:
     try:
         res = run_campaign(spec, args.results, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                            timeout=timeout, retries=args.retries, fail_fast=args.fail_fast,
-                           retry_failed=args.retry_failed, progress=None if args.quiet else sys.stderr)
+                           retry_failed=args.retry_failed, progress=None if args.quiet else LogStream("dchfrac.campaign"))
     except KeyboardInterrupt:
-        print(f"\ninterrupted: finished runs are recorded; rerun the same command to resume", file=sys.stderr)
+        logging.getLogger("dchfrac.campaign").warning("interrupted: finished runs are recorded; rerun the same command to resume")
         return 130
     print(f"campaign {spec.name}: {res.n_points} runs, {res.n_executed} executed now "
           f"({res.n_ok} ok, {res.n_failed} failed), {res.n_skipped} not executed (already recorded or cancelled)")
@@ -219,7 +221,11 @@ def main(argv=None) -> int:
     add_campaign_commands(sub)
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(["campaign", *argv])
-    return int(args.func(args))
+    setup_logging()
+    try:
+        return int(args.func(args))
+    finally:
+        end_logging()
 
 
 if __name__ == "__main__":
