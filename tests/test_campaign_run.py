@@ -366,5 +366,5 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
     assert list(t["front_radius_mean"]) == pytest.approx([25.0, 40.0], abs=1.5)
     assert list(t["t_classified"]) == [1.0, 1.0]
     figs = plot_campaign(spec, tmp_path, version=VERSION)
-    assert [f.name for f in figs] == ["timeseries.png", "fields.png"]
+    assert [f.name for f in figs] == ["timeseries.png", "timeseries.pdf", "fields.png", "fields.pdf"]
     assert all(f.stat().st_size > 5000 for f in figs)
