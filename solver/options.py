@@ -10,7 +10,7 @@ from .tomlio import read_toml, write_flat_toml
 _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("h_inner",)
+_OMIT_WHEN_NONE = ("h_inner", "frames", "xdmf_format")
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,10 @@ class RunOptions:
     dt_cut : factor on dt after a rejected step.
     easy_newton_its : Newton iterations per stagger iteration up to which a step counts as easy.
     stop_front_radius : stop when the S = 0.5 front connected to the inlet reaches this radius, mm (None: never).
-    snapshot_times : times at which fields are written, s (the last state is always written).
+    snapshot_times : times at which fields are written, s (the initial state t = 0 and the last state are
+        always written).
+    frames : also write N evenly spaced snapshots, at k t_end / N for k = 1..N (for animations; None: none).
+        Omitted from :meth:`to_dict` when None, as h_inner.
     newton_rtol : relative Newton tolerance on every field's update (dimensionless; 1e-6: with a reused
         Jacobian the error left is below this, far below the time-discretization error; 1e-7 cost 12 % more
         iterations for changes of p_inj below 1e-5 relative).
@@ -45,6 +48,8 @@ class RunOptions:
         iteration; 0 disables reuse (exact Newton: every iteration factorizes).
     max_wall_time : give up (status "failed") after this many seconds of wall time (None: no limit).
     write_xdmf : also write the snapshots as XDMF for ParaView.
+    xdmf_format : "hdf5" (arrays in fields.h5 beside fields.xdmf; needs h5py), "xml" (inline) or None / "auto"
+        (hdf5 when h5py is installed). Omitted from :meth:`to_dict` when None, as h_inner.
     """
 
     h: float = 1.0
@@ -68,6 +73,8 @@ class RunOptions:
     jacobian_reuse: float = 0.3
     max_wall_time: float | None = None
     write_xdmf: bool = True
+    frames: int | None = None
+    xdmf_format: str | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "snapshot_times", tuple(float(t) for t in self.snapshot_times))
@@ -89,6 +96,18 @@ class RunOptions:
         if unknown:
             raise ValueError(f"unknown run option(s) {unknown}; allowed: {sorted(names)}")
         return cls(**d)
+
+    def frame_times(self) -> list[float]:
+        """Times after t = 0 at which snapshots are written, s: snapshot_times within (0, t_end] and the
+        ``frames`` evenly spaced times, sorted, without repeats (t = 0 and the last state come besides)."""
+        ts = {t for t in self.snapshot_times if 0 < t <= self.t_end + 1e-12}
+        if self.frames:
+            ts |= {self.t_end * k / self.frames for k in range(1, self.frames + 1)}
+        out: list[float] = []
+        for t in sorted(ts):
+            if not out or t - out[-1] > 1e-9:
+                out.append(t)
+        return out
 
     def replace(self, **changes) -> "RunOptions":
         return replace(self, **changes)
@@ -148,6 +167,10 @@ def _check(o: RunOptions) -> None:
         _fail("mesh_seed", o.mesh_seed, "None or an integer >= 0")
     if o.linear_solver not in _LINEAR_SOLVERS:
         _fail("linear_solver", o.linear_solver, f"one of {_LINEAR_SOLVERS}")
+    if o.frames is not None:
+        num("frames", 1, lo_open=False, integer=True)
+    if o.xdmf_format not in (None, "auto", "hdf5", "xml"):
+        _fail("xdmf_format", o.xdmf_format, "None or one of ('auto', 'hdf5', 'xml')")
     if any((not math.isfinite(t)) or t < 0 for t in o.snapshot_times):
         _fail("snapshot_times", list(o.snapshot_times), "finite times >= 0")
 
@@ -158,7 +181,8 @@ OPTION_UNITS = {
     "h": "mm", "h_inner": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
     "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "stop_front_radius": "mm", "snapshot_times": "s",
     "newton_rtol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
-    "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "",
+    "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
+    "xdmf_format": "",
 }
 
 

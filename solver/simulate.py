@@ -229,13 +229,12 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
 def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, progress, t_wall):
     p = sim.params
     disc = sim.disc
-    pending = sorted(t for t in o.snapshot_times if 0 < t <= o.t_end + 1e-12)
+    pending = o.frame_times()
     dt = o.dt0
     cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0}
     V0 = _stored_volume(sim, sim.U)
     warned_layer = False
-    if 0.0 in o.snapshot_times:
-        _snapshot(sim, snaps, writer)
+    _snapshot(sim, snaps, writer)  # the initial state, t = 0
     while sim.t < o.t_end - 1e-12:
         if o.max_wall_time is not None and time.perf_counter() - t_wall > o.max_wall_time:
             return "failed", f"max_wall_time {o.max_wall_time} s exceeded at t = {sim.t:.4g} s"
