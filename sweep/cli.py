@@ -3,6 +3,7 @@
     dchfrac [--version] [-v | -q] COMMAND ...
     dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
     dchfrac params                                   (every parameter: unit, default, allowed range)
+    dchfrac animate RUN [--fields S,phi,d,p] [--out FILE] [--fps 6]
     dchfrac bench [--out results/bench/bench.json] [--quick]
     dchfrac campaign run|status|plot|report SPEC ...
     dchfrac report reference|convergence RUN... --out DIR
@@ -93,6 +94,25 @@ def cmd_report(args) -> int:
     else:
         print(convergence_report(args.runs, args.out).to_string(index=False))
     print(f"written to {args.out}")
+    return 0
+
+
+def cmd_animate(args) -> int:
+    """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
+    from .animate import animate_run, animation_writer, parse_fields
+
+    run = Path(args.run)
+    try:
+        fields = parse_fields(args.fields)
+        animation_writer(args.out)
+        if not (run / "snapshots" / "mesh.npz").is_file():
+            raise ValueError(f"run {str(run)!r}: not a run folder (no snapshots/mesh.npz)")
+        if args.fps < 1:
+            raise ValueError(f"--fps {args.fps}: allowed an integer >= 1")
+    except ValueError as exc:
+        print(f"dchfrac animate: {exc}", file=sys.stderr)
+        return 2
+    print(f"animation: {animate_run(run, fields, args.out, fps=args.fps)}")
     return 0
 
 
@@ -195,6 +215,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--t-end", type=float, help="final time, s")
     r.add_argument("--quiet", action="store_true", help="no progress bar / progress lines")
     r.set_defaults(func=cmd_run)
+    an = sub.add_parser("animate", help="animate a run's snapshots (MP4 with ffmpeg, else GIF)",
+                        description="Animate a run folder's snapshots: one panel per field, fixed colour scales, "
+                                    "time stamp. Dense snapshots: run with --set frames=N.")
+    an.add_argument("run", help="run folder")
+    an.add_argument("--fields", default="S,phi,d,p", help="comma-separated snapshot fields (default S,phi,d,p)")
+    an.add_argument("--out", default=None, help="output file, .mp4 (needs ffmpeg) or .gif (default RUN/animation.mp4|gif)")
+    an.add_argument("--fps", type=int, default=6, help="frames per second (default 6)")
+    an.set_defaults(func=cmd_animate)
     pa = sub.add_parser("params", help="list every model parameter with unit, default and allowed range, and the run options")
     pa.set_defaults(func=cmd_params)
     b = sub.add_parser("bench", help="performance benchmarks (JSON)")
