@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from fake_runs import annulus_grid
 import pytest
 
 from sweep.animate import animate_run, build_animation
@@ -18,13 +19,7 @@ TIMES = (0.0, 0.5, 1.0)
 
 @pytest.fixture()
 def run(tmp_path):
-    r, th = np.linspace(5.0, 53.0, 9), np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
-    R, T = np.meshgrid(r, th, indexing="ij")
-    pts = np.column_stack([(R * np.cos(T)).ravel(), (R * np.sin(T)).ravel()])
-    nt = len(th)
-    i, j = np.meshgrid(np.arange(len(r) - 1), np.arange(nt), indexing="ij")
-    a, b = (i * nt + j).ravel(), (i * nt + (j + 1) % nt).ravel()
-    tri = np.vstack([np.column_stack([a, b, b + nt]), np.column_stack([a, b + nt, a + nt])])
+    pts, tri = annulus_grid()
     d = tmp_path / "run" / "snapshots"
     d.mkdir(parents=True)
     np.savez(d / "mesh.npz", points=pts, triangles=tri)

@@ -14,6 +14,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 import numpy as np
+from fake_runs import annulus_grid
 import pandas as pd
 import pytest
 
@@ -25,13 +26,7 @@ VERSION = "test-fig"
 
 
 def field_runner(params, options, run_dir):
-    r, th = np.linspace(5.0, 53.0, 9), np.linspace(0.0, 2 * np.pi, 24, endpoint=False)
-    R, T = np.meshgrid(r, th, indexing="ij")
-    pts = np.column_stack([(R * np.cos(T)).ravel(), (R * np.sin(T)).ravel()])
-    nt = len(th)
-    i, j = np.meshgrid(np.arange(len(r) - 1), np.arange(nt), indexing="ij")
-    a, b = (i * nt + j).ravel(), (i * nt + (j + 1) % nt).ravel()
-    tri = np.vstack([np.column_stack([a, b, b + nt]), np.column_stack([a, b + nt, a + nt])])
+    pts, tri = annulus_grid()
     snaps = Path(run_dir, "snapshots")
     snaps.mkdir()
     np.savez(snaps / "mesh.npz", points=pts, triangles=tri)
