@@ -4,7 +4,7 @@
                               [--retry-failed] [--fail-fast] [--timeout S] [--retries N] [--results DIR]
     dchfrac campaign status SPEC [--results DIR]
     dchfrac campaign plot SPEC [--results DIR]
-    dchfrac campaign report SPEC [--results DIR]
+    dchfrac campaign report SPEC [--results DIR] [--html]
     dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
     dchfrac campaign columns SPEC [--results DIR] [--timeseries]   (column dictionary: name, unit, meaning)
 
@@ -65,6 +65,9 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         q.set_defaults(func=fn)
         if name == "columns":
             q.add_argument("--timeseries", action="store_true", help="the columns of the runs' timeseries.csv instead")
+        if name == "report":
+            q.add_argument("--html", action="store_true",
+                           help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
     return camp
 
 
@@ -176,8 +179,13 @@ def cmd_plot(args) -> int:
 def cmd_report(args) -> int:
     from sweep.campaign import write_report
 
-    path = write_report(_spec(args), args.results)
+    spec = _spec(args)
+    path = write_report(spec, args.results)
     print(f"report: {path}")
+    if getattr(args, "html", False):
+        from sweep.report_html import write_html_report
+
+        print(f"report: {write_html_report(spec, args.results)}")
     return 0
 
 

@@ -1,7 +1,7 @@
 """Figure conventions: units on axes, legends in swept values with units, one colour scale and one
 colorbar per grid, diverging maps centred at zero, PNG at >= 200 dpi plus PDF.
 
-Run folders in the solver's format are written by the runner below with known fields: the
+Run folders in the solver's format are written by ``fake_runs.field_runner`` with known fields: the
 volumetric strain of run (C, eta_o) is eps_v = C * eta_o * cos(theta) (both signs, a different
 range in every run), so a grid that autoscaled each panel would give each panel its own limits.
 """
@@ -14,30 +14,14 @@ import matplotlib
 matplotlib.use("Agg")
 
 import numpy as np
-from fake_runs import annulus_grid
-import pandas as pd
 import pytest
+from fake_runs import field_runner
 
 from sweep import figures
 from sweep.campaign import plot_campaign, run_campaign
 from sweep.spec import spec_from_dict
 
 VERSION = "test-fig"
-
-
-def field_runner(params, options, run_dir):
-    pts, tri = annulus_grid()
-    snaps = Path(run_dir, "snapshots")
-    snaps.mkdir()
-    np.savez(snaps / "mesh.npz", points=pts, triangles=tri)
-    cx = pts[tri].mean(axis=1)
-    amp = params["cement"] * params["eta_o"]
-    z, ze = np.zeros(len(pts)), np.zeros(len(tri))
-    np.savez(snaps / "snap_00000.npz", t=1.0, S=np.clip(1.5 - np.hypot(pts[:, 0], pts[:, 1]) / 20, 0, 1), mu=z, p=z,
-             d=z, u=np.zeros((len(pts), 2)), phi=ze + 0.4, eps_v=amp * np.cos(np.arctan2(cx[:, 1], cx[:, 0])),
-             hoop_stress=ze, k=ze, w1_mag=ze)
-    pd.DataFrame({"t": [0.0, 1.0], "p_inj": [0.0, 100.0 * amp]}).to_csv(Path(run_dir, "timeseries.csv"), index=False)
-    return {"status": "ok", "regime": "uniform_invasion"}
 
 
 @pytest.fixture()
