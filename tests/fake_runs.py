@@ -33,3 +33,13 @@ def field_runner(params, options, run_dir):
              hoop_stress=ze, k=ze, w1_mag=ze)
     pd.DataFrame({"t": [0.0, 1.0], "p_inj": [0.0, 100.0 * amp]}).to_csv(Path(run_dir, "timeseries.csv"), index=False)
     return {"status": "ok", "regime": "uniform_invasion"}
+
+
+def sleepy_runner(params, options, run_dir):
+    """A campaign runner that takes 1.5 s and returns x = eta_o * cement (a known answer per run)."""
+    import time
+
+    time.sleep(1.5)
+    x = params["eta_o"] * params["cement"]
+    Path(run_dir, "x.txt").write_text(repr(x))
+    return {"status": "ok", "regime": "fracturing" if x > 1.0 else "porous_invasion", "metrics": {"x": x}}
