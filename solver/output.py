@@ -4,6 +4,7 @@ Layout of ``run_dir``::
 
     params.toml, options.toml        inputs (round-trip through Parameters / RunOptions)
     timeseries.csv                   one row per accepted step
+    timeseries_columns.csv           its column dictionary: name, unit, meaning (TIMESERIES_COLUMNS)
     summary.json                     status, reason, wall time, t reached, versions, complete
     log.txt                          rejected steps, warnings, tracebacks
     snapshots/mesh.npz               points (N, 2) mm, triangles (M, 3)
@@ -147,8 +148,12 @@ class RunWriter:
         atomic_write_text(self.dir / "timeseries.csv", df.to_csv(index=False))
 
     def finish(self, df, status, reason, wall, t_reached, rejected, factorizations, xdmf: bool = True) -> None:
-        """Final time series, XDMF (when ``xdmf``: RunOptions.write_xdmf) and the summary, which comes last."""
+        """Final time series and its column dictionary, XDMF (when ``xdmf``: RunOptions.write_xdmf) and the
+        summary, which comes last."""
         self.write_timeseries(df)
+        rows = ["name,unit,meaning"] + [f'{c},{TIMESERIES_COLUMNS[c][0]},"{TIMESERIES_COLUMNS[c][1]}"'
+                                        for c in df.columns if c in TIMESERIES_COLUMNS]
+        atomic_write_text(self.dir / "timeseries_columns.csv", "\n".join(rows) + "\n")
         if xdmf:
             try:
                 write_xdmf(self.dir, getattr(self, "xdmf_format", None))

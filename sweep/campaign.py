@@ -814,7 +814,9 @@ def write_report(spec, root=DEFAULT_ROOT, *, version: str | None = None, plot: b
         for _, r in table[cols].iterrows():
             L.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
         L.append("")
-    L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}`.", ""]
+    L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}` (also `table.parquet`); the unit and meaning of "
+          f"every column: `columns.csv` (`dchfrac campaign columns SPEC`); load both with "
+          f"`sweep.load_campaign` / `sweep.load_timeseries`.", ""]
     write_text_atomic(store.report_md, "\n".join(L))
     return store.report_md
 

@@ -98,3 +98,15 @@ def test_new_options_validated_and_left_out_of_run_keys():
     with pytest.raises(ValueError, match="xdmf_format"):
         RunOptions(xdmf_format="vtk")
     assert RunOptions(t_end=1.0, snapshot_times=(0.5, 2.0), frames=4).frame_times() == [0.25, 0.5, 0.75, 1.0]
+
+
+def test_timeseries_has_its_column_dictionary_beside_it(run):
+    import pandas as pd
+
+    from solver.output import TIMESERIES_COLUMNS
+
+    ts = pd.read_csv(run / "timeseries.csv")
+    cols = pd.read_csv(run / "timeseries_columns.csv", keep_default_na=False)
+    assert list(cols["name"]) == list(ts.columns)  # every column the solver writes is declared
+    assert [TIMESERIES_COLUMNS[n][0] for n in cols["name"]] == list(cols["unit"])
+    assert cols.set_index("name").loc["p_inj", "unit"] == "kPa"
