@@ -154,8 +154,11 @@ def write_html_report(spec, root="results", *, version: str | None = None) -> Pa
         L.append("</table>")
     if figs:
         L.append("<h2>Figures</h2>")
-        L += [f'<figure><img class="fig" alt="{e(f.stem)}" src="{_data_uri(f.read_bytes())}">'
-              f"<figcaption>{e(f.name)} (PDF beside it in figures/)</figcaption></figure>" for f in figs]
+        for f in figs:
+            vec = [v.name for v in (f.with_suffix(".pdf"), f.with_suffix(".svg")) if v.is_file()]
+            also = f" (also {', '.join(vec)} in figures/)" if vec else ""
+            L.append(f'<figure><img class="fig" alt="{e(f.stem)}" src="{_data_uri(f.read_bytes())}">'
+                     f"<figcaption>{e(f.name)}{e(also)}</figcaption></figure>")
     L += _paper_block(spec)
     if not table.empty:
         L.append("<h2>Runs</h2><p>The full table: <code>table.csv</code> / <code>table.parquet</code>, column "
