@@ -24,9 +24,9 @@ def test_packaged_copy_is_found_from_anywhere(tmp_path, monkeypatch):
 
 def test_package_data_declares_the_figures():
     """pyproject.toml ships sweep/data/*.toml with the package, and that glob holds the figures."""
-    from setuptools.config.pyprojecttoml import read_configuration
+    from solver.tomlio import read_toml
 
     root = Path(__file__).resolve().parents[1]
-    globs = read_configuration(root / "pyproject.toml")["tool"]["setuptools"]["package-data"]["sweep"]
+    globs = read_toml(root / "pyproject.toml")["tool"]["setuptools"]["package-data"]["sweep"]
     shipped = {p for g in globs for p in (root / "sweep").glob(g)}
     assert PACKAGED_PAPER_TOML in shipped
