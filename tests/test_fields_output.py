@@ -110,3 +110,30 @@ def test_timeseries_has_its_column_dictionary_beside_it(run):
     assert list(cols["name"]) == list(ts.columns)  # every column the solver writes is declared
     assert [TIMESERIES_COLUMNS[n][0] for n in cols["name"]] == list(cols["unit"])
     assert cols.set_index("name").loc["p_inj", "unit"] == "kPa"
+
+
+@pytest.mark.parametrize("fmt", ["hdf5", "xml"])
+def test_vtk_xdmf_reader_reads_every_frame(run, tmp_path, fmt):
+    """VTK's XDMF reader (the pip wheel's vtkXdmfReader; ParaView's readers are built on the same library)."""
+    xdmf2 = pytest.importorskip("vtkmodules.vtkIOXdmf2")
+    import shutil
+
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline as SDDP
+
+    copy = tmp_path / "run"
+    shutil.copytree(run, copy)
+    write_xdmf(copy, fmt)
+    r = xdmf2.vtkXdmfReader()
+    r.SetFileName(str(copy / "fields.xdmf"))
+    r.UpdateInformation()
+    times = r.GetOutputInformation(0).Get(SDDP.TIME_STEPS())
+    _, tri, snaps = load_run(copy)
+    assert list(times) == [t for t, _ in snaps]
+    for t, f in snaps:
+        r.UpdateTimeStep(t)
+        out = r.GetOutputDataObject(0)
+        assert out.GetNumberOfCells() == len(tri)  # one grid: no static mesh block beside the series
+        np.testing.assert_array_equal(vtk_to_numpy(out.GetPointData().GetArray("S")), f["S"])
+        np.testing.assert_array_equal(vtk_to_numpy(out.GetCellData().GetArray("phi")), f["phi"])
+        np.testing.assert_array_equal(vtk_to_numpy(out.GetPointData().GetArray("u"))[:, :2], f["u"])
