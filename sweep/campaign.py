@@ -253,7 +253,8 @@ def _extra_points(plan: Plan):
 
 
 def write_table(spec, root=DEFAULT_ROOT, *, version: str | None = None, plan: Plan | None = None) -> list[Path]:
-    """Rebuild the campaign table from the run records and write it (CSV, Parquet with pyarrow)."""
+    """Rebuild the campaign table from the run records and write it: table.csv, table.parquet and its column
+    dictionary columns.csv (``ResultsStore.write_table``)."""
     spec = as_spec(spec)
     df = build_table(spec, root, version=version, plan=plan)
     return ResultsStore(root, spec.name).write_table(df, swept=spec.axis_names)

@@ -132,3 +132,19 @@ def test_campaign_columns_command(campaign, tmp_path, capsys):
     assert cli_main(["columns", str(path), "--results", str(root), "--timeseries"]) == 0
     out = capsys.readouterr().out
     assert any(ln.split()[:2] == ["p_inj", "kPa"] for ln in out.splitlines())
+
+
+def test_spec_without_a_written_table_builds_it_from_the_records(campaign, tmp_path, monkeypatch):
+    import shutil
+
+    spec, root = campaign
+    monkeypatch.setattr("sweep.campaign.solver_version", lambda: VERSION)
+    copy = tmp_path / "toy"
+    shutil.copytree(root / "toy", copy)
+    for f in ("table.csv", "table.parquet", "columns.csv"):
+        (copy / f).unlink()
+    with pytest.raises(FileNotFoundError, match="no table"):
+        load_campaign(copy)  # a folder alone cannot say which grid it holds
+    built = load_campaign(spec, tmp_path)
+    written = load_campaign(root / "toy")
+    pd.testing.assert_frame_equal(built, written)
