@@ -127,7 +127,7 @@ def cmd_params(args) -> int:
     _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C)",
                 ("name", "unit", "default", "allowed", "meaning"), rows)
     docs = option_docs()
-    rows = [(f.name, OPTION_UNITS[f.name], _show(getattr(RunOptions(), f.name)), docs.get(f.name, ""))
+    rows = [(f.name, OPTION_UNITS.get(f.name, "?"), _show(getattr(RunOptions(), f.name)), docs.get(f.name, ""))
             for f in fields(RunOptions)]
     print()
     _print_rows("run options (discretization and outputs; set them like parameters with --set)",

@@ -102,7 +102,7 @@ def _declared() -> dict[str, tuple[str, str, str]]:
         out[f.name] = (field_unit(f.name), _dtype_of_annotation(f.type), f"model parameter: {field_doc(f.name)}")
     docs = option_docs()
     for f in fields(RunOptions):
-        out[f.name] = (OPTION_UNITS[f.name], _dtype_of_annotation(f.type), f"run option: {docs.get(f.name, '')}")
+        out[f.name] = (OPTION_UNITS.get(f.name, "?"), _dtype_of_annotation(f.type), f"run option: {docs.get(f.name, '')}")
     for name, (unit, meaning) in TIMESERIES_COLUMNS.items():
         for suffix, how in _TS_SUFFIXES.items():
             out[name + suffix] = (unit, "Float64", f"{meaning}, {how}")

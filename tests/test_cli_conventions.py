@@ -117,3 +117,12 @@ def test_run_help_lists_what_set_accepts(capsys):
     text = " ".join(capsys.readouterr().out.replace(",", " ").split())
     words = set(text.split())
     assert {f.name for f in fields(Parameters)} <= words and {f.name for f in fields(RunOptions)} <= words
+
+
+def test_every_run_option_declares_its_unit_and_meaning():
+    """A new run option needs its unit in solver.options.OPTION_UNITS and a line in the RunOptions docstring."""
+    from solver.options import OPTION_UNITS, option_docs
+
+    names = {f.name for f in fields(RunOptions)}
+    assert set(OPTION_UNITS) == names
+    assert {n for n, d in option_docs().items() if d} >= names
