@@ -414,5 +414,5 @@ def field_unit(name: str) -> str:
 
 def parameter_table() -> list[dict]:
     """One dict per parameter: name, unit, default, allowed (text), meaning (units mm, s, kPa)."""
-    return [{"name": f.name, "unit": _UNITS[f.name], "default": f.default, "allowed": _ALLOWED[f.name],
-             "meaning": _FIELD_DOCS[f.name]} for f in fields(Parameters)]
+    return [{"name": f.name, "unit": _UNITS.get(f.name, "?"), "default": f.default,
+             "allowed": _ALLOWED.get(f.name, "?"), "meaning": _FIELD_DOCS.get(f.name, "")} for f in fields(Parameters)]
