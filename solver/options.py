@@ -11,7 +11,7 @@ _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
 _TRANSPORTS = ("galerkin", "upwind")
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("h_inner",)
+_OMIT_WHEN_NONE = ("h_inner", "frames", "xdmf_format")
 
 
 @dataclass(frozen=True)
@@ -30,8 +30,12 @@ class RunOptions:
     dt0, dt_min, dt_max : initial, minimum and maximum time step, s.
     dt_grow : factor on dt after an easy step (<= ``easy_newton_its`` Newton iterations).
     dt_cut : factor on dt after a rejected step.
+    easy_newton_its : Newton iterations per stagger iteration up to which a step counts as easy.
     stop_front_radius : stop when the S = 0.5 front connected to the inlet reaches this radius, mm (None: never).
-    snapshot_times : times at which fields are written, s (the last state is always written).
+    snapshot_times : times at which fields are written, s (the initial state t = 0 and the last state are
+        always written).
+    frames : also write N evenly spaced snapshots, at k t_end / N for k = 1..N (for animations; None: none).
+        Omitted from :meth:`to_dict` when None, as h_inner.
     newton_rtol : relative Newton tolerance on every field's update (dimensionless; 1e-6: with a reused
         Jacobian the error left is below this, far below the time-discretization error; 1e-7 cost 12 % more
         iterations for changes of p_inj below 1e-5 relative).
@@ -48,6 +52,8 @@ class RunOptions:
     transport : discretization of the convective transport of S: "galerkin" (the plain P1 Galerkin
         form, the paper's Sec. 3.1) or "upwind" (phase mobilities at the saturation shifted upstream by
         half the element size, ``solver.model.upwind_saturation``: first-order streamline upwinding).
+    xdmf_format : "hdf5" (arrays in fields.h5 beside fields.xdmf; needs h5py), "xml" (inline) or None / "auto"
+        (hdf5 when h5py is installed). Omitted from :meth:`to_dict` when None, as h_inner.
     """
 
     h: float = 1.0
@@ -72,6 +78,8 @@ class RunOptions:
     max_wall_time: float | None = None
     write_xdmf: bool = True
     transport: str = "galerkin"
+    frames: int | None = None
+    xdmf_format: str | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "snapshot_times", tuple(float(t) for t in self.snapshot_times))
@@ -93,6 +101,18 @@ class RunOptions:
         if unknown:
             raise ValueError(f"unknown run option(s) {unknown}; allowed: {sorted(names)}")
         return cls(**d)
+
+    def frame_times(self) -> list[float]:
+        """Times after t = 0 at which snapshots are written, s: snapshot_times within (0, t_end] and the
+        ``frames`` evenly spaced times, sorted, without repeats (t = 0 and the last state come besides)."""
+        ts = {t for t in self.snapshot_times if 0 < t <= self.t_end + 1e-12}
+        if self.frames:
+            ts |= {self.t_end * k / self.frames for k in range(1, self.frames + 1)}
+        out: list[float] = []
+        for t in sorted(ts):
+            if not out or t - out[-1] > 1e-9:
+                out.append(t)
+        return out
 
     def replace(self, **changes) -> "RunOptions":
         return replace(self, **changes)
@@ -153,5 +173,32 @@ def _check(o: RunOptions) -> None:
     for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", _TRANSPORTS)):
         if getattr(o, name) not in allowed:
             _fail(name, getattr(o, name), f"one of {allowed}")
+    if o.frames is not None:
+        num("frames", 1, lo_open=False, integer=True)
+    if o.xdmf_format not in (None, "auto", "hdf5", "xml"):
+        _fail("xdmf_format", o.xdmf_format, "None or one of ('auto', 'hdf5', 'xml')")
     if any((not math.isfinite(t)) or t < 0 for t in o.snapshot_times):
         _fail("snapshot_times", list(o.snapshot_times), "finite times >= 0")
+
+
+# unit of every run option ("-": dimensionless; "" for counts, switches and labels): the one declaration the
+# campaign column dictionary reads; the meanings are the RunOptions docstring's
+OPTION_UNITS = {
+    "h": "mm", "h_inner": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
+    "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "stop_front_radius": "mm", "snapshot_times": "s",
+    "newton_rtol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
+    "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
+    "xdmf_format": "",
+}
+
+
+def option_docs() -> dict[str, str]:
+    """Meaning of each run option, parsed from the Attributes section of the RunOptions docstring."""
+    import re
+
+    out: dict[str, str] = {}
+    text = (RunOptions.__doc__ or "").split("----------", 1)[-1]
+    for m in re.finditer(r"^    ([a-z_0-9, ]+) : (.+?)(?=^    [a-z_0-9, ]+ : |\Z)", text, re.M | re.S):
+        for name in m.group(1).split(","):
+            out[name.strip()] = " ".join(m.group(2).split())
+    return out

@@ -4,11 +4,14 @@ Layout of ``run_dir``::
 
     params.toml, options.toml        inputs (round-trip through Parameters / RunOptions)
     timeseries.csv                   one row per accepted step
+    timeseries_columns.csv           its column dictionary: name, unit, meaning (TIMESERIES_COLUMNS)
     summary.json                     status, reason, wall time, t reached, versions, code_hash, complete
     log.txt                          rejected steps, warnings, tracebacks
     snapshots/mesh.npz               points (N, 2) mm, triangles (M, 3)
     snapshots/snap_00000.npz ...     t; nodal S, mu, p, d, u; element phi, eps_v, hoop_stress, k, w1_mag
-    fields.xdmf                      the snapshots for ParaView (meshio, inline XML data)
+    fields.xdmf, fields.h5           the snapshots for ParaView / meshio.xdmf.TimeSeriesReader: XDMF 3 with
+                                     the arrays in fields.h5 beside it (RunOptions.xdmf_format "hdf5"),
+                                     or inline ("xml"); default: hdf5 when h5py is installed
 
 While a run is in progress ``summary.json`` says ``"status": "running"`` and
 ``"complete": false``; a failed run keeps what it wrote and says why.
@@ -22,6 +25,46 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+
+
+# columns of timeseries.csv (one row per accepted step): name -> (unit, meaning). The one declaration
+# of their units: the campaign column dictionary and the figures' axis labels read it.
+TIMESERIES_COLUMNS = {
+    "t": ("s", "time at the end of the step"),
+    "dt": ("s", "time step"),
+    "p_inj": ("kPa", "injection pressure: mean p on the inner circle"),
+    "injected_volume": ("mm²", "cumulative injected volume w_i x inner length x t (per unit cell height)"),
+    "invading_volume": ("mm²", "invading fluid in the pores: integral of phi S"),
+    "water_inflow_volume": ("mm²", "cumulative invading-fluid inflow through the inner circle"),
+    "water_outflow_volume": ("mm²", "cumulative invading-fluid outflow through the outer circle"),
+    "outflow_volume": ("mm²", "cumulative total outflow through the outer circle"),
+    "mass_error": ("-", "relative error of the total mass balance since t = 0"),
+    "mean_damage": ("-", "area-weighted mean damage d"),
+    "max_damage": ("-", "largest nodal damage d"),
+    "max_hoop_stress": ("kPa", "largest element hoop (circumferential) effective stress"),
+    "front_radius_mean": ("mm", "mean radius of the S = 0.5 front connected to the inlet"),
+    "front_radius_max": ("mm", "largest radius of the S = 0.5 front connected to the inlet"),
+    "open_tip_radius": ("mm", "largest radius of the open region (phi >= 0.99) connected to the inlet"),
+    "outer_layer_area": ("mm²", "invaded area not connected to the inlet (outer water layer)"),
+    "newton_its": ("", "Newton iterations of the step (all stagger iterations)"),
+    "stagger_its": ("", "stagger iterations of the step"),
+    "damage_kkt": ("-", "KKT residual of the damage bound constraints"),
+    "factorizations": ("", "cumulative sparse factorizations of the run"),
+}
+
+# fields of a snapshot (snapshots/snap_*.npz, fields.xdmf): name -> (unit, meaning, "node" | "element")
+SNAPSHOT_FIELDS = {
+    "S": ("-", "saturation of the invading fluid", "node"),
+    "mu": ("kPa", "chemical potential", "node"),
+    "p": ("kPa", "pore pressure", "node"),
+    "d": ("-", "damage", "node"),
+    "u": ("mm", "displacement (u_x, u_y)", "node"),
+    "phi": ("-", "porosity", "element"),
+    "eps_v": ("-", "volumetric strain", "element"),
+    "hoop_stress": ("kPa", "hoop (circumferential) effective stress", "element"),
+    "k": ("mm²", "permeability", "element"),
+    "w1_mag": ("mm/s", "Darcy speed of the invading fluid", "element"),
+}
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
@@ -77,6 +120,7 @@ class RunWriter:
         self.snap_dir = self.dir / "snapshots"
 
     def start(self, params, options) -> None:
+        self.xdmf_format = getattr(options, "xdmf_format", None)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.snap_dir.mkdir(exist_ok=True)
         for old in self.snap_dir.glob("snap_*.npz"):
@@ -104,11 +148,15 @@ class RunWriter:
         atomic_write_text(self.dir / "timeseries.csv", df.to_csv(index=False))
 
     def finish(self, df, status, reason, wall, t_reached, rejected, factorizations, xdmf: bool = True) -> None:
-        """Final time series, XDMF (when ``xdmf``: RunOptions.write_xdmf) and the summary, which comes last."""
+        """Final time series and its column dictionary, XDMF (when ``xdmf``: RunOptions.write_xdmf) and the
+        summary, which comes last."""
         self.write_timeseries(df)
+        rows = ["name,unit,meaning"] + [f'{c},{TIMESERIES_COLUMNS[c][0]},"{TIMESERIES_COLUMNS[c][1]}"'
+                                        for c in df.columns if c in TIMESERIES_COLUMNS]
+        atomic_write_text(self.dir / "timeseries_columns.csv", "\n".join(rows) + "\n")
         if xdmf:
             try:
-                write_xdmf(self.dir)
+                write_xdmf(self.dir, getattr(self, "xdmf_format", None))
             except Exception as exc:  # ParaView output is a convenience, never a failure
                 self.log(f"XDMF not written: {exc}")
         self._summary({
@@ -137,21 +185,113 @@ def load_run(run_dir):
     return mesh["points"], mesh["triangles"], out
 
 
-def write_xdmf(run_dir) -> Path:
-    """Write ``fields.xdmf`` (ParaView) from the NPZ snapshots with meshio's time-series writer."""
-    import meshio
+XDMF_FORMATS = ("auto", "hdf5", "xml")
+_XI = "http://www.w3.org/2001/XInclude"
 
+
+def xdmf_format(requested: str | None) -> str:
+    """The XDMF data format to write: "hdf5" (heavy data in ``fields.h5``) or "xml" (inline text);
+    None / "auto" picks "hdf5" when h5py is installed, else "xml"."""
+    if requested not in (None, *XDMF_FORMATS):
+        raise ValueError(f"xdmf_format={requested!r}: allowed None or one of {XDMF_FORMATS}")
+    if requested in (None, "auto"):
+        from importlib.util import find_spec
+
+        return "hdf5" if find_spec("h5py") is not None else "xml"
+    return requested
+
+
+def _xdmf_frames(pts, snaps):
+    """[(t, {name: (center, array)})] of the snapshots: nodal S, mu, p, d, u (3 components); element fields."""
+    out = []
+    for t, f in snaps:
+        arrays = {k: ("Node", np.asarray(f[k], float)) for k in ("S", "mu", "p", "d") if k in f}
+        if "u" in f:
+            arrays["u"] = ("Node", np.column_stack([f["u"], np.zeros(len(pts))]))
+        for k, (_, _, where) in SNAPSHOT_FIELDS.items():
+            if where == "element" and k in f:
+                arrays[k] = ("Cell", np.asarray(f[k], float))
+        out.append((t, arrays))
+    return out
+
+
+def _data_item(parent, array, fmt: str, h5_ref: str):
+    import xml.etree.ElementTree as ET
+
+    kind = "Int" if np.issubdtype(array.dtype, np.integer) else "Float"
+    item = ET.SubElement(parent, "DataItem", DataType=kind, Precision=str(array.dtype.itemsize),
+                         Dimensions=" ".join(str(n) for n in array.shape), Format="HDF" if fmt == "hdf5" else "XML")
+    if fmt == "hdf5":
+        item.text = h5_ref
+    else:
+        import io
+
+        buf = io.StringIO()
+        np.savetxt(buf, array.reshape(len(array), -1), fmt="%.17g" if kind == "Float" else "%d")
+        item.text = buf.getvalue()
+    return item
+
+
+def _xdmf_tree(pts3, tri, frames, fmt: str, h5_name: str):
+    """The XDMF 3 document: one temporal collection of uniform grids; the mesh is stored once (the first
+    grid in XML, one HDF5 dataset pair otherwise) and never as a separate static grid."""
+    import xml.etree.ElementTree as ET
+
+    root = ET.Element("Xdmf", Version="3.0")
+    col = ET.SubElement(ET.SubElement(root, "Domain"), "Grid", Name="fields", GridType="Collection",
+                        CollectionType="Temporal")
+    for k, (t, arrays) in enumerate(frames):
+        g = ET.SubElement(col, "Grid", Name=f"t{k}", GridType="Uniform")
+        if k == 0 or fmt == "hdf5":
+            topo = ET.SubElement(g, "Topology", TopologyType="Triangle", NumberOfElements=str(len(tri)))
+            _data_item(topo, tri, fmt, f"{h5_name}:/mesh/triangles")
+            geo = ET.SubElement(g, "Geometry", GeometryType="XYZ")
+            _data_item(geo, pts3, fmt, f"{h5_name}:/mesh/points")
+        else:
+            ET.SubElement(g, f"{{{_XI}}}include",
+                          xpointer='xpointer(//Grid[@Name="t0"]/*[self::Topology or self::Geometry])')
+        ET.SubElement(g, "Time", Value=repr(float(t)))
+        for name, (center, a) in arrays.items():
+            att = ET.SubElement(g, "Attribute", Name=name, AttributeType="Vector" if a.ndim == 2 else "Scalar",
+                                Center=center)
+            _data_item(att, a, fmt, f"{h5_name}:/data/{k}/{name}")
+    ET.register_namespace("xi", _XI)
+    return ET.ElementTree(root)
+
+
+def _write_h5(path: Path, pts3, tri, frames) -> None:
+    import h5py
+
+    with h5py.File(path, "w") as h:
+        h.create_dataset("mesh/points", data=pts3)
+        h.create_dataset("mesh/triangles", data=tri)
+        for k, (_, arrays) in enumerate(frames):
+            for name, (_, a) in arrays.items():
+                h.create_dataset(f"data/{k}/{name}", data=a, compression="gzip", compression_opts=4)
+
+
+def write_xdmf(run_dir, data_format: str | None = None) -> Path:
+    """Write ``fields.xdmf`` (ParaView, meshio ``TimeSeriesReader``) from the run folder's NPZ snapshots.
+
+    data_format : "hdf5" (the arrays in ``fields.h5`` beside the .xdmf), "xml" (inline) or None / "auto"
+    (hdf5 with h5py installed). Both files are written under temporary names and renamed, the .h5 first.
+    """
+    fmt = xdmf_format(data_format)
+    run_dir = Path(run_dir)
     pts, tri, snaps = load_run(run_dir)
-    path = Path(run_dir) / "fields.xdmf"
-    tmp = Path(run_dir) / ".fields_tmp.xdmf"
-    # XML (inline) data: meshio's HDF5 time-series writer puts the .h5 file in the
-    # current directory, not beside the .xdmf; inline data keeps the run folder self-contained
-    with meshio.xdmf.TimeSeriesWriter(str(tmp), data_format="XML") as w:
-        w.write_points_cells(np.column_stack([pts, np.zeros(len(pts))]), [("triangle", tri)])
-        for t, f in snaps:
-            pdata = {k: f[k] for k in ("S", "mu", "p", "d")}
-            pdata["u"] = np.column_stack([f["u"], np.zeros(len(pts))])
-            cdata = {k: [f[k]] for k in ("phi", "eps_v", "hoop_stress", "k", "w1_mag")}
-            w.write_data(t, point_data=pdata, cell_data=cdata)
-    os.replace(tmp, path)
+    pts3 = np.column_stack([pts, np.zeros(len(pts))]).astype(float)
+    tri = np.asarray(tri, dtype=np.int64)
+    frames = _xdmf_frames(pts, snaps)
+    path, h5 = run_dir / "fields.xdmf", run_dir / "fields.h5"
+    if fmt == "hdf5":
+        tmp = run_dir / f".fields.h5.{os.getpid()}.tmp"
+        _write_h5(tmp, pts3, tri, frames)
+        os.replace(tmp, h5)
+    import io
+
+    buf = io.BytesIO()
+    _xdmf_tree(pts3, tri, frames, fmt, h5.name).write(buf, xml_declaration=True, encoding="utf-8")
+    atomic_write_bytes(path, buf.getvalue())
+    if fmt == "xml" and h5.exists():
+        h5.unlink()  # a stale heavy-data file of an earlier hdf5 write
     return path

@@ -81,6 +81,38 @@ _FIELD_DOCS = {
 }
 
 
+# unit of every parameter ("-": dimensionless; "" for labels and seeds): the one declaration that
+# `dchfrac params`, the campaign column dictionary and the figures' axis labels read
+_UNITS = {
+    "eta_o": "kPa·s", "eta_w": "kPa·s", "kbar": "mm²", "cement": "%", "w_i": "mm/s", "E": "kPa", "nu": "-",
+    "K_s": "kPa", "gamma": "kPa·mm", "l_S": "mm", "l_d": "mm", "mu_i": "kPa", "mu_o": "kPa", "Gc": "kPa·mm",
+    "psi_c": "kPa", "beta": "kPa·s", "cell_height": "mm", "r_inner": "mm", "r_outer": "mm", "bead_diameter": "mm",
+    "phi_mean": "-", "phi_range": "-", "seed": "", "porosity_field": "", "mu_outer_bc": "",
+    "volumetric_coupling": "-", "korteweg_factor": "-", "outer_compliance": "mm/kPa", "crack_permeability": "-",
+}
+
+# allowed values of every parameter, as `_coerce_and_check` enforces them (tests/test_params.py holds the
+# two together: a value just outside each simple bound "> 0" / ">= 0" is rejected, one just inside accepted)
+_ALLOWED = {
+    **{n: "> 0" for n in ("eta_o", "eta_w", "kbar", "E", "cell_height", "bead_diameter", "r_inner")},
+    **{n: ">= 0" for n in ("w_i", "gamma", "volumetric_coupling", "korteweg_factor", "outer_compliance",
+                           "crack_permeability", "mu_i", "mu_o")},
+    "cement": ">= 0 (> 0 when psi_c follows its law 0.0015 C²)",
+    "nu": "(-1, 0.5)",
+    "K_s": "> K = E/(3(1 - 2 nu))",
+    "l_S": "> 0",
+    "l_d": "> 0 and <= 3 G_c/(8 psi_c) (m >= 1)",
+    "Gc": "None or > 0",
+    "psi_c": "None or > 0",
+    "beta": "None or >= 0",
+    "r_outer": "> r_inner",
+    "phi_mean": "(0, 1)",
+    "phi_range": ">= 0 and phi_mean ± phi_range inside (0, 1)",
+    "seed": "integer >= 0",
+    "porosity_field": f"one of {POROSITY_FIELDS}",
+    "mu_outer_bc": f"one of {MU_OUTER_BCS}",
+}
+
 @dataclass(frozen=True)
 class Parameters:
     """All model parameters, units mm, s, kPa; defaults = the paper's reference experiment.
@@ -388,3 +420,16 @@ def field_doc(name: str) -> str:
     if name not in _FIELD_DOCS:
         raise ValueError(f"unknown parameter {name!r}; allowed names: {list(_FIELD_DOCS)}")
     return _FIELD_DOCS[name]
+
+
+def field_unit(name: str) -> str:
+    """Unit of the parameter ``name`` (mm, s, kPa system; "-" dimensionless, "" for labels and seeds)."""
+    if name not in _UNITS:
+        raise ValueError(f"unknown parameter {name!r}; allowed names: {list(_UNITS)}")
+    return _UNITS[name]
+
+
+def parameter_table() -> list[dict]:
+    """One dict per parameter: name, unit, default, allowed (text), meaning (units mm, s, kPa)."""
+    return [{"name": f.name, "unit": _UNITS.get(f.name, "?"), "default": f.default,
+             "allowed": _ALLOWED.get(f.name, "?"), "meaning": _FIELD_DOCS.get(f.name, "")} for f in fields(Parameters)]

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -178,7 +177,8 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     mesh : optional mesh with ``points`` (mm), ``triangles`` and ``boundary_edges``
         tags "inner" and "outer" (default: the paper's annulus at size ``options.h``).
     phi0 : optional initial porosity per element (default: ``params.porosity_field``).
-    progress : print a live progress line (simulated time, dt, iterations) to stderr.
+    progress : report progress (``solver.progress.StepProgress``: a bar with % of t_end and ETA on a
+        terminal, periodic INFO lines of the logger ``dchfrac.solver`` otherwise); or a StepProgress.
     """
     from .params import Parameters
 
@@ -188,6 +188,10 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     if not isinstance(options, RunOptions):
         raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
     t_wall = time.perf_counter()
+    if progress is True:
+        from .progress import StepProgress
+
+        progress = StepProgress(options.t_end)
     writer = RunWriter(out_dir) if out_dir is not None else None
     if writer:
         writer.start(params, options)
@@ -218,20 +222,19 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     if writer:
         writer.finish(ts, status, reason, wall, rows[-1]["t"] if rows else 0.0, rejected, nfact, xdmf=options.write_xdmf)
     if progress:
-        print(file=sys.stderr)
+        progress.close()
     return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact)
 
 
 def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, progress, t_wall):
     p = sim.params
     disc = sim.disc
-    pending = sorted(t for t in o.snapshot_times if 0 < t <= o.t_end + 1e-12)
+    pending = o.frame_times()
     dt = o.dt0
     cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0}
     V0 = _stored_volume(sim, sim.U)
     warned_layer = False
-    if 0.0 in o.snapshot_times:
-        _snapshot(sim, snaps, writer)
+    _snapshot(sim, snaps, writer)  # the initial state, t = 0
     while sim.t < o.t_end - 1e-12:
         if o.max_wall_time is not None and time.perf_counter() - t_wall > o.max_wall_time:
             return "failed", f"max_wall_time {o.max_wall_time} s exceeded at t = {sim.t:.4g} s"
@@ -265,7 +268,8 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
             if writer:
                 writer.log(f"WARNING: invaded layer not connected to the inlet at the outer circle (area {row['outer_layer_area']:.3g} mm^2) at t={sim.t:.4g} s; see mu_outer_bc")
         if progress:
-            print(f"\r t={sim.t:.4f} s  dt={dt_try:.2e}  newton={info['newton_its']}  stagger={info['stagger_its']}  p_inj={row['p_inj']:.1f} kPa  front={row['front_radius_mean']:.1f} mm   ", end="", file=sys.stderr, flush=True)
+            progress.update(sim.t, f"dt = {dt_try:.2e} s, newton {info['newton_its']}, stagger {info['stagger_its']}, "
+                                   f"p_inj = {row['p_inj']:.1f} kPa, front = {row['front_radius_mean']:.1f} mm")
         if pending and abs(sim.t - pending[0]) < 1e-9:
             pending.pop(0)
             _snapshot(sim, snaps, writer)

@@ -13,6 +13,7 @@ Speed is measured here, never by timed tests.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import platform
 import time
@@ -20,6 +21,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+LOG = logging.getLogger("dchfrac.bench")
 
 
 def _best(fn, repeats: int = 3) -> float:
@@ -131,18 +134,18 @@ def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> di
                           "platform": platform.platform()},
               "backends_available": backends, "newton_iteration": []}
     for h in sizes:
-        print(f"bench: one Newton iteration at h = {h} mm ...", flush=True)
+        LOG.info(f"bench: one Newton iteration at h = {h} mm ...")
         result["newton_iteration"].append(_newton_iteration(h, backends))
     t_end = 0.05 if quick else 0.2
-    print(f"bench: coupled run h = 2 mm to {t_end} s ...", flush=True)
+    LOG.info(f"bench: coupled run h = 2 mm to {t_end} s ...")
     run = _coupled_run(2.0, t_end)
     result["coupled_run_h2"] = run
     result["coupled_run_h2_wall_s_per_sim_s"] = run["wall_s_per_sim_s"]
     if not quick:
-        print("bench: reference case at h = 2 mm to 2 s ...", flush=True)
+        LOG.info("bench: reference case at h = 2 mm to 2 s ...")
         result["reference_run_h2"] = _coupled_run(2.0, 2.0)
     if reference:
-        print("bench: reference run h = 1 mm to 2 s ...", flush=True)
+        LOG.info("bench: reference run h = 1 mm to 2 s ...")
         result["reference_run_h1"] = _coupled_run(1.0, 2.0)
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)

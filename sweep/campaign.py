@@ -344,10 +344,11 @@ def _extra_points(plan: Plan):
 
 
 def write_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None) -> list[Path]:
-    """Rebuild the campaign table from the run records and write it (CSV, Parquet with pyarrow)."""
+    """Rebuild the campaign table from the run records and write it: table.csv, table.parquet and its column
+    dictionary columns.csv (``ResultsStore.write_table``)."""
     spec = as_spec(spec)
     df = build_table(spec, root, code_hash=code_hash, plan=plan)
-    return ResultsStore(root, spec.name).write_table(df)
+    return ResultsStore(root, spec.name).write_table(df, swept=spec.axis_names)
 
 
 # ---------------------------------------------------------------------------
@@ -401,12 +402,9 @@ class Progress:
 
 
 def _hms(s: float) -> str:
-    if not math.isfinite(s):
-        return "?"
-    s = int(round(s))
-    h, r = divmod(s, 3600)
-    m, sec = divmod(r, 60)
-    return f"{h}h{m:02d}m{sec:02d}s" if h else f"{m}m{sec:02d}s"
+    from solver.progress import format_duration
+
+    return format_duration(s)
 
 
 def _make_runner(spec: CampaignSpec, runner) -> Callable:
@@ -563,7 +561,7 @@ def _execute(plan: Plan, todo, cfg: ExecConfig, result: CampaignResult, *, jobs,
                     result.aborted = True
                     break
             if time.perf_counter() - last_write > table_interval:
-                plan.store.write_table(build_table(plan.spec, plan=plan))
+                plan.store.write_table(build_table(plan.spec, plan=plan), swept=plan.spec.axis_names)
                 last_write = time.perf_counter()
     finally:
         gen.close()
@@ -734,18 +732,23 @@ def _scatter(df, x, y, ax, *, by="regime", logx=False, logy=False):
         ax.set_xscale("log")
     if logy:
         ax.set_yscale("log")
-    ax.set_xlabel(x)
-    ax.set_ylabel(y)
+    from sweep.figures import axis_label
+
+    ax.set_xlabel(axis_label(x))
+    ax.set_ylabel(axis_label(y))
     ax.grid(True, which="both", alpha=0.3)
     return np.asarray(df[x]).size
 
 
-def _timeseries_plot(spec, store, table, g, path):
+def _timeseries_plot(spec, store, table, g, path) -> list[Path]:
+    """One curve per ok run of time-series column ``y`` against ``x``, labelled by its swept values (units)."""
     import matplotlib.pyplot as plt
     import pandas as pd
 
+    from sweep.figures import axis_label, save_figure, swept_label
+
     fig, ax = plt.subplots(figsize=(6, 4))
-    by = g.get("by")
+    names = [g["by"]] if g.get("by") else list(spec.axis_names)
     missing = []
     for _, row in table[table["status"] == "ok"].iterrows():
         f = store.run_dir(row["key"]) / "timeseries.csv"
@@ -754,18 +757,17 @@ def _timeseries_plot(spec, store, table, g, path):
             continue
         ts = pd.read_csv(f)
         if g["x"] in ts.columns and g["y"] in ts.columns:
-            label = f"{by}={row[by]}" if by and by in row else row["key"]
-            ax.plot(ts[g["x"]], ts[g["y"]], label=label)
-    ax.set_xlabel(g["x"])
-    ax.set_ylabel(g["y"])
+            ax.plot(ts[g["x"]], ts[g["y"]], label=swept_label(row, names) or row["key"])
+    ax.set_xlabel(axis_label(g["x"]))
+    ax.set_ylabel(axis_label(g["y"]))
     ax.grid(True, alpha=0.3)
     if ax.lines:
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7)
     ax.set_title(g.get("title", spec.name))
-    fig.savefig(path, dpi=150, bbox_inches="tight")
+    paths = save_figure(fig, path)
     plt.close(fig)
     _warn_left_out(path, missing, "no timeseries.csv")
-    return path
+    return paths
 
 
 def _warn_left_out(path: Path, keys: Sequence[str], why: str) -> None:
@@ -790,63 +792,77 @@ def _snapshot(run_dir: Path, time_s=None):
     return m["points"], m["triangles"], s
 
 
-def _fields_plot(spec, store, table, g, path):
-    """Grid of field maps (last snapshot, or the one nearest ``time`` s) with the S = 0.5 front in white.
+def _field_rows(spec, ok, rows_col):
+    """[(row label, rows of the table)] of a fields grid: one per spec block, per value of a column, or one."""
+    from sweep.figures import value_label
 
-    rows: "blocks" (default: one row per spec block, runs ordered by the block's first axis) or a
-    table column; cols: a table column giving the column order (default: run order in the row).
-    """
-    import matplotlib.pyplot as plt
-
-    ok = table[table["status"] == "ok"].sort_values("index")
-    rows_col, cols_col = g.get("rows", "blocks"), g.get("cols")
-    rows: list[tuple[str, Any]] = []
     if rows_col == "blocks":
+        rows = []
         for b in spec.blocks:
             sub = ok[ok["blocks"].str.split(";").apply(lambda ls, lab=b.label: lab in ls)]
             if b.axes and b.axes[0].name in sub.columns:
                 sub = sub.sort_values(b.axes[0].name, kind="stable")
             rows.append((b.label if len(spec.blocks) > 1 else "", sub))
-    elif rows_col in ok.columns:
-        rows = [(f"{rows_col}={v}", ok[ok[rows_col] == v]) for v in dict.fromkeys(ok[rows_col])]
-    else:
-        rows = [("", ok)]
+        return rows
+    if rows_col in ok.columns:
+        return [(value_label(rows_col, v), ok[ok[rows_col] == v]) for v in dict.fromkeys(ok[rows_col])]
+    return [("", ok)]
+
+
+def _fields_plot(spec, store, table, g, path) -> list[Path]:
+    """Grid of field maps (last snapshot, or the one nearest ``time`` s) with the S = 0.5 front in white.
+
+    rows: "blocks" (default: one row per spec block, runs ordered by the block's first axis) or a
+    table column; cols: a table column giving the column order (default: run order in the row).
+    Every panel shares one colour scale (diverging and centred at zero for a field with both signs),
+    shown by one colorbar; row labels on the left, panel titles give the other swept values.
+    """
+    import matplotlib.pyplot as plt
+
+    from solver.output import SNAPSHOT_FIELDS
+    from sweep.figures import axis_label, colour_scale, save_figure, swept_label
+
+    ok = table[table["status"] == "ok"].sort_values("index")
+    rows_col, cols_col = g.get("rows", "blocks"), g.get("cols")
+    rows = _field_rows(spec, ok, rows_col)
     cvals = sorted(dict.fromkeys(ok[cols_col])) if cols_col and cols_col in ok.columns else None
     ncols = max(1, len(cvals) if cvals else max((len(sub) for _, sub in rows), default=1))
-    fig, axes = plt.subplots(len(rows), ncols, figsize=(3 * ncols, 3 * len(rows)), squeeze=False)
+    panels, missing = [], []
+    for i, (_, sub) in enumerate(rows):
+        for j, (_, row) in enumerate(sub.iterrows()):
+            snap = _snapshot(store.run_dir(row["key"]), g.get("time"))
+            if snap is not None and g["field"] in snap[2]:
+                panels.append((i, cvals.index(row[cols_col]) if cvals else j, row, snap))
+            else:
+                missing.append(row["key"])
+    cmap, vmin, vmax = colour_scale(g["field"], [s[g["field"]] for *_, (_, _, s) in panels],
+                                    fixed=(0.0, 1.0) if g["field"] in ("phi", "d", "S") else None)
+    fig, axes = plt.subplots(len(rows), ncols, figsize=(3 * ncols + 0.8, 3 * len(rows)), squeeze=False)
     for ax in axes.ravel():
         ax.set_axis_off()
-    swept = list(spec.axis_names)
-    missing = []
-    for i, (rlabel, sub) in enumerate(rows):
-        for j, (_, row) in enumerate(sub.iterrows()):
-            jj = cvals.index(row[cols_col]) if cvals else j
-            snap = _snapshot(store.run_dir(row["key"]), g.get("time"))
-            if snap is None or g["field"] not in snap[2]:
-                missing.append(row["key"])
-                continue
-            pts, tri, s = snap
-            ax = axes[i, jj]
-            vals = s[g["field"]]
-            shading = "flat" if len(vals) == len(tri) else "gouraud"
-            ax.tripcolor(pts[:, 0], pts[:, 1], tri, vals, shading=shading, cmap="viridis")
-            if "S" in s and len(s["S"]) == len(pts):
-                ax.tricontour(pts[:, 0], pts[:, 1], tri, s["S"], levels=[0.5], colors="w", linewidths=0.8)
-            ax.set_aspect("equal")
-            lab = ", ".join(f"{a}={_fmt(row[a])}" for a in swept if a in row.index and pd_notna(row[a]))
-            ax.set_title(f"{rlabel + ': ' if rlabel else ''}{lab}\nt={float(s['t']):.2f} s", fontsize=7)
+    others = [a for a in spec.axis_names if a != rows_col]
+    im = None
+    for i, j, row, (pts, tri, s) in panels:
+        ax = axes[i, j]
+        vals = s[g["field"]]
+        shading = "flat" if len(vals) == len(tri) else "gouraud"
+        im = ax.tripcolor(pts[:, 0], pts[:, 1], tri, vals, shading=shading, cmap=cmap, vmin=vmin, vmax=vmax)
+        if "S" in s and len(s["S"]) == len(pts):
+            ax.tricontour(pts[:, 0], pts[:, 1], tri, s["S"], levels=[0.5], colors="w", linewidths=0.8)
+        ax.set_aspect("equal")
+        ax.set_title("\n".join(x for x in (swept_label(row, others), f"t = {float(s['t']):.2f} s") if x), fontsize=7)
+    for i, (rlabel, _) in enumerate(rows):
+        if rlabel:
+            axes[i, 0].annotate(rlabel, xy=(-0.08, 0.5), xycoords="axes fraction", rotation=90, ha="right",
+                                va="center", fontsize=8)
+    if im is not None:
+        unit = SNAPSHOT_FIELDS.get(g["field"], ("",))[0]
+        fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label=axis_label(g["field"]) if unit else g["field"])
     fig.suptitle(g.get("title", f"{spec.name}: {g['field']}"))
-    fig.savefig(path, dpi=120, bbox_inches="tight")
+    paths = save_figure(fig, path)
     plt.close(fig)
     _warn_left_out(path, missing, f"no snapshot with {g['field']}")
-    return path
-
-
-def pd_notna(v) -> bool:
-    try:
-        return not (v is None or (isinstance(v, float) and math.isnan(v)))
-    except TypeError:
-        return True
+    return paths
 
 
 def _phase_diagram(spec, table, g, path) -> list[Path]:
@@ -890,6 +906,8 @@ def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, tabl
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from sweep.figures import save_figure
+
     spec = as_spec(spec)
     store = ResultsStore(root, spec.name)
     if table is None:
@@ -911,13 +929,12 @@ def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, tabl
             fig, ax = plt.subplots(figsize=(5, 4))
             _scatter(table, g["x"], g["y"], ax, by=g.get("color", "regime"), logx=g.get("logx", False), logy=g.get("logy", False))
             ax.set_title(g.get("title", spec.name))
-            fig.savefig(path, dpi=150, bbox_inches="tight")
+            out.extend(save_figure(fig, path))
             plt.close(fig)
-            out.append(path)
         elif kind == "timeseries":
-            out.append(_timeseries_plot(spec, store, table, g, path))
+            out.extend(_timeseries_plot(spec, store, table, g, path))
         elif kind == "fields":
-            out.append(_fields_plot(spec, store, table, g, path))
+            out.extend(_fields_plot(spec, store, table, g, path))
     return out
 
 
@@ -936,7 +953,7 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
     table = build_table(spec, root, plan=plan)
     figs = plot_campaign(spec, root, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
     if not table.empty:
-        store.write_table(table)
+        store.write_table(table, swept=spec.axis_names)
     L = [f"# Campaign `{spec.name}`", ""]
     if spec.description:
         L += [spec.description.strip(), ""]
@@ -982,7 +999,9 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
         for _, r in table[cols].iterrows():
             L.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
         L.append("")
-    L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}`.", ""]
+    L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}` (also `table.parquet`); the unit and meaning of "
+          f"every column: `columns.csv` (`dchfrac campaign columns SPEC`); load both with "
+          f"`sweep.load_campaign` / `sweep.load_timeseries`.", ""]
     write_text_atomic(store.report_md, "\n".join(L))
     return store.report_md
 

@@ -5,8 +5,9 @@
                               [--results DIR]
     dchfrac campaign status SPEC [--results DIR]       (also: runs made by other code, damaged runs)
     dchfrac campaign plot SPEC [--results DIR]
-    dchfrac campaign report SPEC [--results DIR]
+    dchfrac campaign report SPEC [--results DIR] [--html]
     dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
+    dchfrac campaign columns SPEC [--results DIR] [--timeseries]   (column dictionary: name, unit, meaning)
 
 ``run`` reruns damaged runs and runs made by other solver code (stale); ``--accept-stale`` keeps
 the stale ones and lists them. ``plot``, ``report`` and ``classify`` refuse (exit 1) while runs
@@ -19,8 +20,10 @@ Exit codes: 0 success, 1 failed runs (run), damaged runs (status, plot, report, 
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
+from sweep.logs import LogStream, end_logging, setup_logging
 from sweep.scheduler import BACKENDS
 
 __all__ = ["add_campaign_commands", "main"]
@@ -38,7 +41,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify}")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -56,7 +59,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="wall-time limit per run, s (default: spec [run] timeout, else none); the run is killed")
     p.add_argument("--retries", type=int, default=None, help="extra attempts after a failure (default: spec or 0)")
-    p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument("--quiet", action="store_true", help="no progress lines (as -q)")
     p.set_defaults(func=cmd_run)
 
     for name, fn, helptext in (
@@ -64,10 +67,16 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         ("plot", cmd_plot, "draw the campaign's diagrams from its table"),
         ("report", cmd_report, "write a Markdown summary with the figures"),
         ("classify", cmd_classify, "rerun the classifier on the finished runs (no simulation)"),
+        ("columns", cmd_columns, "the column dictionary of the campaign table: name, unit, dtype, meaning"),
     ):
         q = sub.add_parser(name, help=helptext)
         _common(q)
         q.set_defaults(func=fn)
+        if name == "columns":
+            q.add_argument("--timeseries", action="store_true", help="the columns of the runs' timeseries.csv instead")
+        if name == "report":
+            q.add_argument("--html", action="store_true",
+                           help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
     return camp
 
 
@@ -140,9 +149,9 @@ def cmd_run(args) -> int:
         res = run_campaign(spec, args.results, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                            timeout=timeout, retries=args.retries, fail_fast=args.fail_fast,
                            retry_failed=args.retry_failed, accept_stale=args.accept_stale,
-                           progress=None if args.quiet else sys.stderr)
+                           progress=None if args.quiet else LogStream("dchfrac.campaign"))
     except KeyboardInterrupt:
-        print(f"\ninterrupted: finished runs are recorded; rerun the same command to resume", file=sys.stderr)
+        logging.getLogger("dchfrac.campaign").warning("interrupted: finished runs are recorded; rerun the same command to resume")
         return 130
     print(f"campaign {spec.name}: {res.n_points} runs, {res.n_executed} executed now "
           f"({res.n_ok} ok, {res.n_failed} failed), {res.n_skipped} not executed (already recorded or cancelled)")
@@ -211,8 +220,13 @@ def cmd_plot(args) -> int:
 def cmd_report(args) -> int:
     from sweep.campaign import write_report
 
-    path = write_report(_spec(args), args.results)
+    spec = _spec(args)
+    path = write_report(spec, args.results)
     print(f"report: {path}")
+    if getattr(args, "html", False):
+        from sweep.report_html import write_html_report
+
+        print(f"report: {write_html_report(spec, args.results)}")
     return 0
 
 
@@ -233,6 +247,30 @@ def cmd_classify(args) -> int:
     return 1 if errors else 0
 
 
+@_guarded
+def cmd_columns(args) -> int:
+    from sweep.columns import column_dictionary, timeseries_dictionary
+    from sweep.load import load_campaign
+
+    spec = _spec(args)
+    if args.timeseries:
+        cols = timeseries_dictionary()
+    else:
+        try:
+            table = load_campaign(spec, args.results)
+        except FileNotFoundError:
+            table = None
+        if table is None or table.empty:
+            print(f"campaign {spec.name}: no finished runs yet, so no table", file=sys.stderr)
+            return 1
+        cols = column_dictionary(table)
+    width = max(len(n) for n in cols["name"])
+    uw = max(len(u) for u in cols["unit"])
+    for name, unit, meaning in zip(cols["name"], cols["unit"], cols["meaning"]):
+        print(f"{name:<{width}}  {unit:<{uw}}  {meaning}")
+    return 0
+
+
 def main(argv=None) -> int:
     """Standalone entry point: the ``campaign`` subcommands without the ``dchfrac campaign`` prefix."""
     parser = argparse.ArgumentParser(prog="python -m sweep.campaign_cli")
@@ -240,7 +278,11 @@ def main(argv=None) -> int:
     add_campaign_commands(sub)
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(["campaign", *argv])
-    return int(args.func(args))
+    setup_logging()
+    try:
+        return int(args.func(args))
+    finally:
+        end_logging()
 
 
 if __name__ == "__main__":

@@ -1,6 +1,9 @@
 """The ``dchfrac`` command line.
 
+    dchfrac [--version] [-v | -q] COMMAND ...
     dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
+    dchfrac params                                   (every parameter: unit, default, allowed range)
+    dchfrac animate RUN [--fields S,phi,d,p] [--out FILE] [--fps 6]
     dchfrac bench [--out results/bench/bench.json] [--quick]
     dchfrac campaign run|status|plot|report SPEC ...
     dchfrac report reference|convergence RUN... --out DIR
@@ -10,8 +13,11 @@ from __future__ import annotations
 
 import argparse
 import ast
+import logging
 import sys
 from pathlib import Path
+
+LOG = logging.getLogger("dchfrac")
 
 
 def _parse_value(text: str):
@@ -59,7 +65,7 @@ def cmd_run(args) -> int:
     except ValueError as exc:  # bad input: a clear message before any work
         print(f"dchfrac run: {exc}", file=sys.stderr)
         return 2
-    res = simulate(params, options, out_dir=args.out, progress=not args.quiet)
+    res = simulate(params, options, out_dir=args.out, progress=not args.quiet and LOG.isEnabledFor(logging.INFO))
     ts = res.timeseries
     last = ts.iloc[-1] if len(ts) else None
     print(f"status: {res.status}" + (f" ({res.reason})" if res.reason else ""))
@@ -91,17 +97,134 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_animate(args) -> int:
+    """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
+    from .animate import animate_run, animation_writer, parse_fields
+
+    run = Path(args.run)
+    try:
+        fields = parse_fields(args.fields)
+        animation_writer(args.out)
+        if not (run / "snapshots" / "mesh.npz").is_file():
+            raise ValueError(f"run {str(run)!r}: not a run folder (no snapshots/mesh.npz)")
+        if args.fps < 1:
+            raise ValueError(f"--fps {args.fps}: allowed an integer >= 1")
+    except ValueError as exc:
+        print(f"dchfrac animate: {exc}", file=sys.stderr)
+        return 2
+    print(f"animation: {animate_run(run, fields, args.out, fps=args.fps)}")
+    return 0
+
+
+def cmd_params(args) -> int:
+    """Print every model parameter (unit, default, allowed range, meaning) and every run option."""
+    from dataclasses import fields
+
+    from solver.options import OPTION_UNITS, RunOptions, option_docs
+    from solver.params import parameter_table
+
+    rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"], r["meaning"]) for r in parameter_table()]
+    _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C)",
+                ("name", "unit", "default", "allowed", "meaning"), rows)
+    docs = option_docs()
+    rows = [(f.name, OPTION_UNITS.get(f.name, "?"), _show(getattr(RunOptions(), f.name)), docs.get(f.name, ""))
+            for f in fields(RunOptions)]
+    print()
+    _print_rows("run options (discretization and outputs; set them like parameters with --set)",
+                ("name", "unit", "default", "meaning"), rows)
+    return 0
+
+
+def _show(v) -> str:
+    return "None" if v is None else str(list(v) if isinstance(v, tuple) else v)
+
+
+def _print_rows(title, header, rows) -> None:
+    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)]
+    print(title)
+    for r in (header, *rows):
+        print("  ".join(str(x).ljust(w) for x, w in zip(r[:-1], widths)) + "  " + str(r[-1]))
+
+
+def version_text() -> str:
+    """``dchfrac VERSION``, plus the code hash when the solver provides ``solver.code_hash()``."""
+    import solver
+
+    from .store import solver_version
+
+    text = f"dchfrac {solver_version()}"
+    code_hash = getattr(solver, "code_hash", None)
+    if callable(code_hash):
+        text += f" (code {code_hash()})"
+    return text
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the version text, computed only when asked (the code hash reads the sources)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(version_text())
+        parser.exit()
+
+
+def _run_epilog() -> str:
+    from dataclasses import fields
+
+    from solver.options import RunOptions
+    from solver.params import Parameters
+    import textwrap
+
+    wrap = lambda names: textwrap.fill(", ".join(names), 100, initial_indent="  ", subsequent_indent="  ")  # noqa: E731
+    return ("--set accepts these model parameters (units, defaults and ranges: `dchfrac params`):\n"
+            + wrap([f.name for f in fields(Parameters)]) + "\nand these run options:\n"
+            + wrap([f.name for f in fields(RunOptions)]) + "\nValues are Python literals: --set cement=1.2 "
+            "--set porosity_field=pockets --set snapshot_times=[0.5,1.0].")
+
+
+def _verbosity(p: argparse.ArgumentParser, top: bool) -> None:
+    """``-v`` / ``-q`` on a parser; below the top they only override when given (SUPPRESS defaults)."""
+    d = {} if top else {"default": argparse.SUPPRESS}
+    p.add_argument("-v", "--verbose", action="count", help="more log output (-v: debug)", **({"default": 0} if top else d))
+    p.add_argument("-q", dest="less", action="count",
+                   help="less log output (-q: warnings only, -qq: errors only)", **({"default": 0} if top else d))
+
+
+def _leaf_parsers(p: argparse.ArgumentParser):
+    subs = [a for a in p._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        yield p
+    for a in subs:
+        for child in dict.fromkeys(a.choices.values()):
+            yield from _leaf_parsers(child)
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="dchfrac", description="Darcy–Cahn–Hilliard fluid-driven fracture: runs, benchmarks, campaigns (units mm, s, kPa)")
+    ap.add_argument("--version", action=_VersionAction, help="print the version (and the code hash) and exit")
+    _verbosity(ap, top=True)
     sub = ap.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run", help="run one simulation")
+    r = sub.add_parser("run", help="run one simulation", epilog=_run_epilog(),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("--config", help="TOML with [parameters] and [options] tables")
-    r.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter or run option")
+    r.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter or run option (names below)")
     r.add_argument("--out", required=True, help="run folder")
     r.add_argument("--h", type=float, help="mesh size, mm")
     r.add_argument("--t-end", type=float, help="final time, s")
-    r.add_argument("--quiet", action="store_true", help="no progress line")
+    r.add_argument("--quiet", action="store_true", help="no progress bar / progress lines")
     r.set_defaults(func=cmd_run)
+    an = sub.add_parser("animate", help="animate a run's snapshots (MP4 with ffmpeg, else GIF)",
+                        description="Animate a run folder's snapshots: one panel per field, fixed colour scales, "
+                                    "time stamp. Dense snapshots: run with --set frames=N.")
+    an.add_argument("run", help="run folder")
+    an.add_argument("--fields", default="S,phi,d,p", help="comma-separated snapshot fields (default S,phi,d,p)")
+    an.add_argument("--out", default=None, help="output file, .mp4 (needs ffmpeg) or .gif (default RUN/animation.mp4|gif)")
+    an.add_argument("--fps", type=int, default=6, help="frames per second (default 6)")
+    an.set_defaults(func=cmd_animate)
+    pa = sub.add_parser("params", help="list every model parameter with unit, default and allowed range, and the run options")
+    pa.set_defaults(func=cmd_params)
     b = sub.add_parser("bench", help="performance benchmarks (JSON)")
     b.add_argument("--out", default="results/bench/bench.json")
     b.add_argument("--quick", action="store_true", help="skip h = 0.5 mm and shorten the coupled run")
@@ -111,23 +234,31 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("kind", choices=["reference", "convergence"])
     rp.add_argument("runs", nargs="+", help="run folder(s)")
     rp.add_argument("--out", required=True)
-    rp.add_argument("--paper", help="path to paper_reported.toml (default: ../shared/data/)")
+    rp.add_argument("--paper", help="path to paper_reported.toml (default: the shared file beside the project, else the copy shipped with the package)")
     rp.set_defaults(func=cmd_report)
-    try:
-        from .campaign_cli import add_campaign_commands
-
-        add_campaign_commands(sub)
-    except ImportError as exc:  # pragma: no cover - campaign module missing
-        print(f"(campaign commands unavailable: {exc})", file=sys.stderr)
+    from .campaign_cli import add_campaign_commands
     from .discrepancy.cli import add_discrepancy_commands
 
+    add_campaign_commands(sub)
     add_discrepancy_commands(sub)
+    for leaf in _leaf_parsers(ap):
+        if leaf is not ap:
+            _verbosity(leaf, top=False)
     return ap
 
 
 def main(argv=None) -> int:
+    from .logs import end_logging, setup_logging
+
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    setup_logging(args.verbose, args.less)
+    args.logging_configured = True
+    try:
+        return int(args.func(args) or 0)
+    except BrokenPipeError:  # `dchfrac ... | head`: the reader left; not an error of ours
+        return 0
+    finally:
+        end_logging()
 
 
 if __name__ == "__main__":  # pragma: no cover

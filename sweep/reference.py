@@ -15,7 +15,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sweep.figures import DIVERGING, save_figure
+
 PAPER_TOML_CANDIDATES = ("../shared/data/paper_reported.toml", "shared/data/paper_reported.toml")
+# the copy shipped with the package (sweep/data/), so that an installed copy finds the figures;
+# tests/test_reference_data.py holds it equal to the shared file whenever that is present
+PACKAGED_PAPER_TOML = Path(__file__).resolve().parent / "data" / "paper_reported.toml"
 
 
 def _figure(nrows=1, ncols=1, size=(6, 4.5)):
@@ -27,14 +32,20 @@ def _figure(nrows=1, ncols=1, size=(6, 4.5)):
 
 
 def paper_reported(path=None) -> dict:
-    """The paper's reported figures (TOML), searched beside the project when no path is given."""
+    """The paper's reported figures (TOML): ``path`` when given, else the shared file beside the project,
+    else the copy shipped with the package (``sweep/data/paper_reported.toml``)."""
     from solver.tomlio import read_toml
 
-    cands = [Path(path)] if path else [Path(p) for p in PAPER_TOML_CANDIDATES] + [Path(__file__).resolve().parents[2] / "shared/data/paper_reported.toml"]
+    if path:
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"paper figures {str(path)!r} not found")
+        return read_toml(path)
+    cands = [Path(p) for p in PAPER_TOML_CANDIDATES] + [Path(__file__).resolve().parents[2] / "shared/data/paper_reported.toml",
+                                                        PACKAGED_PAPER_TOML]
     for c in cands:
-        if c.exists():
+        if c.is_file():
             return read_toml(c)
-    raise FileNotFoundError("paper_reported.toml not found; pass --paper PATH")
+    raise FileNotFoundError(f"paper_reported.toml not found (not even the packaged {PACKAGED_PAPER_TOML}); pass --paper PATH")
 
 
 def plateau_onset(t: np.ndarray, p: np.ndarray, fraction: float = 0.3) -> float:
@@ -67,9 +78,13 @@ def plateau_onset(t: np.ndarray, p: np.ndarray, fraction: float = 0.3) -> float:
 
 
 def _tri_plot(ax, pts, tri, values, title, cmap="viridis", S=None, vmin=None, vmax=None, r_outer=None):
+    """One field map (x, y in mm) with its colorbar; the diverging map is centred at zero."""
     from matplotlib.tri import Triangulation
 
     T = Triangulation(pts[:, 0], pts[:, 1], tri)
+    if cmap == DIVERGING and vmin is None and vmax is None:  # white at zero
+        m = float(np.nanmax(np.abs(values))) or 1.0
+        vmin, vmax = -m, m
     if len(values) == len(tri):
         im = ax.tripcolor(T, facecolors=values, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat")
     else:
@@ -106,29 +121,30 @@ def reference_report(run_dir, out_dir, paper_path=None) -> dict:
     ax[0, 1].plot(ts["t"], ts["p_inj"] / max(ts["p_inj"].max(), 1e-12), label="p_inj / max")
     ax[0, 1].plot(ts["t"], ts["mean_damage"] / max(ts["mean_damage"].max(), 1e-12), label="mean damage / max")
     ax[0, 1].set_xlabel("t (s)")
+    ax[0, 1].set_ylabel("fraction of the run's maximum (-)")
     ax[0, 1].legend(fontsize=8)
     ax[0, 1].set_title("Appendix B: injection pressure vs mean damage", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "injection_pressure.png")
+    save_figure(fig, out / "injection_pressure.png")
 
     t_last, f_last = snaps[-1]
     f_first = snaps[0][1]
     c = classify_fields(pts, tri, f_last["S"], f_last["phi"], r_inner=5.0, r_outer=53.0)
     fig, ax = _figure(2, 3, (15, 9.5))
-    _tri_plot(ax[0, 0], pts, tri, f_first["phi"], f"porosity t = {snaps[0][0]:.2g} s", cmap="cividis", vmin=0, vmax=1)
-    _tri_plot(ax[0, 1], pts, tri, f_last["phi"], f"porosity t = {t_last:.3g} s (S = 0.5 white)", cmap="cividis", S=f_last["S"], vmin=0, vmax=1)
-    _tri_plot(ax[0, 2], pts, tri, f_last["d"], f"damage t = {t_last:.3g} s", cmap="magma", S=f_last["S"], vmin=0, vmax=1)
-    _tri_plot(ax[1, 0], pts, tri, f_last["S"], f"saturation t = {t_last:.3g} s", cmap="Blues", S=f_last["S"], vmin=0, vmax=1)
-    _tri_plot(ax[1, 1], pts, tri, f_last["eps_v"], "volumetric strain", cmap="RdBu_r", S=f_last["S"])
-    _tri_plot(ax[1, 2], pts, tri, f_last["p"], "pressure (kPa)", cmap="plasma", S=f_last["S"])
+    _tri_plot(ax[0, 0], pts, tri, f_first["phi"], f"porosity φ (-), t = {snaps[0][0]:.2g} s", cmap="cividis", vmin=0, vmax=1)
+    _tri_plot(ax[0, 1], pts, tri, f_last["phi"], f"porosity φ (-), t = {t_last:.3g} s (S = 0.5 white)", cmap="cividis", S=f_last["S"], vmin=0, vmax=1)
+    _tri_plot(ax[0, 2], pts, tri, f_last["d"], f"damage d (-), t = {t_last:.3g} s", cmap="magma", S=f_last["S"], vmin=0, vmax=1)
+    _tri_plot(ax[1, 0], pts, tri, f_last["S"], f"saturation S (-), t = {t_last:.3g} s", cmap="Blues", S=f_last["S"], vmin=0, vmax=1)
+    _tri_plot(ax[1, 1], pts, tri, f_last["eps_v"], "volumetric strain ε_v (-)", cmap=DIVERGING, S=f_last["S"])
+    _tri_plot(ax[1, 2], pts, tri, f_last["p"], "pressure p (kPa)", cmap="plasma", S=f_last["S"])
     fig.tight_layout()
-    fig.savefig(out / "fields.png")
+    save_figure(fig, out / "fields.png")
     fig, ax = _figure(1, 3, (15, 4.8))
-    _tri_plot(ax[0, 0], pts, tri, f_last["hoop_stress"], "hoop stress σ'θθ (kPa)", cmap="RdBu_r", S=f_last["S"])
+    _tri_plot(ax[0, 0], pts, tri, f_last["hoop_stress"], "hoop stress σ'θθ (kPa)", cmap=DIVERGING, S=f_last["S"])
     _tri_plot(ax[0, 1], pts, tri, np.log10(f_last["k"]), "log10 permeability (mm²)", cmap="viridis", S=f_last["S"])
     _tri_plot(ax[0, 2], pts, tri, f_last["w1_mag"], "|w_water| (mm/s)", cmap="inferno", S=f_last["S"])
     fig.tight_layout()
-    fig.savefig(out / "supplementary_fields.png")
+    save_figure(fig, out / "supplementary_fields.png")
 
     onset = plateau_onset(ts["t"].values, ts["p_inj"].values)
     fronts = np.asarray(c.finger_radii) if getattr(c, "finger_radii", None) is not None else np.array([])
@@ -157,7 +173,7 @@ def reference_report(run_dir, out_dir, paper_path=None) -> dict:
           "| quantity | paper | dchfrac | how measured |", "|---|---|---|---|"]
     for q, pv, ov, how in rows:
         md.append(f"| {q} | {pv} | {ov:.3g} | {how} |" if isinstance(ov, float) else f"| {q} | {pv} | {ov} | {how} |")
-    md += ["", "Figures: `injection_pressure.png`, `fields.png`, `supplementary_fields.png`."]
+    md += ["", "Figures (PNG, and PDF beside): `injection_pressure.png`, `fields.png`, `supplementary_fields.png`."]
     (out / "comparison.md").write_text("\n".join(md) + "\n")
     table.to_csv(out / "comparison.csv", index=False)
     (out / "comparison.json").write_text(json.dumps({"meta": meta, "rows": table.to_dict(orient="records")}, indent=2, default=float))
@@ -191,7 +207,7 @@ def convergence_report(run_dirs, out_dir) -> pd.DataFrame:
         ax[0, 0].set_ylabel(ylabel)
         ax[0, 0].legend()
         fig.tight_layout()
-        fig.savefig(out / fname)
+        save_figure(fig, out / fname)
         for h, ts in curves[:-1]:
             tmax = min(ts["t"].max(), fine["t"].max())
             grid = np.linspace(0.05 * tmax, tmax, 100)

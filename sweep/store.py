@@ -4,7 +4,8 @@ Layout under a configurable root (default ``results/``)::
 
     <root>/<campaign>/spec.toml            copy of the spec last run
     <root>/<campaign>/runs/<key>/          one run: record.json + the solver's run folder
-    <root>/<campaign>/table.csv            one row per run (table.parquet too with pyarrow)
+    <root>/<campaign>/table.csv            one row per run, typed (sweep.columns); also table.parquet
+    <root>/<campaign>/columns.csv          column dictionary of the table: name, unit, dtype, meaning
     <root>/<campaign>/figures/*.png        diagrams
     <root>/<campaign>/report.md            Markdown summary
 
@@ -255,30 +256,50 @@ class ResultsStore:
     def report_md(self) -> Path:
         return self.dir / "report.md"
 
-    def write_table(self, df) -> list[Path]:
-        """Write the campaign table as CSV (atomically), and Parquet when pyarrow is installed."""
+    @property
+    def columns_csv(self) -> Path:
+        return self.dir / "columns.csv"
+
+    def write_table(self, df, swept=()) -> list[Path]:
+        """Write the campaign table, typed by its column dictionary (``sweep.columns``): ``table.csv``,
+        ``table.parquet`` (pyarrow: real lists, every column typed) and ``columns.csv`` (name, unit,
+        dtype, swept, meaning; ``swept``: the spec's axis names), each atomically. ``run_dir`` is written
+        relative to the campaign folder."""
+        from sweep.columns import column_dictionary, to_csv_frame, typed_table
+
         self.dir.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(self.table_csv, df.to_csv(index=False))
-        out = [self.table_csv]
-        try:
-            import pyarrow  # noqa: F401
-        except ImportError:
-            return out
+        df = self._relative_run_dirs(df)
+        dictionary = column_dictionary(df, swept=swept)
+        typed = typed_table(df, dictionary)
+        write_text_atomic(self.columns_csv, dictionary.to_csv(index=False))
+        write_text_atomic(self.table_csv, to_csv_frame(typed, dictionary).to_csv(index=False))
+        self._write_parquet(typed, dictionary)
+        return [self.table_csv, self.table_parquet]
+
+    def _relative_run_dirs(self, df):
+        if "run_dir" not in df.columns:
+            return df
+        df = df.copy()
+        df["run_dir"] = [v if not isinstance(v, str) or not os.path.isabs(v) else os.path.relpath(v, self.dir.resolve())
+                         for v in df["run_dir"]]
+        return df
+
+    def _write_parquet(self, typed, dictionary) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        from sweep.columns import arrow_schema
+
+        table = pa.Table.from_pandas(typed, schema=arrow_schema(typed, dictionary), preserve_index=False)
         tmp = self.table_parquet.with_name(f".table.{uuid.uuid4().hex[:8]}.parquet")
-        try:
-            df.to_parquet(tmp, index=False)
-        except Exception:  # noqa: BLE001 - mixed-type object columns: store them as text
-            obj = df.select_dtypes(include="object").columns
-            df = df.astype({c: "string" for c in obj})
-            df.to_parquet(tmp, index=False)
+        pq.write_table(table, tmp)
         os.replace(tmp, self.table_parquet)
-        out.append(self.table_parquet)
-        return out
 
     def read_table(self):
-        import pandas as pd
+        """The campaign table as written (typed; see ``sweep.load.load_campaign``)."""
+        from sweep.load import load_campaign
 
-        return pd.read_csv(self.table_csv)
+        return load_campaign(self.dir)
 
     # -- single-writer lock ----------------------------------------------------
     def acquire_lock(self) -> None:

@@ -20,6 +20,7 @@ import pytest
 
 from sweep.campaign import build_table, plan_campaign, run_campaign, write_report
 from sweep.campaign_cli import main as cli_main
+from sweep.columns import typed_table
 from sweep.spec import spec_from_dict
 
 VERSION = "test-1"
@@ -105,13 +106,9 @@ def test_table_rows_known_answers_and_store_layout(tmp_path):
         assert rec["status"] == "ok" and rec["code_hash"] == VERSION
         assert json.loads((d / "out.json").read_text())["x"] == pytest.approx(rec["params"]["eta_o"] * 10.0)
     assert not [p for p in (tmp_path / "toy" / "runs").iterdir() if p.name.startswith(".")]
-    try:
-        import pyarrow  # noqa: F401
-    except ImportError:
-        assert res.table_paths == [tmp_path / "toy" / "table.csv"]
-    else:
-        pq = pd.read_parquet(tmp_path / "toy" / "table.parquet")
-        pd.testing.assert_frame_equal(_stable(pq), _stable(res.table), check_dtype=False)
+    assert res.table_paths == [tmp_path / "toy" / "table.csv", tmp_path / "toy" / "table.parquet"]
+    pq = pd.read_parquet(tmp_path / "toy" / "table.parquet")
+    pd.testing.assert_frame_equal(_stable(pq), _stable(typed_table(res.table)))
 
 
 def test_failures_are_isolated_and_their_reasons_tabled(tmp_path):
@@ -369,5 +366,5 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
     assert list(t["front_radius_mean"]) == pytest.approx([25.0, 40.0], abs=1.5)
     assert list(t["t_classified"]) == [1.0, 1.0]
     figs = plot_campaign(spec, tmp_path, code_hash=VERSION)
-    assert [f.name for f in figs] == ["timeseries.png", "fields.png"]
+    assert [f.name for f in figs] == ["timeseries.png", "timeseries.pdf", "fields.png", "fields.pdf"]
     assert all(f.stat().st_size > 5000 for f in figs)

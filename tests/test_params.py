@@ -219,3 +219,21 @@ def test_dict_round_trip_and_field_docs():
         assert len(field_doc(f.name)) > 10
     with pytest.raises(ValueError, match="nope"):
         field_doc("nope")
+
+
+def test_declared_units_and_simple_bounds_follow_the_validation():
+    """Every parameter has a unit and an allowed range; each "> 0" / ">= 0" bound is the one enforced."""
+    from solver.params import _ALLOWED, _UNITS, field_unit, parameter_table
+
+    names = [f.name for f in dataclasses.fields(Parameters)]
+    assert set(_UNITS) == set(names) == set(_ALLOWED)
+    assert [r["name"] for r in parameter_table()] == names and field_unit("w_i") == "mm/s"
+    for name, rule in _ALLOWED.items():
+        if rule not in ("> 0", ">= 0"):
+            continue
+        tiny = 1e-9
+        Parameters(**{name: tiny})  # just inside either bound
+        with pytest.raises(ValueError, match=name):
+            Parameters(**{name: 0.0 if rule == "> 0" else -tiny})
+        if rule == ">= 0":
+            Parameters(**{name: 0.0})

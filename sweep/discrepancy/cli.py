@@ -77,7 +77,8 @@ def cmd_run(args) -> int:
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
-    show_progress(args.quiet)
+    if not getattr(args, "logging_configured", False):  # `dchfrac -v/-q discrepancy ...` set it already
+        show_progress(args.quiet)
     out = Path(args.out)
     cache = Path(args.cache) if args.cache else out / "cache"
     jobs = args.jobs if args.jobs is not None else spec.fit.n_jobs
