@@ -150,9 +150,12 @@ def version_text() -> str:
     """``dchfrac VERSION``, plus the code hash when the solver provides ``solver.code_hash()``."""
     import solver
 
-    from .store import solver_version
+    from importlib.metadata import PackageNotFoundError, version
 
-    text = f"dchfrac {solver_version()}"
+    try:
+        text = f"dchfrac {version('dchfrac')}"
+    except PackageNotFoundError:
+        text = "dchfrac (not installed)"
     code_hash = getattr(solver, "code_hash", None)
     if callable(code_hash):
         text += f" (code {code_hash()})"

@@ -120,16 +120,16 @@ def _paper_block(spec) -> list[str]:
     return out
 
 
-def write_html_report(spec, root="results", *, version: str | None = None) -> Path:
+def write_html_report(spec, root="results", *, code_hash: str | None = None) -> Path:
     """Write ``<root>/<name>/report.html`` (self-contained: every image a data URI); returns its path."""
     from sweep.campaign import as_spec, build_table, plan_campaign, plot_campaign
     from sweep.store import ResultsStore, write_text_atomic
 
     spec = as_spec(spec)
     store = ResultsStore(root, spec.name)
-    plan = plan_campaign(spec, root, version=version)
+    plan = plan_campaign(spec, root, code_hash=code_hash)
     table = build_table(spec, root, plan=plan)
-    figs = [Path(f) for f in plot_campaign(spec, root, version=version, table=table) if Path(f).suffix == ".png"]
+    figs = [Path(f) for f in plot_campaign(spec, root, code_hash=code_hash, table=table) if Path(f).suffix == ".png"]
     if not table.empty:
         store.write_table(table, swept=spec.axis_names)
     e = html.escape
@@ -141,7 +141,7 @@ def write_html_report(spec, root="results", *, version: str | None = None) -> Pa
     if spec.paper:
         L.append(f"<p>Paper: {e(spec.paper)}</p>")
     L.append(f"<p>Runs in the grid: {len(plan.points)}; done {len(plan.done)}, failed {len(plan.failed)}, "
-             f"pending {len(plan.pending)}. Solver version <code>{e(plan.version)}</code>. Units mm, s, kPa.</p>")
+             f"pending {len(plan.pending)}. Solver code hash <code>{e(plan.code_hash)}</code>. Units mm, s, kPa.</p>")
     if not table.empty and table["regime"].notna().any():
         L.append("<h2>Regimes</h2><table><tr><th class='l'>regime</th><th>runs</th></tr>")
         L += [f"<tr><td class='l'>{e(str(r))}</td><td>{n}</td></tr>"

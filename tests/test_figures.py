@@ -48,8 +48,8 @@ def _spec():
 
 def test_fields_grid_shares_one_scale_centred_at_zero_with_one_colorbar(tmp_path, captured):
     spec = _spec()
-    run_campaign(spec, tmp_path, runner=field_runner, jobs=1, version=VERSION, progress=None)
-    paths = plot_campaign(spec, tmp_path, version=VERSION)
+    run_campaign(spec, tmp_path, runner=field_runner, jobs=1, code_hash=VERSION, progress=None)
+    paths = plot_campaign(spec, tmp_path, code_hash=VERSION)
     fig = captured["grid"]
     panels = [ax for ax in fig.axes if ax.collections and ax.get_label() != "<colorbar>"]
     assert len(panels) == 4
@@ -71,8 +71,8 @@ def test_fields_grid_shares_one_scale_centred_at_zero_with_one_colorbar(tmp_path
 
 def test_timeseries_axes_have_units_and_legends_swept_values(tmp_path, captured):
     spec = _spec()
-    run_campaign(spec, tmp_path, runner=field_runner, jobs=1, version=VERSION, progress=None)
-    plot_campaign(spec, tmp_path, version=VERSION)
+    run_campaign(spec, tmp_path, runner=field_runner, jobs=1, code_hash=VERSION, progress=None)
+    plot_campaign(spec, tmp_path, code_hash=VERSION)
     ax = captured["timeseries"].axes[0]
     assert (ax.get_xlabel(), ax.get_ylabel()) == ("t (s)", "p_inj (kPa)")
     legend = sorted(t.get_text() for t in ax.get_legend().get_texts())

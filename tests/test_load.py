@@ -43,7 +43,7 @@ def _spec(tmp_path):
     d = {"name": "toy", "base": {"w_i": 10.0}, "options": {"h": 4.0, "snapshot_times": [0.5, 1.0]},
          "axes": {"cement": [1.0, 2.0, 3.0], "eta_o": [0.1, 0.5]}}
     spec = spec_from_dict(d)
-    run_campaign(spec, tmp_path, runner=classified_runner, jobs=1, version=VERSION, progress=None)
+    run_campaign(spec, tmp_path, runner=classified_runner, jobs=1, code_hash=VERSION, progress=None)
     return spec
 
 
@@ -55,7 +55,7 @@ def campaign(tmp_path_factory):
 
 def test_typed_table_with_failed_runs(campaign, monkeypatch):
     spec, root = campaign
-    monkeypatch.setattr("sweep.campaign.solver_version", lambda: VERSION)
+    monkeypatch.setattr("sweep.campaign.current_code_hash", lambda: VERSION)
     d = load_campaign(root / "toy")
     assert len(d) == 6 and d.attrs["campaign_dir"] == str(root / "toy")
     assert str(d["fracturing"].dtype) == "boolean" and d["fracturing"].isna().sum() == 2  # C = 3 failed
@@ -138,7 +138,7 @@ def test_spec_without_a_written_table_builds_it_from_the_records(campaign, tmp_p
     import shutil
 
     spec, root = campaign
-    monkeypatch.setattr("sweep.campaign.solver_version", lambda: VERSION)
+    monkeypatch.setattr("sweep.campaign.current_code_hash", lambda: VERSION)
     copy = tmp_path / "toy"
     shutil.copytree(root / "toy", copy)
     for f in ("table.csv", "table.parquet", "columns.csv"):

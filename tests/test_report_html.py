@@ -31,8 +31,8 @@ def report(tmp_path_factory):
     spec = spec_from_dict({"name": "fig", "paper": "Sec. 3.6 (coarse)", "axes": {"cement": [1.0, 2.0], "eta_o": [0.25, 1.0]},
                            "diagrams": [{"kind": "timeseries", "x": "t", "y": "p_inj"},
                                         {"kind": "fields", "field": "eps_v", "rows": "cement", "cols": "eta_o"}]})
-    run_campaign(spec, root, runner=field_runner, jobs=1, version=VERSION, progress=None)
-    return write_html_report(spec, root, version=VERSION)
+    run_campaign(spec, root, runner=field_runner, jobs=1, code_hash=VERSION, progress=None)
+    return write_html_report(spec, root, code_hash=VERSION)
 
 
 def test_every_image_is_embedded_and_decodes(report):
