@@ -11,7 +11,7 @@ _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
 _TRANSPORTS = ("galerkin", "upwind")
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("h_inner", "frames", "xdmf_format")
+_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format")
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,10 @@ class RunOptions:
         h_inner at r_inner to h at r_inner + 5 mm (see ``solver.mesh.annulus_mesh``); None (default)
         or h: the quasi-uniform mesh of size h.  Omitted from :meth:`to_dict` when None, so the run
         keys / cache hashes of runs made before this option existed are unchanged.
+    h_outer : mesh size on the outer circle, mm, 0 < h_outer <= h: the annulus mesh is graded from
+        h_outer at r_outer to h at r_outer - 5 mm (resolves the boundary layer at the drained outer
+        wall; combinable with h_inner); None (default) or h: no outer grading.  Omitted from
+        :meth:`to_dict` when None, like h_inner.
     mesh_seed : perturbation seed of the mesh generator (None = deterministic default).
     t_end : final time, s.
     dt0, dt_min, dt_max : initial, minimum and maximum time step, s.
@@ -58,6 +62,7 @@ class RunOptions:
 
     h: float = 1.0
     h_inner: float | None = None
+    h_outer: float | None = None
     mesh_seed: int | None = None
     t_end: float = 2.0
     dt0: float = 1e-3
@@ -145,10 +150,11 @@ def _check(o: RunOptions) -> None:
             _fail(name, v, f"<= {hi}")
 
     num("h", 0.0, 24.0)
-    if o.h_inner is not None:
-        num("h_inner")
-        if not 0.0 < o.h_inner <= o.h:
-            _fail("h_inner", o.h_inner, f"(0, h = {o.h}]")
+    for name in ("h_inner", "h_outer"):
+        if getattr(o, name) is not None:
+            num(name)
+            if not 0.0 < getattr(o, name) <= o.h:
+                _fail(name, getattr(o, name), f"(0, h = {o.h}]")
     num("t_end", 0.0)
     num("dt0", 0.0)
     num("dt_min", 0.0)

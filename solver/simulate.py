@@ -202,7 +202,8 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         if mesh is None:
             from .mesh import annulus_mesh
 
-            mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed, h_inner=options.h_inner)
+            mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed, h_inner=options.h_inner,
+                                h_outer=options.h_outer)
         _validate_mesh(mesh)
         if phi0 is None:
             from .porosity import initial_porosity

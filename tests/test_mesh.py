@@ -310,3 +310,201 @@ def test_graded_validation(kw, msg):
     with pytest.raises(ValueError) as e:
         annulus_mesh(RI, RO, h=1.0, **kw)
     assert msg in str(e.value)
+
+
+# ---------------------------------------------------------------------------
+# graded annulus towards the outer circle (h_outer)
+# ---------------------------------------------------------------------------
+# sha256 of inner-graded meshes recorded before the h_outer option existed: h_outer=None keeps them bit for bit
+_INNER_GRADED_SHA256 = {
+    (2.0, 1.0, None): "caeb890a0192a29eef0b95077572e3c23cced3c0deb77a5593a84669f90b2ae3",
+    (1.0, 0.5, 3): "85a5785be0bd4c88bad421e9332bd36a023657643c99acf6e9b0699e9d8d79df",
+}
+
+
+@pytest.mark.parametrize("h,hi,seed", list(_INNER_GRADED_SHA256))
+def test_inner_graded_mesh_unchanged_by_outer_option(h, hi, seed):
+    from solver import mesh as mod
+
+    mod._annulus_cached.cache_clear()
+    m = annulus_mesh(RI, RO, h=h, h_inner=hi, seed=seed)
+    assert _sha256(m) == _INNER_GRADED_SHA256[(h, hi, seed)]
+    # h_outer=None / == h (any outer_grading_length) are the same memoized mesh
+    assert annulus_mesh(RI, RO, h=h, h_inner=hi, seed=seed, h_outer=None) is m
+    assert annulus_mesh(RI, RO, h=h, h_inner=hi, seed=seed, h_outer=h, outer_grading_length=2.0) is m
+
+
+def test_uniform_mesh_unchanged_by_outer_option():
+    from solver import mesh as mod
+
+    mod._annulus_cached.cache_clear()
+    m = annulus_mesh(RI, RO, h=2.0, h_outer=None)
+    assert _sha256(m) == _UNIFORM_SHA256[(2.0, None)]
+    assert annulus_mesh(RI, RO, h=2.0, h_outer=2.0) is m
+
+
+def _check_valid_annulus(m):
+    """Positive areas, boundary nodes exactly on the circles, interior nodes strictly inside, all tagged."""
+    assert np.all(m.areas > 0)
+    poly = polygon_area_exact(RO, len(m.outer_edges)) - polygon_area_exact(RI, len(m.inner_edges))
+    assert m.areas.sum() == pytest.approx(poly, rel=1e-12)
+    for name, r in (("inner", RI), ("outer", RO)):
+        rr = np.hypot(*m.points[m.boundary_nodes(name)].T)
+        assert np.abs(rr - r).max() < 1e-12
+        assert len(m.boundary_edges[name]) == len(m.boundary_nodes(name))
+    others = np.setdiff1d(np.arange(m.n_nodes), np.concatenate([m.boundary_nodes("inner"), m.boundary_nodes("outer")]))
+    rr = np.hypot(*m.points[others].T)
+    assert rr.min() > RI and rr.max() < RO
+    assert m.n_nodes - len(m.edges()) + m.n_elements == 0  # annulus: Euler characteristic 0
+
+
+@pytest.fixture(scope="module", params=[(2.0, 0.5), (1.0, 0.25)])
+def graded_outer(request):
+    h, ho = request.param
+    return h, ho, annulus_mesh(RI, RO, h=h, h_outer=ho)
+
+
+def test_outer_graded_quality_and_boundary(graded_outer):
+    h, ho, m = graded_outer
+    assert m.min_angle_deg().min() >= 25.0
+    _check_valid_annulus(m)
+
+
+def test_outer_graded_local_edge_length(graded_outer):
+    from solver.mesh import GRADING_LENGTH, annulus_size
+
+    h, ho, m = graded_outer
+    e = m.edges()
+    L = np.linalg.norm(m.points[e[:, 1]] - m.points[e[:, 0]], axis=1)
+    rm = np.hypot(*(0.5 * (m.points[e[:, 0]] + m.points[e[:, 1]])).T)
+    # on and next to the outer circle: h_outer; on the inner circle and far from r_o: h
+    assert m.edge_lengths("outer").mean() == pytest.approx(ho, rel=0.05)
+    assert np.all(np.abs(m.edge_lengths("outer") / ho - 1) < 0.25)
+    ratio = L / annulus_size(rm, h, h_outer=ho, r_outer=RO)
+    assert ratio[rm > RO - ho].mean() == pytest.approx(1.0, rel=0.1)
+    assert m.edge_lengths("inner").mean() == pytest.approx(h, rel=0.05)
+    assert L[rm < RO - GRADING_LENGTH - h].mean() == pytest.approx(h, rel=0.05)
+    # everywhere, the edges follow the size function: mean ratio per h-wide ring within 5 %
+    k = np.floor(np.clip(RO - rm, 0.0, None) / h).astype(int)
+    per_ring = np.bincount(k, ratio) / np.bincount(k)
+    assert np.abs(per_ring - 1).max() < 0.05, per_ring
+
+
+def test_graded_both_sides_and_seeds():
+    for h, hi, ho, gl, glo, seed in [(2.0, 1.0, 0.5, 5.0, 5.0, None), (2.0, None, 1.0, 5.0, 3.0, 4),
+                                     (1.0, 0.5, 0.5, 5.0, 5.0, 1), (4.0, 0.5, 0.5, 30.0, 30.0, None)]:
+        m = annulus_mesh(RI, RO, h=h, h_inner=hi, h_outer=ho, grading_length=gl, outer_grading_length=glo, seed=seed)
+        assert m.min_angle_deg().min() >= 25.0, (h, hi, ho, gl, glo, seed)
+        _check_valid_annulus(m)
+        assert m.edge_lengths("inner").mean() == pytest.approx(hi or h, rel=0.05)
+        assert m.edge_lengths("outer").mean() == pytest.approx(ho, rel=0.05)
+    # overlapping ramps (h = 4, both over 30 mm of the 48-mm annulus): the size at mid-radius is the smaller ramp
+    e = m.edges()
+    rm = np.hypot(*(0.5 * (m.points[e[:, 0]] + m.points[e[:, 1]])).T)
+    L = np.linalg.norm(m.points[e[:, 1]] - m.points[e[:, 0]], axis=1)
+    mid = np.abs(rm - 29.0) < 1.0  # both ramps give 0.5 + 3.5 * 24/30 = 3.3 mm here
+    assert L[mid].mean() == pytest.approx(3.3, rel=0.05)
+
+
+@pytest.mark.parametrize("kw,msg", [
+    (dict(h_outer=0.0), "h_outer=0.0 is out of range: allowed (0, h = 1.0]"),
+    (dict(h_outer=1.5), "h_outer=1.5 is out of range: allowed (0, h = 1.0]"),
+    (dict(h_outer=float("nan")), "h_outer=nan is out of range"),
+    (dict(h_outer="0.5"), "h_outer='0.5' is out of range"),
+    (dict(h_outer=True), "h_outer=True is out of range"),
+    (dict(h_outer=0.5, outer_grading_length=0.0), "outer_grading_length=0.0 is out of range: allowed a finite number > 0"),
+    (dict(h_outer=0.5, outer_grading_length=None), "outer_grading_length=None is out of range"),
+])
+def test_outer_graded_validation(kw, msg):
+    with pytest.raises(ValueError) as e:
+        annulus_mesh(RI, RO, h=1.0, **kw)
+    assert msg in str(e.value)
+
+
+def _boundary_layer_h1_error(h, h_outer, delta):
+    """Relative H1-seminorm error of P1 for −Δu + u/δ² = 0, u = I0(r/δ)/I0(r_o/δ) (mm).
+
+    The exact solution is a boundary layer of thickness δ at r_o; its K0 part is left out
+    (relative size K0(r_o/δ) I0(r_i/δ) / (I0(r_o/δ) K0(r_i/δ)) < 1e-40 here), so u on r_i is
+    that small instead of 0.  Errors by the mesh's element centroids and the exact gradient
+    at the 3 edge midpoints (exact for quadratics).
+    """
+    import scipy.sparse.linalg as spla
+    from scipy.special import ive
+
+    from solver import fem
+
+    m = annulus_mesh(RI, RO, h=h, h_outer=h_outer)
+    pts, tri = np.asarray(m.points), np.asarray(m.triangles)
+
+    def grad_ex(x):
+        r = np.hypot(x[..., 0], x[..., 1])
+        return (ive(1, r / delta) / ive(0, RO / delta) * np.exp((r - RO) / delta) / (delta * r))[..., None] * x
+
+    A = (fem.stiffness_matrix(pts, tri) + fem.mass_matrix(pts, tri) / delta**2).tocsr()
+    b = np.concatenate([m.boundary_nodes("inner"), m.boundary_nodes("outer")])
+    free = np.setdiff1d(np.arange(m.n_nodes), b)
+    u = np.zeros(m.n_nodes)
+    rb = np.hypot(*pts[b].T)
+    u[b] = ive(0, rb / delta) / ive(0, RO / delta) * np.exp((rb - RO) / delta)
+    u[free] = spla.spsolve(A[free][:, free].tocsc(), -A[free][:, b] @ u[b])
+    gh = fem.element_gradient(u, tri, fem.geometry(pts, tri))
+    x = pts[tri]
+    xq = 0.5 * (x + x[:, [1, 2, 0]])  # edge midpoints (M, 3, 2), weights |T|/3
+    gq = grad_ex(xq)
+    w = m.areas[:, None] / 3.0
+    err = np.sqrt(np.sum(w * ((gh[:, None, :] - gq) ** 2).sum(-1)))
+    return err / np.sqrt(np.sum(w * (gq ** 2).sum(-1)))
+
+
+def _layer_h_eff(h, h_outer, delta):
+    """Hessian-weighted mean size (mm) of the boundary-layer solution: h_eff² = ∫ size² |D²u|² r dr / ∫ |D²u|² r dr."""
+    from scipy.special import ive
+
+    from solver.mesh import annulus_size
+
+    r = np.linspace(RO - 20 * delta, RO, 20001)
+    u = ive(0, r / delta) * np.exp(r / delta - RO / delta)
+    ur = ive(1, r / delta) * np.exp(r / delta - RO / delta) / delta
+    hess2 = (u / delta**2 - ur / r) ** 2 + (ur / r) ** 2  # u_rr from the ODE, u_θθ/r² + u_r/r = u_r/r
+    size = annulus_size(r, h, h_outer=h_outer, r_outer=RO)
+    return math.sqrt(np.sum(size**2 * hess2 * r) / np.sum(hess2 * r))
+
+
+def test_outer_grading_resolves_a_boundary_layer():
+    """P1 H1 error = c h_eff (first order) for uniform and outer-graded meshes alike.
+
+    A layer of thickness δ = 1 mm (the drained wall's √(c t) at 2 s) on meshes h = 2 with
+    h_outer = None, 1, 0.5, 0.25: the error falls with the layer's effective mesh size at
+    order 1 (slope 0.9–1.1) with one constant c, so the grading refines where the solution
+    needs it; h = 2 graded to h_outer = 0.5 (h_eff < 1 mm) beats c · 1 mm, the uniform h = 1 error.
+    """
+    delta = 1.0
+    cases = [(2.0, None), (2.0, 1.0), (2.0, 0.5), (2.0, 0.25)]
+    e = np.array([_boundary_layer_h1_error(h, ho, delta) for h, ho in cases])
+    he = np.array([_layer_h_eff(h, ho, delta) for h, ho in cases])
+    assert np.all(np.diff(e) < 0), e
+    slope = np.polyfit(np.log(he), np.log(e), 1)[0]
+    assert 0.9 < slope < 1.1, (he, e, slope)
+    c = e / he
+    assert c.max() / c.min() < 1.2, c
+    assert e[2] < c.mean() * 1.0  # below what the uniform h = 1 mesh gives (h_eff = 1)
+
+
+@pytest.mark.parametrize("v,allowed", [(0.0, "(0, h = 1.0]"), (1.5, "(0, h = 1.0]"), (float("nan"), "a finite number"),
+                                       ("fine", "a number"), (True, "a number")])
+def test_run_option_h_outer_validation(v, allowed):
+    from solver.options import RunOptions
+
+    with pytest.raises(ValueError) as e:
+        RunOptions(h_outer=v)
+    assert f"run option h_outer={v!r} is out of range: allowed {allowed}" == str(e.value)
+
+
+def test_run_option_h_outer_round_trips_and_is_omitted_when_none():
+    from solver.options import RunOptions
+
+    assert "h_outer" not in RunOptions().to_dict()
+    o = RunOptions(h=2.0, h_outer=0.5, h_inner=1.0)
+    assert o.to_dict()["h_outer"] == 0.5
+    assert RunOptions.from_dict(o.to_dict()) == o
