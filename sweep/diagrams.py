@@ -29,6 +29,8 @@ __all__ = [
     "REGIME_STYLE",
     "ExponentialSeparatrix",
     "fit_exponential_separatrix",
+    "SeparatrixInterval",
+    "separatrix_profile_interval",
     "regime_map",
     "plot_ca_star_vs_cement",
     "plot_nf_vs_nb",
@@ -109,6 +111,99 @@ def fit_exponential_separatrix(C: Any, ca_star: Any, fracturing: Any,
     D = np.diag([A, 1.0])
     return ExponentialSeparatrix(A=A, B=float(B), cov=D @ cov_lnAB @ D, cov_lnA_B=cov_lnAB,
                                  separable=fit.separable)
+
+
+class SeparatrixInterval(NamedTuple):
+    """Profile-likelihood intervals of the separatrix Ca*_c = A exp(B C) at ``level``.
+
+    A (-) and B (1/%) are the maximum-likelihood values; ``A_interval``, ``B_interval`` their
+    intervals (each parameter profiled over the other and the transition's sharpness); ``separable``:
+    the labels are perfectly separated (the sharpness reaches its cap; the intervals then bound the
+    separatrices that separate the labels, plus the threshold's margin).
+    """
+
+    A: float
+    B: float
+    A_interval: tuple[float, float]
+    B_interval: tuple[float, float]
+    level: float
+    separable: bool
+
+
+_SHARPNESS_CAP = 1e3   # scale of the weak ridge on the logistic slope per unit of ln Ca* (sharp labels reach it)
+
+
+def _sep_nll(theta, X, y):
+    z = X @ theta
+    ridge = 0.5 * (theta[0] / _SHARPNESS_CAP) ** 2
+    g = X.T @ (0.5 * (1 + np.tanh(0.5 * z)) - y)
+    g[0] += theta[0] / _SHARPNESS_CAP**2
+    return float(np.sum(np.logaddexp(0.0, z) - y * z) + ridge), g
+
+
+def _sep_hess(theta, X, y):
+    pr = 0.5 * (1 + np.tanh(0.5 * (X @ theta)))
+    H = (X * (pr * (1 - pr))[:, None]).T @ X
+    H[0, 0] += 1.0 / _SHARPNESS_CAP**2
+    return H
+
+
+def _sep_min(X, y):
+    """Minimum negative log-likelihood of the logistic model z = X theta (convex; Newton trust region).
+    The sharpness theta[0] carries a weak ridge (scale _SHARPNESS_CAP) so that separable labels stay finite."""
+    from scipy.optimize import minimize
+
+    res = minimize(_sep_nll, np.r_[1.0, np.zeros(X.shape[1] - 1)], args=(X, y), jac=True, hess=_sep_hess,
+                   method="trust-exact", options={"gtol": 1e-8, "maxiter": 500})
+    return res.fun, res.x
+
+
+def _profile_bounds(rise, v0: float, step: float) -> tuple[float, float]:
+    """Where rise(v) (< 0 at v0) crosses 0 on each side: doubling steps, then Brent."""
+    from scipy.optimize import brentq
+
+    out = []
+    for sgn in (-1.0, 1.0):
+        inner, d = v0, step
+        while (r := rise(v0 + sgn * d)) < 0 and d < 1e3 * step:
+            inner, d = v0 + sgn * d, 2.0 * d
+        out.append(brentq(rise, inner, v0 + sgn * d, xtol=0.01 * step) if r >= 0 else v0 + sgn * d)
+    return min(out), max(out)
+
+
+def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: float = 0.95) -> SeparatrixInterval:
+    """Fit Ca*_c = A exp(B C) with profile-likelihood intervals of A and B (scipy only).
+
+    Model: P(fracturing) = expit(s (ln Ca* - ln A - B C)), s the transition's sharpness (weak ridge, scale 1e3).
+    With ln A fixed the model is linear in (s, s B), with B fixed linear in (s, s ln A): each profile
+    point is a convex fit. The interval is where twice the profile's rise stays below the chi-square(1)
+    quantile of ``level``. C in %, Ca* > 0 (-), fracturing bools (both outcomes needed).
+    """
+    from scipy.stats import chi2
+
+    Cc = np.asarray(C, float).ravel()
+    L = np.log(np.asarray(ca_star, float).ravel())
+    y = np.asarray(fracturing).astype(bool).astype(float).ravel()
+    if not (Cc.size == L.size == y.size) or Cc.size < 3 or y.min() == y.max():
+        raise ValueError("C, ca_star, fracturing: need equal lengths >= 3 and both outcomes")
+    if not 0 < level < 1:
+        raise ValueError(f"level={level!r}: must be in (0, 1)")
+    full, th = _sep_min(np.c_[L, -Cc, -np.ones_like(L)], y)
+    s_hat = max(th[0], 1e-12)
+    B_hat, lnA_hat = th[1] / s_hat, th[2] / s_hat
+    thr = chi2.ppf(level, 1) / 2.0
+
+    def rise_lnA(v):
+        return _sep_min(np.c_[L - v, -Cc], y)[0] - full - thr
+
+    def rise_B(v):
+        return _sep_min(np.c_[L - v * Cc, -np.ones_like(L)], y)[0] - full - thr
+
+    span_L, span_C = max(np.ptp(L), 1e-6), max(np.ptp(Cc), 1e-6)
+    lo_a, hi_a = _profile_bounds(rise_lnA, lnA_hat, 0.02 * span_L)
+    b_iv = _profile_bounds(rise_B, B_hat, 0.02 * span_L / span_C)
+    return SeparatrixInterval(float(np.exp(lnA_hat)), float(B_hat), (float(np.exp(lo_a)), float(np.exp(hi_a))),
+                              b_iv, level, bool(th[0] >= 0.1 * _SHARPNESS_CAP))
 
 
 # --------------------------------------------------------------------------- helpers
