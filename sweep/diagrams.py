@@ -34,6 +34,7 @@ __all__ = [
     "regime_map",
     "plot_ca_star_vs_cement",
     "plot_nf_vs_nb",
+    "plot_boundary_sampling",
 ]
 
 BLUE = "#1f77b4"
@@ -345,6 +346,99 @@ def regime_map(log_nb: Any, log_nf: Any, regimes: Sequence[str], grid_x: Any, gr
     return out.reshape(gx.shape)
 
 
+_PALETTE = ("#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#fcbba1", "#d9d9d9")
+
+
+def _label_shade(label: str, i: int) -> str:
+    if label in REGIME_STYLE:
+        return REGIME_STYLE[label]["shade"]
+    return {"True": REGIME_STYLE["invasive_fracturing"]["shade"], "fracturing": REGIME_STYLE["invasive_fracturing"]["shade"],
+            "False": REGIME_STYLE["uniform_invasion"]["shade"],
+            "porous_invasion": REGIME_STYLE["uniform_invasion"]["shade"]}.get(label, _PALETTE[i % len(_PALETTE)])
+
+
+def _shade_classifier(ax, model, GX, GY, alpha: float = 0.75):
+    """Colour the plane by the classifier: each label's shade weighted by its probability (a smooth map,
+    white where no label is likely), and the borders of the most probable label as thin black lines."""
+    from matplotlib.colors import to_rgb
+
+    P = model.proba(np.c_[GX.ravel(), GY.ravel()])
+    cols = np.array([to_rgb(_label_shade(lab, i)) for i, lab in enumerate(model.labels)])
+    img = (P @ cols).reshape(GX.shape + (3,))
+    ax.pcolormesh(GX, GY, img, shading="auto", alpha=alpha, zorder=0, rasterized=True)
+    top = np.argmax(P, axis=1).reshape(GX.shape)
+    for k in range(len(model.labels)):
+        m = (top == k).astype(float)
+        if 0 < m.mean() < 1:
+            ax.contour(GX, GY, m, levels=[0.5], colors="k", linewidths=0.8, zorder=1)
+    return P
+
+
+def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Mapping[str, Any] | None = None,
+                           title: str | None = None, formats: Sequence[str] = ("svg",), grid: int = 200) -> dict[str, Any]:
+    """The boundary sampler's view of a 2-axis campaign: classifier shading, probability contours, the
+    50 % line (the boundary) with its uncertainty band, and the runs numbered and coloured by order.
+
+    model : a ``sweep.regime_model.RegimeModel`` over two axes (axis units; log axes drawn in log).
+    points : DataFrame with the two axis columns, ``order`` (0, 1, ...) and ``label`` (None: failed).
+    band : ``sweep.regime_model.boundary_band(model)``; the band is the set of points closer to an
+        estimated boundary point than its half-width (tolerance units), drawn hatched.
+    Two labels: contours of P(second label) at 10, 30, 70, 90 % (thin) and 50 % (thick); more labels:
+    the borders of the most probable label (thick). Writes PNG plus ``formats``; returns {"paths"}.
+    """
+    from scipy.spatial import cKDTree
+
+    if len(model.axes) != 2:
+        raise ValueError(f"model: {len(model.axes)} axes; the boundary figure draws two")
+    ax0, ax1 = model.axes
+    fig = _new_figure((6.0, 5.0))
+    ax = fig.add_subplot(1, 1, 1)
+    u = np.linspace(-1.0, 1.0, grid)
+    UX, UY = np.meshgrid(u, u)
+    GX, GY = ax0.from_u(UX), ax1.from_u(UY)
+    P = _shade_classifier(ax, model, GX, GY)
+    if len(model.labels) == 2:
+        cs = ax.contour(GX, GY, P[:, 1].reshape(GX.shape), levels=[0.1, 0.3, 0.7, 0.9], colors="0.3",
+                        linewidths=0.5, linestyles="dotted", zorder=1)
+        ax.clabel(cs, fmt=lambda v: f"{v:.0%}", fontsize=5)
+        ax.contour(GX, GY, P[:, 1].reshape(GX.shape), levels=[0.5], colors="k", linewidths=1.8, zorder=2)
+    if band is not None and len(band["U"]):
+        tol = np.array([ax0.tol_per_u, ax1.tol_per_u])
+        dist, j = cKDTree(band["U"] * tol).query(np.c_[UX.ravel(), UY.ravel()] * tol)
+        inside = (dist <= np.asarray(band["half"])[j]).reshape(GX.shape).astype(float)
+        ax.contourf(GX, GY, inside, levels=[0.5, 1.5], colors="none", hatches=["////"], zorder=1)
+        ax.contour(GX, GY, inside, levels=[0.5], colors="0.35", linewidths=0.6, zorder=1)
+    order = points["order"].to_numpy()
+    x, y = points[ax0.name].to_numpy(float), points[ax1.name].to_numpy(float)
+    labels = points["label"].to_numpy()
+    markers = {lab: "o^sDvP"[i % 6] for i, lab in enumerate(model.labels)}
+    for lab in list(model.labels) + [None]:
+        m = np.array([(v is None or v != v) if lab is None else v == lab for v in labels])
+        if m.any():
+            sc = ax.scatter(x[m], y[m], c=order[m], cmap="viridis", vmin=0, vmax=max(order.max(), 1),
+                            marker=markers.get(lab, "x"), s=28, edgecolor="k", linewidth=0.4, zorder=3,
+                            label=str(lab) if lab is not None else "failed")
+    for xv, yv, o in zip(x, y, order):
+        ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=4)
+    fig.colorbar(sc, ax=ax, label="order of the run", fraction=0.046, pad=0.04)
+    for a, setter in ((ax0, ax.set_xscale), (ax1, ax.set_yscale)):
+        if a.log:
+            setter("log")
+    ax.set_xlim(ax0.lo, ax0.hi)
+    ax.set_ylim(ax1.lo, ax1.hi)
+    ax.set_xlabel(ax0.name + (" (log axis)" if ax0.log else ""))
+    ax.set_ylabel(ax1.name + (" (log axis)" if ax1.log else ""))
+    if title:
+        ax.set_title(title, fontsize=8)
+    from matplotlib.patches import Patch
+
+    handles, _ = ax.get_legend_handles_labels()
+    handles.append(Patch(facecolor="none", edgecolor="0.35", hatch="////",
+                         label=f"{model.confidence:.0%} band of the boundary"))
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
+    return {"paths": _save(fig, out_path, formats)}
+
+
 def _thumbnail(fig, ax, run_dir: str | Path, xy: tuple[float, float], pos: tuple[float, float],
                size: float, at: Any) -> None:
     """Circular inset of a run: porosity and the S = 0.5 contour in white.
@@ -375,7 +469,7 @@ def _thumbnail(fig, ax, run_dir: str | Path, xy: tuple[float, float], pos: tuple
                 arrowprops=dict(arrowstyle="-", color="0.3", lw=0.6))
 
 
-def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int = 1,
+def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k: int = 1,
                   experimental_range: Mapping[str, float] | Sequence[float] | None = None,
                   thumbnails: Sequence[Mapping[str, Any]] | None = None,
                   dp_cri: float | None = None, formats: Sequence[str] = ("svg",),
@@ -385,8 +479,11 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
     df columns: ``N_b``, ``N_f``, ``regime`` (+ ``run_dir`` for thumbnails).
     Symbols: blue circle uniform invasion, blue star viscous fingering, orange triangle
     invasive fracturing, orange square non-invasive fracturing, orange cross
-    fracturing/fingering. ``shade``: colour the plane by ``regime_map`` (k nearest runs
-    in the log plane). Dashed lines N_f = 1 and N_b = 1. ``experimental_range``:
+    fracturing/fingering. ``shade``: True or "classifier" colours the plane by the regime
+    probabilities of ``sweep.regime_model`` (multinomial logistic regression on a cubic basis in
+    the log plane: each regime's shade weighted by its probability, the most probable regime's
+    borders drawn as thin lines); "nearest" by ``regime_map`` (k nearest runs, a staircase);
+    False: no shading. ``order`` column (optional): each run numbered by it. Dashed lines N_f = 1 and N_b = 1. ``experimental_range``:
     (nb_min, nb_max, nf_min, nf_max) or a mapping with those keys, drawn as a red
     rectangle. ``thumbnails``: list of {"row": index label of df (or "run_dir": path
     and "xy": (N_b, N_f)), "pos": (x, y) axes fraction of the inset centre,
@@ -415,7 +512,10 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
     else:
         lx = ly = np.empty(0)
         x0, x1, y0, y1 = -2.0, 2.0, -2.0, 2.0
-    if shade and nb.size:
+    if shade not in (True, False, "classifier", "nearest"):
+        raise ValueError(f"shade={shade!r}: must be true/\"classifier\" (smooth, from the regime classifier), "
+                         "\"nearest\" (nearest-neighbour staircase) or false")
+    if shade == "nearest" and nb.size:
         from matplotlib.colors import ListedColormap
 
         gx, gy = np.meshgrid(np.linspace(x0, x1, grid), np.linspace(y0, y1, grid))
@@ -424,6 +524,13 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
         cmap = ListedColormap([REGIME_STYLE[r]["shade"] for r in REGIMES])
         ax.pcolormesh(10**gx, 10**gy, code, cmap=cmap, vmin=-0.5, vmax=len(REGIMES) - 0.5,
                       shading="auto", alpha=0.6, zorder=0, rasterized=True)
+    elif shade and len(set(rg)) >= 2:
+        from .regime_model import AxisScale, fit_regime_model
+
+        axes = (AxisScale("N_b", 10**x0, 10**x1, True, 0.1), AxisScale("N_f", 10**y0, 10**y1, True, 0.1))
+        model = fit_regime_model(np.c_[nb, nf], rg, axes, degree=3, prior_sd=10.0)
+        gx, gy = np.meshgrid(np.linspace(x0, x1, grid), np.linspace(y0, y1, grid))
+        _shade_classifier(ax, model, 10**gx, 10**gy)
     counts = {}
     for r in REGIMES:
         m = rg == r
@@ -432,6 +539,10 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
         if m.any():
             ax.scatter(nb[m], nf[m], marker=st["marker"], color=st["color"],
                        s=60 if st["marker"] == "*" else 30, label=st["label"], zorder=3)
+    if "order" in df.columns:
+        for xv, yv, o in zip(nb, nf, df["order"].to_numpy()[ok]):
+            if o == o:
+                ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=5)
     ax.axhline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
     ax.axvline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
     if experimental_range is not None:

@@ -194,3 +194,115 @@ def test_separatrix_A_B_intervals_cover_the_truth():
           f"B in {cover_b}/{len(SEEDS)}; B interval width median {np.median(widths):.3f} /% (truth {B_TRUE})")
     assert cover_a >= 0.9 * len(SEEDS) and cover_b >= 0.9 * len(SEEDS)
     assert np.median(widths) < 0.5 * B_TRUE       # an interval, not the whole axis
+
+
+# ------------------------------------------------------------------------------------ as a campaign
+_INTERRUPT_AFTER = [None]
+
+
+def separatrix_runner(params, options, run_dir):
+    """Campaign runner with the sharp separatrix as the regime (Ctrl-C after _INTERRUPT_AFTER runs)."""
+    if _INTERRUPT_AFTER[0] is not None:
+        if _INTERRUPT_AFTER[0] == 0:
+            raise KeyboardInterrupt
+        _INTERRUPT_AFTER[0] -= 1
+    return {"status": "ok", "regime": separatrix_sharp(params)}
+
+
+def _campaign_spec(source="<dict>"):
+    return spec_from_dict({"name": "bnd", "base": {"eta_w": 1e-6, "kbar": 0.0015}, "options": {"h": 4.0},
+                           "axes": CA_AXES, "run": {"isolate": "none"},
+                           "sampler": {"kind": "boundary", "budget": 40, "tolerance": 0.2, "seed": 3, "batch": 3}},
+                          source=source)
+
+
+def _coords(root):
+    from sweep.store import ResultsStore
+
+    return sorted((r["params"]["cement"], r["params"]["eta_o"]) for r in ResultsStore(root, "bnd").records().values())
+
+
+def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path):
+    import json
+
+    from sweep.campaign import run_campaign
+
+    spec = _campaign_spec()
+    full = run_campaign(spec, tmp_path / "full", runner=separatrix_runner, version="t", progress=None)
+    state = json.loads((tmp_path / "full" / "bnd" / "sampler.json").read_text())
+    assert state["stopped"] and state["runs_used"] == full.n_executed == len(_coords(tmp_path / "full")) <= 40
+    st, _ = drive(spec, separatrix_sharp)
+    assert sorted(c for r in st.rounds for c in r) == _coords(tmp_path / "full")     # the sequence, stored
+    from sweep.campaign import _boundary_figure, build_table
+    from sweep.store import ResultsStore
+
+    figs, table = _boundary_figure(spec, ResultsStore(tmp_path / "full", "bnd"), build_table(spec, tmp_path / "full",
+                                                                                              version="t"))
+    assert [f.name for f in figs] == ["boundary.png", "boundary.svg"] and all(f.stat().st_size > 0 for f in figs)
+    assert sorted(table["order"]) == list(range(full.n_executed))                  # every run numbered by order
+    _INTERRUPT_AFTER[0] = 14
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_campaign(spec, tmp_path / "cut", runner=separatrix_runner, version="t", progress=None)
+    finally:
+        _INTERRUPT_AFTER[0] = None
+    assert len(_coords(tmp_path / "cut")) == 14
+    rest = run_campaign(spec, tmp_path / "cut", runner=separatrix_runner, version="t", progress=None)
+    assert rest.n_executed == full.n_executed - 14
+    assert _coords(tmp_path / "cut") == _coords(tmp_path / "full")
+
+
+def test_cli_status_shows_round_budget_and_uncertainty(tmp_path, capsys):
+    from sweep.campaign import run_campaign
+    from sweep.campaign_cli import main as cli_main
+
+    path = tmp_path / "bnd.toml"
+    path.write_text('name = "bnd"\n[base]\neta_w = 1e-6\nkbar = 0.0015\n[options]\nh = 4.0\n[axes]\n'
+                    'cement = {linear = [0.5, 3.0, 3]}\neta_o = {log = [1e-3, 1.0, 3]}\n'
+                    '[sampler]\nkind = "boundary"\nbudget = 40\ntolerance = 0.2\nseed = 3\nbatch = 3\n'
+                    '[run]\nisolate = "none"\nrunner = "test_boundary_sampler:separatrix_runner"\n')
+    run_campaign(_campaign_spec(str(path)), tmp_path, runner=separatrix_runner, progress=None)
+    assert cli_main(["status", str(path), "--results", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "boundary sampler: round " in out and "/40 runs of the budget" in out and "x tolerance" in out
+    assert "stopped: converged" in out
+
+
+@pytest.mark.parametrize("sampler, axes, key", [
+    ({"budget": 5, "tolerance": 0.1}, CA_AXES, "sampler.budget"),
+    ({"budget": 40, "tolerance": 0.0}, CA_AXES, "sampler.tolerance"),
+    ({"budget": 40, "tolerance": {"cement": 0.1}}, CA_AXES, "sampler.tolerance"),
+    ({"budget": 40, "tolerance": {"cement": 0.1, "eta_o": 0.1, "w_i": 1.0}}, CA_AXES, "sampler.tolerance.w_i"),
+    ({"budget": 40, "tolerance": 0.1, "labels": ["fracturing"]}, CA_AXES, "sampler.labels"),
+    ({"budget": 40, "tolerance": 0.1, "batch": 0}, CA_AXES, "sampler.batch"),
+    ({"budget": 40, "tolerance": 0.1, "initial": "sobol"}, CA_AXES, "sampler.initial"),
+    ({"budget": 40, "tolerance": 0.1, "budjet": 3}, CA_AXES, "sampler.budjet"),
+    ({"tolerance": 0.1}, CA_AXES, "sampler.budget"),
+    ({"budget": 40, "tolerance": 0.1}, {"cement": [0.5, 1.0, 2.0], "eta_o": {"log": [1e-3, 1.0, 3]}}, "axes.cement"),
+    ({"budget": 8, "tolerance": 0.1, "initial": "grid"}, CA_AXES, "sampler.budget"),
+])
+def test_bad_settings_are_rejected_before_any_run_naming_the_key(sampler, axes, key):
+    with pytest.raises(SpecError, match=key.replace(".", r"\.")):
+        _spec(axes, **sampler)
+
+
+def test_nf_vs_nb_classifier_shading_recovers_a_known_map(tmp_path):
+    """The smooth shading is the regime classifier fitted in the log plane: on runs from a known 3-regime map
+    (a 6 x 6 grid) its most probable regime agrees with the map away from the boundaries."""
+    from sweep.diagrams import plot_nf_vs_nb
+    from sweep.regime_model import AxisScale, fit_regime_model
+
+    lx, ly = np.meshgrid(np.linspace(-2, 4, 6), np.linspace(-3, 2, 6))
+    lab = _map_truth(np.c_[10 ** (lx.ravel() / 1.5 - 2.0), 10 ** (ly.ravel() * 0.6 - 2.5)])
+    df = pd.DataFrame({"N_b": 10 ** lx.ravel(), "N_f": 10 ** ly.ravel(), "regime": lab})
+    out = plot_nf_vs_nb(df, tmp_path / "nfnb", formats=())
+    assert out["paths"][0].stat().st_size > 0
+    axes = (AxisScale("N_b", 10**-2.5, 10**4.5, True, 0.1), AxisScale("N_f", 10**-3.5, 10**2.5, True, 0.1))
+    model = fit_regime_model(df[["N_b", "N_f"]].to_numpy(), lab, axes, degree=3, prior_sd=10.0)
+    qx, qy = np.meshgrid(np.linspace(-2, 4, 40), np.linspace(-3, 2, 40))
+    Q = np.c_[10 ** qx.ravel(), 10 ** qy.ravel()]
+    truth = _map_truth(np.c_[10 ** (qx.ravel() / 1.5 - 2.0), 10 ** (qy.ravel() * 0.6 - 2.5)])
+    got = np.array(model.labels, dtype=object)[np.argmax(model.proba(Q), axis=1)]
+    assert np.mean(got == truth) > 0.9
+    with pytest.raises(ValueError, match="shade"):
+        plot_nf_vs_nb(df, tmp_path / "bad", shade="staircase", formats=())
