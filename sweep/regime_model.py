@@ -251,11 +251,14 @@ def boundary_points(model: RegimeModel, n: int = 64) -> np.ndarray:
     return U[edge.ravel()]
 
 
-def boundary_band(model: RegimeModel, n: int = 64) -> dict[str, Any]:
+_GRID_PER_AXIS = {1: 512, 2: 64, 3: 20}   # evaluation grid of the boundaries, points per axis
+
+
+def boundary_band(model: RegimeModel, n: int | None = None) -> dict[str, Any]:
     """The estimated boundaries and their uncertainty: grid points next to a label change (n per axis),
     projected onto the zero line of their pair; ``U`` (m, d) unit coordinates, ``half`` (m,) the band's
     half-width z sigma_loc (tolerance units), ``pair`` (m,) the two labels "a | b" (sorted)."""
-    B = boundary_points(model, n)
+    B = boundary_points(model, n or _GRID_PER_AXIS[len(model.axes)])
     if len(B) == 0:
         return {"U": B, "half": np.empty(0), "pair": np.empty(0, dtype=object)}
     P = project_to_boundary(model, B)
@@ -265,7 +268,7 @@ def boundary_band(model: RegimeModel, n: int = 64) -> dict[str, Any]:
     return {"U": P, "half": model.z * st["sigma_loc"], "pair": pair}
 
 
-def boundary_uncertainty(model: RegimeModel, n: int = 64) -> dict[str, Any]:
+def boundary_uncertainty(model: RegimeModel, n: int | None = None) -> dict[str, Any]:
     """Largest z * sigma_loc over the estimated boundaries (tolerance units: <= 1 means the band of
     the model's confidence is within the tolerance everywhere), overall and per label pair."""
     band = boundary_band(model, n)
