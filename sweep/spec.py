@@ -37,7 +37,9 @@ Format (all tables optional except ``name``)::
     axes = {psi_c = [2.16e-4, 2.16e-3, 2.16e-2]}
 
     [sampler]
-    kind = "grid"                       # see sweep.sampler.SAMPLERS
+    kind = "grid"                       # see sweep.sampler.SAMPLERS; "boundary": adaptive runs where
+                                        # the regime boundary is least certain (sweep.boundary: budget,
+                                        # tolerance, seed, batch, ...; axes linear/log/range bounds)
 
     [classify]                          # keyword arguments of classify_run
 
