@@ -1,5 +1,8 @@
 """The ``boundary`` sampler: adaptive runs where a phase diagram's regime boundaries are least certain.
 
+Units: the axes' own (model units: mm, s, kPa; kPa*s, mm^2, ...); tolerances in axis units, decades on
+log axes; uncertainties reported in tolerance units (1 = one tolerance).
+
 Campaign TOML::
 
     [axes]                                  # 1 to 3 axes, each {linear = [..]}, {log = [..]} or {range = [..]}
