@@ -47,6 +47,7 @@ __all__ = [
     "plot_campaign",
     "write_report",
     "reclassify",
+    "sampler_status",
     "DEFAULT_WALL_S_PER_SIM_S_H2",
     "COST_MESH_EXPONENT",
 ]
@@ -287,8 +288,9 @@ def build_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: 
 
     plan = plan or plan_campaign(spec, root, code_hash=code_hash)
     extra = _extra_points(plan)
-    rows = [_row(p, k, plan.records[k], numbers, plan) for p, k in zip(plan.points + extra[0], plan.keys + extra[1])
-            if k in plan.records]
+    records = {**extra[2], **plan.records}
+    rows = [_row(p, k, records[k], numbers, plan) for p, k in zip(plan.points + extra[0], plan.keys + extra[1])
+            if k in records]
     df = pd.DataFrame(rows)
     if not df.empty:
         df.insert(df.columns.get_loc("blocks") + 1, "run_dir",
@@ -329,18 +331,19 @@ def _add_fracturing_number(df, spec: CampaignSpec):
 
 
 def _extra_points(plan: Plan):
-    """Points added by a refining sampler in earlier sessions (records not in the initial grid; they
-    join ``plan.records``)."""
+    """Points added by a refining sampler in earlier sessions (records not in the initial grid): their
+    points, keys and records."""
     if plan.spec.sampler["kind"] == "grid":
-        return [], []
+        return [], [], {}
     known = set(plan.keys)
-    pts, keys = [], []
+    pts, keys, recs = [], [], {}
     for k, r in plan.store.records().items():
         if k not in known:
             pts.append(Point(r["params"], r["options"], {}, ("refined",), len(plan.points) + len(pts)))
             keys.append(k)
+            recs[k] = r
             plan.records.setdefault(k, r)
-    return pts, keys
+    return pts, keys, recs
 
 
 def write_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None) -> list[Path]:
@@ -487,8 +490,9 @@ def run_campaign(
                 break
             if not accept_stale:
                 result.reclassified += _reclassify_keys(plan, [k for _, k in plan.misclassified], spec.classify)
-            new = [p for p in sampler.refine(spec, build_table(spec, root, plan=plan))
-                   if run_key(p.params, p.options) not in set(plan.keys)]
+            table = build_table(spec, root, plan=plan)
+            new = [p for p in sampler.refine(spec, table) if run_key(p.params, p.options) not in set(plan.keys)]
+            _write_sampler_state(sampler, spec, table, store)
             points = points + new if new else []
         result.n_skipped = result.n_points - result.n_executed
         if result.reclassified:
@@ -565,6 +569,24 @@ def _execute(plan: Plan, todo, cfg: ExecConfig, result: CampaignResult, *, jobs,
                 last_write = time.perf_counter()
     finally:
         gen.close()
+
+
+def _write_sampler_state(sampler, spec: CampaignSpec, table, store: ResultsStore) -> None:
+    """``sampler.json``: where an adaptive sampler stands (round, runs of the budget, why it stopped)."""
+    if hasattr(sampler, "state"):
+        from sweep.store import write_json_atomic
+
+        write_json_atomic(store.dir / "sampler.json", sampler.state(spec, table))
+
+
+def sampler_status(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None) -> dict | None:
+    """The adaptive sampler's state dict (see ``sweep.boundary.BoundarySampler.state``), None for the grid."""
+    spec = as_spec(spec)
+    sampler = SAMPLERS[spec.sampler["kind"]]()
+    if not hasattr(sampler, "state"):
+        return None
+    table = build_table(spec, root, code_hash=code_hash) if table is None else table
+    return sampler.state(spec, table)
 
 
 def _save_spec(spec: CampaignSpec, store: ResultsStore) -> None:
@@ -894,6 +916,32 @@ def _phase_diagram(spec, table, g, path) -> list[Path]:
     return [Path(p) for p in paths] if paths else [path]
 
 
+def _boundary_figure(spec, store: ResultsStore, table):
+    """The boundary sampler's figure (``figures/boundary.png``: classifier, 50 % line, band, runs by
+    order) and the table with an ``order`` column (the order the sampler chose each run)."""
+    import pandas as pd
+
+    from sweep import diagrams as dg
+    from sweep.boundary import BoundarySampler
+    from sweep.regime_model import boundary_band
+    from sweep.spec import round_sig
+
+    st = BoundarySampler().replay(spec, table)
+    names = list(spec.axis_names)
+    pts = pd.DataFrame(st.to_dict(st.model.axes if st.model else ())["points"]) if st.model else None
+    if pts is None or len(names) != 2:
+        return [], table
+    order = {tuple(round_sig(float(v), 10) for v in r[names]): r["order"] for _, r in pts.iterrows()}
+    table = table.copy()
+    table["order"] = [order.get(tuple(round_sig(float(v), 10) for v in row), math.nan) for row in table[names].to_numpy()]
+    unc = "?" if not math.isfinite(st.uncertainty) else f"{st.uncertainty:.2f}"
+    title = (f"{spec.name}: {st.runs_used}/{st.budget} runs in {len(st.rounds)} rounds, boundary band "
+             f"half-width {unc} x tolerance\n" + (st.reason if st.stopped else "running"))
+    res = dg.plot_boundary_sampling(st.model, pts, store.figures_dir / "boundary.png", band=boundary_band(st.model),
+                                    title=title)
+    return [Path(p) for p in res["paths"]], table
+
+
 def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None,
                   allow_damaged: bool = False) -> list[Path]:
     """Draw the spec's diagrams from the campaign table into ``<root>/<name>/figures/``.
@@ -918,6 +966,9 @@ def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, tabl
     out = []
     if table.empty:
         return out
+    if spec.sampler["kind"] == "boundary":
+        figs, table = _boundary_figure(spec, store, table)
+        out.extend(figs)
     for i, g in enumerate(spec.diagrams):
         kind = g["kind"]
         path = store.figures_dir / g.get("file", f"{kind}.png" if sum(d["kind"] == kind for d in spec.diagrams) == 1 else f"{kind}_{i}.png")

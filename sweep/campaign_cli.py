@@ -180,7 +180,7 @@ def _print_provenance(res) -> None:
 
 @_guarded
 def cmd_status(args) -> int:
-    from sweep.campaign import code_counts, plan_campaign
+    from sweep.campaign import code_counts, plan_campaign, sampler_status
 
     spec = _spec(args)
     plan = plan_campaign(spec, args.results)
@@ -197,6 +197,15 @@ def cmd_status(args) -> int:
     for p, k in plan.failed:
         swept = ", ".join(f"{a}={v}" for a, v in p.swept.items())
         print(f"  failed {k} ({swept}): {plan.records[k].get('reason')}")
+    st = sampler_status(spec, args.results)
+    if st is not None:
+        unc = "not yet measured (fewer than two labels)" if st["uncertainty"] is None else \
+            f"{st['uncertainty']:.2f} x tolerance (largest half-width of the boundary's band)"
+        print(f"{st['sampler']} sampler: round {st['round']}, {st['runs_used']}/{st['budget']} runs of the budget "
+              f"({st['pending']} pending), boundary uncertainty {unc}")
+        for pair, v in sorted(st["uncertainty_by_pair"].items()):
+            print(f"  {pair}: {v:.2f} x tolerance")
+        print(f"  stopped: {st['reason']}" if st["stopped"] else "  running: rerun `campaign run` to continue")
     if plan.damaged:
         print(plan.damage_text())
         return 1

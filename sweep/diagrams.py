@@ -29,9 +29,12 @@ __all__ = [
     "REGIME_STYLE",
     "ExponentialSeparatrix",
     "fit_exponential_separatrix",
+    "SeparatrixInterval",
+    "separatrix_profile_interval",
     "regime_map",
     "plot_ca_star_vs_cement",
     "plot_nf_vs_nb",
+    "plot_boundary_sampling",
 ]
 
 BLUE = "#1f77b4"
@@ -109,6 +112,99 @@ def fit_exponential_separatrix(C: Any, ca_star: Any, fracturing: Any,
     D = np.diag([A, 1.0])
     return ExponentialSeparatrix(A=A, B=float(B), cov=D @ cov_lnAB @ D, cov_lnA_B=cov_lnAB,
                                  separable=fit.separable)
+
+
+class SeparatrixInterval(NamedTuple):
+    """Profile-likelihood intervals of the separatrix Ca*_c = A exp(B C) at ``level``.
+
+    A (-) and B (1/%) are the maximum-likelihood values; ``A_interval``, ``B_interval`` their
+    intervals (each parameter profiled over the other and the transition's sharpness); ``separable``:
+    the labels are perfectly separated (the sharpness reaches its cap; the intervals then bound the
+    separatrices that separate the labels, plus the threshold's margin).
+    """
+
+    A: float
+    B: float
+    A_interval: tuple[float, float]
+    B_interval: tuple[float, float]
+    level: float
+    separable: bool
+
+
+_SHARPNESS_CAP = 1e3   # scale of the weak ridge on the logistic slope per unit of ln Ca* (sharp labels reach it)
+
+
+def _sep_nll(theta, X, y):
+    z = X @ theta
+    ridge = 0.5 * (theta[0] / _SHARPNESS_CAP) ** 2
+    g = X.T @ (0.5 * (1 + np.tanh(0.5 * z)) - y)
+    g[0] += theta[0] / _SHARPNESS_CAP**2
+    return float(np.sum(np.logaddexp(0.0, z) - y * z) + ridge), g
+
+
+def _sep_hess(theta, X, y):
+    pr = 0.5 * (1 + np.tanh(0.5 * (X @ theta)))
+    H = (X * (pr * (1 - pr))[:, None]).T @ X
+    H[0, 0] += 1.0 / _SHARPNESS_CAP**2
+    return H
+
+
+def _sep_min(X, y):
+    """Minimum negative log-likelihood of the logistic model z = X theta (convex; Newton trust region).
+    The sharpness theta[0] carries a weak ridge (scale _SHARPNESS_CAP) so that separable labels stay finite."""
+    from scipy.optimize import minimize
+
+    res = minimize(_sep_nll, np.r_[1.0, np.zeros(X.shape[1] - 1)], args=(X, y), jac=True, hess=_sep_hess,
+                   method="trust-exact", options={"gtol": 1e-8, "maxiter": 500})
+    return res.fun, res.x
+
+
+def _profile_bounds(rise, v0: float, step: float) -> tuple[float, float]:
+    """Where rise(v) (< 0 at v0) crosses 0 on each side: doubling steps, then Brent."""
+    from scipy.optimize import brentq
+
+    out = []
+    for sgn in (-1.0, 1.0):
+        inner, d = v0, step
+        while (r := rise(v0 + sgn * d)) < 0 and d < 1e3 * step:
+            inner, d = v0 + sgn * d, 2.0 * d
+        out.append(brentq(rise, inner, v0 + sgn * d, xtol=0.01 * step) if r >= 0 else v0 + sgn * d)
+    return min(out), max(out)
+
+
+def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: float = 0.95) -> SeparatrixInterval:
+    """Fit Ca*_c = A exp(B C) with profile-likelihood intervals of A and B (scipy only).
+
+    Model: P(fracturing) = expit(s (ln Ca* - ln A - B C)), s the transition's sharpness (weak ridge, scale 1e3).
+    With ln A fixed the model is linear in (s, s B), with B fixed linear in (s, s ln A): each profile
+    point is a convex fit. The interval is where twice the profile's rise stays below the chi-square(1)
+    quantile of ``level``. C in %, Ca* > 0 (-), fracturing bools (both outcomes needed).
+    """
+    from scipy.stats import chi2
+
+    Cc = np.asarray(C, float).ravel()
+    L = np.log(np.asarray(ca_star, float).ravel())
+    y = np.asarray(fracturing).astype(bool).astype(float).ravel()
+    if not (Cc.size == L.size == y.size) or Cc.size < 3 or y.min() == y.max():
+        raise ValueError("C, ca_star, fracturing: need equal lengths >= 3 and both outcomes")
+    if not 0 < level < 1:
+        raise ValueError(f"level={level!r}: must be in (0, 1)")
+    full, th = _sep_min(np.c_[L, -Cc, -np.ones_like(L)], y)
+    s_hat = max(th[0], 1e-12)
+    B_hat, lnA_hat = th[1] / s_hat, th[2] / s_hat
+    thr = chi2.ppf(level, 1) / 2.0
+
+    def rise_lnA(v):
+        return _sep_min(np.c_[L - v, -Cc], y)[0] - full - thr
+
+    def rise_B(v):
+        return _sep_min(np.c_[L - v * Cc, -np.ones_like(L)], y)[0] - full - thr
+
+    span_L, span_C = max(np.ptp(L), 1e-6), max(np.ptp(Cc), 1e-6)
+    lo_a, hi_a = _profile_bounds(rise_lnA, lnA_hat, 0.02 * span_L)
+    b_iv = _profile_bounds(rise_B, B_hat, 0.02 * span_L / span_C)
+    return SeparatrixInterval(float(np.exp(lnA_hat)), float(B_hat), (float(np.exp(lo_a)), float(np.exp(hi_a))),
+                              b_iv, level, bool(th[0] >= 0.1 * _SHARPNESS_CAP))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -250,6 +346,99 @@ def regime_map(log_nb: Any, log_nf: Any, regimes: Sequence[str], grid_x: Any, gr
     return out.reshape(gx.shape)
 
 
+_PALETTE = ("#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#fcbba1", "#d9d9d9")
+
+
+def _label_shade(label: str, i: int) -> str:
+    if label in REGIME_STYLE:
+        return REGIME_STYLE[label]["shade"]
+    return {"True": REGIME_STYLE["invasive_fracturing"]["shade"], "fracturing": REGIME_STYLE["invasive_fracturing"]["shade"],
+            "False": REGIME_STYLE["uniform_invasion"]["shade"],
+            "porous_invasion": REGIME_STYLE["uniform_invasion"]["shade"]}.get(label, _PALETTE[i % len(_PALETTE)])
+
+
+def _shade_classifier(ax, model, GX, GY, alpha: float = 0.75):
+    """Colour the plane by the classifier: each label's shade weighted by its probability (a smooth map,
+    white where no label is likely), and the borders of the most probable label as thin black lines."""
+    from matplotlib.colors import to_rgb
+
+    P = model.proba(np.c_[GX.ravel(), GY.ravel()])
+    cols = np.array([to_rgb(_label_shade(lab, i)) for i, lab in enumerate(model.labels)])
+    img = (P @ cols).reshape(GX.shape + (3,))
+    ax.pcolormesh(GX, GY, img, shading="auto", alpha=alpha, zorder=0, rasterized=True)
+    top = np.argmax(P, axis=1).reshape(GX.shape)
+    for k in range(len(model.labels)):
+        m = (top == k).astype(float)
+        if 0 < m.mean() < 1:
+            ax.contour(GX, GY, m, levels=[0.5], colors="k", linewidths=0.8, zorder=1)
+    return P
+
+
+def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Mapping[str, Any] | None = None,
+                           title: str | None = None, formats: Sequence[str] = ("svg",), grid: int = 200) -> dict[str, Any]:
+    """The boundary sampler's view of a 2-axis campaign: classifier shading, probability contours, the
+    50 % line (the boundary) with its uncertainty band, and the runs numbered and coloured by order.
+
+    model : a ``sweep.regime_model.RegimeModel`` over two axes (axis units; log axes drawn in log).
+    points : DataFrame with the two axis columns, ``order`` (0, 1, ...) and ``label`` (None: failed).
+    band : ``sweep.regime_model.boundary_band(model)``; the band is the set of points closer to an
+        estimated boundary point than its half-width (tolerance units), drawn hatched.
+    Two labels: contours of P(second label) at 10, 30, 70, 90 % (thin) and 50 % (thick); more labels:
+    the borders of the most probable label (thick). Writes PNG plus ``formats``; returns {"paths"}.
+    """
+    from scipy.spatial import cKDTree
+
+    if len(model.axes) != 2:
+        raise ValueError(f"model: {len(model.axes)} axes; the boundary figure draws two")
+    ax0, ax1 = model.axes
+    fig = _new_figure((6.0, 5.0))
+    ax = fig.add_subplot(1, 1, 1)
+    u = np.linspace(-1.0, 1.0, grid)
+    UX, UY = np.meshgrid(u, u)
+    GX, GY = ax0.from_u(UX), ax1.from_u(UY)
+    P = _shade_classifier(ax, model, GX, GY)
+    if len(model.labels) == 2:
+        cs = ax.contour(GX, GY, P[:, 1].reshape(GX.shape), levels=[0.1, 0.3, 0.7, 0.9], colors="0.3",
+                        linewidths=0.5, linestyles="dotted", zorder=1)
+        ax.clabel(cs, fmt=lambda v: f"{v:.0%}", fontsize=5)
+        ax.contour(GX, GY, P[:, 1].reshape(GX.shape), levels=[0.5], colors="k", linewidths=1.8, zorder=2)
+    if band is not None and len(band["U"]):
+        tol = np.array([ax0.tol_per_u, ax1.tol_per_u])
+        dist, j = cKDTree(band["U"] * tol).query(np.c_[UX.ravel(), UY.ravel()] * tol)
+        inside = (dist <= np.asarray(band["half"])[j]).reshape(GX.shape).astype(float)
+        ax.contourf(GX, GY, inside, levels=[0.5, 1.5], colors="none", hatches=["////"], zorder=1)
+        ax.contour(GX, GY, inside, levels=[0.5], colors="0.35", linewidths=0.6, zorder=1)
+    order = points["order"].to_numpy()
+    x, y = points[ax0.name].to_numpy(float), points[ax1.name].to_numpy(float)
+    labels = points["label"].to_numpy()
+    markers = {lab: "o^sDvP"[i % 6] for i, lab in enumerate(model.labels)}
+    for lab in list(model.labels) + [None]:
+        m = np.array([(v is None or v != v) if lab is None else v == lab for v in labels])
+        if m.any():
+            sc = ax.scatter(x[m], y[m], c=order[m], cmap="viridis", vmin=0, vmax=max(order.max(), 1),
+                            marker=markers.get(lab, "x"), s=28, edgecolor="k", linewidth=0.4, zorder=3,
+                            label=str(lab) if lab is not None else "failed")
+    for xv, yv, o in zip(x, y, order):
+        ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=4)
+    fig.colorbar(sc, ax=ax, label="order of the run", fraction=0.046, pad=0.04)
+    for a, setter in ((ax0, ax.set_xscale), (ax1, ax.set_yscale)):
+        if a.log:
+            setter("log")
+    ax.set_xlim(ax0.lo, ax0.hi)
+    ax.set_ylim(ax1.lo, ax1.hi)
+    ax.set_xlabel(ax0.name + (" (log axis)" if ax0.log else ""))
+    ax.set_ylabel(ax1.name + (" (log axis)" if ax1.log else ""))
+    if title:
+        ax.set_title(title, fontsize=8)
+    from matplotlib.patches import Patch
+
+    handles, _ = ax.get_legend_handles_labels()
+    handles.append(Patch(facecolor="none", edgecolor="0.35", hatch="////",
+                         label=f"{model.confidence:.0%} band of the boundary"))
+    ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
+    return {"paths": _save(fig, out_path, formats)}
+
+
 def _thumbnail(fig, ax, run_dir: str | Path, xy: tuple[float, float], pos: tuple[float, float],
                size: float, at: Any) -> None:
     """Circular inset of a run: porosity and the S = 0.5 contour in white.
@@ -280,7 +469,7 @@ def _thumbnail(fig, ax, run_dir: str | Path, xy: tuple[float, float], pos: tuple
                 arrowprops=dict(arrowstyle="-", color="0.3", lw=0.6))
 
 
-def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int = 1,
+def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k: int = 1,
                   experimental_range: Mapping[str, float] | Sequence[float] | None = None,
                   thumbnails: Sequence[Mapping[str, Any]] | None = None,
                   dp_cri: float | None = None, formats: Sequence[str] = ("svg",),
@@ -290,8 +479,11 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
     df columns: ``N_b``, ``N_f``, ``regime`` (+ ``run_dir`` for thumbnails).
     Symbols: blue circle uniform invasion, blue star viscous fingering, orange triangle
     invasive fracturing, orange square non-invasive fracturing, orange cross
-    fracturing/fingering. ``shade``: colour the plane by ``regime_map`` (k nearest runs
-    in the log plane). Dashed lines N_f = 1 and N_b = 1. ``experimental_range``:
+    fracturing/fingering. ``shade``: True or "classifier" colours the plane by the regime
+    probabilities of ``sweep.regime_model`` (multinomial logistic regression on a cubic basis in
+    the log plane: each regime's shade weighted by its probability, the most probable regime's
+    borders drawn as thin lines); "nearest" by ``regime_map`` (k nearest runs, a staircase);
+    False: no shading. ``order`` column (optional): each run numbered by it. Dashed lines N_f = 1 and N_b = 1. ``experimental_range``:
     (nb_min, nb_max, nf_min, nf_max) or a mapping with those keys, drawn as a red
     rectangle. ``thumbnails``: list of {"row": index label of df (or "run_dir": path
     and "xy": (N_b, N_f)), "pos": (x, y) axes fraction of the inset centre,
@@ -320,7 +512,10 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
     else:
         lx = ly = np.empty(0)
         x0, x1, y0, y1 = -2.0, 2.0, -2.0, 2.0
-    if shade and nb.size:
+    if shade not in (True, False, "classifier", "nearest"):
+        raise ValueError(f"shade={shade!r}: must be true/\"classifier\" (smooth, from the regime classifier), "
+                         "\"nearest\" (nearest-neighbour staircase) or false")
+    if shade == "nearest" and nb.size:
         from matplotlib.colors import ListedColormap
 
         gx, gy = np.meshgrid(np.linspace(x0, x1, grid), np.linspace(y0, y1, grid))
@@ -329,6 +524,13 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
         cmap = ListedColormap([REGIME_STYLE[r]["shade"] for r in REGIMES])
         ax.pcolormesh(10**gx, 10**gy, code, cmap=cmap, vmin=-0.5, vmax=len(REGIMES) - 0.5,
                       shading="auto", alpha=0.6, zorder=0, rasterized=True)
+    elif shade and len(set(rg)) >= 2:
+        from .regime_model import AxisScale, fit_regime_model
+
+        axes = (AxisScale("N_b", 10**x0, 10**x1, True, 0.1), AxisScale("N_f", 10**y0, 10**y1, True, 0.1))
+        model = fit_regime_model(np.c_[nb, nf], rg, axes, degree=3, prior_sd=10.0)
+        gx, gy = np.meshgrid(np.linspace(x0, x1, grid), np.linspace(y0, y1, grid))
+        _shade_classifier(ax, model, 10**gx, 10**gy)
     counts = {}
     for r in REGIMES:
         m = rg == r
@@ -337,6 +539,10 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool = True, k: int =
         if m.any():
             ax.scatter(nb[m], nf[m], marker=st["marker"], color=st["color"],
                        s=60 if st["marker"] == "*" else 30, label=st["label"], zorder=3)
+    if "order" in df.columns:
+        for xv, yv, o in zip(nb, nf, df["order"].to_numpy()[ok]):
+            if o == o:
+                ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=5)
     ax.axhline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
     ax.axvline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
     if experimental_range is not None:

@@ -10,9 +10,9 @@ interface is two methods, so that a smarter sampler can be dropped in:
   the campaign.
 
 :class:`GridSampler` (``kind = "grid"``) returns the whole grid at once and never refines.
-The planned adaptive sampler will return a coarse grid first, then points between
-neighbouring runs whose ``regime`` differs, until a resolution is reached; register it
-in :data:`SAMPLERS`.
+:class:`sweep.boundary.BoundarySampler` (``kind = "boundary"``) starts from a small
+space-filling design and adds batches where a probabilistic classifier of the regime is
+least certain about the boundary, until it is located within a tolerance or a budget is spent.
 """
 from __future__ import annotations
 
@@ -165,3 +165,12 @@ class GridSampler:
 
 
 SAMPLERS: dict[str, type] = {"grid": GridSampler}
+
+
+def _register_boundary() -> None:
+    from sweep.boundary import BoundarySampler  # imports this module: registered after its definitions
+
+    SAMPLERS[BoundarySampler.kind] = BoundarySampler
+
+
+_register_boundary()

@@ -37,7 +37,9 @@ Format (all tables optional except ``name``)::
     axes = {psi_c = [2.16e-4, 2.16e-3, 2.16e-2]}
 
     [sampler]
-    kind = "grid"                       # see sweep.sampler.SAMPLERS
+    kind = "grid"                       # see sweep.sampler.SAMPLERS; "boundary": adaptive runs where
+                                        # the regime boundary is least certain (sweep.boundary: budget,
+                                        # tolerance, seed, batch, ...; axes linear/log/range bounds)
 
     [classify]                          # keyword arguments of classify_run
 
@@ -110,11 +112,13 @@ def option_fields() -> tuple[str, ...]:
 # ---------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Axis:
-    """One swept quantity: ``target`` is "params" or "options"; ``values`` in the field's units."""
+    """One swept quantity: ``target`` is "params" or "options"; ``values`` in the field's units;
+    ``scale`` how the values were written: "values" (a list), "linear", "log" or "range"."""
 
     name: str
     target: str
     values: tuple
+    scale: str = "values"
 
 
 @dataclass(frozen=True)
@@ -227,6 +231,11 @@ def _axis_values(where: str, spec) -> tuple:
     return tuple(vals)
 
 
+def _axis_scale(spec) -> str:
+    """How an axis spec (already checked by :func:`_axis_values`) spaces its values."""
+    return next(iter(spec)) if isinstance(spec, dict) else "values"
+
+
 def _resolve_name(where: str, name: str, pfields, ofields) -> tuple[str, str]:
     """Return (target, field) for an axis/base name."""
     if name in pfields and name in ofields:
@@ -250,10 +259,10 @@ def _parse_axes(where: str, axes_tbl, pfields, ofields) -> list[Axis]:
             for sub, sspec in spec.items():
                 if sub not in allowed:
                     _fail(f"{where}.{name}.{sub}", f"unknown key {sub!r}: allowed {sorted(allowed)}")
-                out.append(Axis(sub, name, _axis_values(f"{where}.{name}.{sub}", sspec)))
+                out.append(Axis(sub, name, _axis_values(f"{where}.{name}.{sub}", sspec), _axis_scale(sspec)))
             continue
         target, fname = _resolve_name(f"{where}.{name}", name, pfields, ofields)
-        out.append(Axis(fname, target, _axis_values(f"{where}.{name}", spec)))
+        out.append(Axis(fname, target, _axis_values(f"{where}.{name}", spec), _axis_scale(spec)))
     names = [a.name for a in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
