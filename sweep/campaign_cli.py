@@ -24,6 +24,12 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", help="campaign spec, a TOML file (see campaigns/)")
     p.add_argument("--results", default="results", metavar="DIR",
                    help="results root (default: results); the campaign lives in DIR/<name>/")
+    p.add_argument("--max-runs", type=int, default=None, metavar="N",
+                   help="allow grids of up to N runs (default: spec [run] max_runs, else 10000)")
+
+
+class UsageError(ValueError):
+    """A bad argument (e.g. an unwritable --results): one line on stderr, exit code 2."""
 
 
 def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
@@ -72,7 +78,7 @@ def _guarded(fn):
 
         try:
             return fn(args)
-        except SpecError as e:
+        except (SpecError, UsageError) as e:
             print(f"error: {e}", file=sys.stderr)
             return 2
         except ValueError as e:
@@ -89,10 +95,18 @@ def _guarded(fn):
     return wrapper
 
 
-def _spec(args):
+def _spec(args, writes: bool = True):
+    """The validated spec of ``args``; with ``writes``, the campaign folder RESULTS/<name> is checked writable."""
+    from solver.output import check_writable_dir
     from sweep.spec import load_spec
 
-    return load_spec(args.spec)
+    spec = load_spec(args.spec, max_runs=getattr(args, "max_runs", None))
+    if writes:
+        try:
+            check_writable_dir(f"{args.results}/{spec.name}", "--results campaign folder")
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+    return spec
 
 
 def _fmt_s(s: float) -> str:
@@ -143,7 +157,7 @@ def cmd_run(args) -> int:
 def cmd_status(args) -> int:
     from sweep.campaign import plan_campaign
 
-    spec = _spec(args)
+    spec = _spec(args, writes=False)
     plan = plan_campaign(spec, args.results)
     print(f"campaign {spec.name}: {len(plan.points)} runs: {len(plan.done)} done, {len(plan.failed)} failed, "
           f"{len(plan.pending)} pending  ({plan.store.dir})")
