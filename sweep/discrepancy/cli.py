@@ -43,25 +43,30 @@ def cmd_run(args) -> int:
     from pathlib import Path
 
     from solver import RunOptions
+    from solver.output import check_writable_dir
 
+    from .checks import check_data_against_model
     from .data import load_measured
     from .forward import SolverForward, fine_forwards
     from .report import ROUGH_NOTE
     from .spec import load_spec
     from .workflow import run_workflow
 
-    try:
+    out = Path(args.out)
+    cache = Path(args.cache) if args.cache else out / "cache"
+    try:  # bad input and unwritable outputs: one line, before any forward run
         data = load_measured(args.measured)
         spec = load_spec(args.model)
+        check_writable_dir(out, "--out")
+        check_writable_dir(cache, "--cache")
+        jobs = args.jobs if args.jobs is not None else spec.wf("n_jobs")
+        fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
+        fine = fine_forwards(spec, cache, jobs)      # one per mesh realization ([discretization] mesh_seeds)
+        check_data_against_model(data, spec, [fwd, *fine])
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
     show_progress(args.quiet)
-    out = Path(args.out)
-    cache = Path(args.cache) if args.cache else out / "cache"
-    jobs = args.jobs if args.jobs is not None else spec.wf("n_jobs")
-    fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
-    fine = fine_forwards(spec, cache, jobs)          # one per mesh realization ([discretization] mesh_seeds)
     rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
                                           f"{rep['strength_interval']}"

@@ -20,6 +20,7 @@ from scipy.optimize import least_squares
 from solver.effects import get_effect
 
 from . import stats
+from .checks import check_data_against_model
 from .data import CURVE_OBSERVABLES, MeasuredData
 from .jitter import estimate_model_jitter
 from .realizations import RealizationCovariance, realization_mean_spread, realizations
@@ -777,6 +778,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     data and widens the measured uncertainties, and the realizations' spread is added in quadrature
     (see add_discretization_error).
     """
+    check_data_against_model(data, spec, [forward, *realizations(fine_forward)])  # before any forward run
     problem = Problem(data, spec, forward)
     fine_forward = realizations(fine_forward) or None
     ledger = _RunLedger(forward, fine_forward or [])
