@@ -109,6 +109,19 @@ def _spec(args, writes: bool = True):
     return spec
 
 
+def _input_warnings(spec) -> list[str]:
+    """Warnings of ``solver.options.check_run_inputs`` over the grid, each once with its number of runs."""
+    from solver import Parameters, RunOptions
+    from solver.options import check_run_inputs
+    from sweep.sampler import grid_points
+
+    counts: dict[str, int] = {}
+    for p in grid_points(spec):
+        for w in check_run_inputs(Parameters.from_dict(p.params), RunOptions.from_dict(p.options)):
+            counts[w] = counts.get(w, 0) + 1
+    return [f"{n} run(s): {w}" for w, n in counts.items()]
+
+
 def _fmt_s(s: float) -> str:
     from sweep.campaign import _hms
 
@@ -130,6 +143,8 @@ def cmd_run(args) -> int:
                   f"wall s per simulated s ({d['source']}) = {_fmt_s(d['wall_s'])} CPU")
         print(f"estimated cost of the runs to do: {_fmt_s(est['cpu_s'])} CPU, about {_fmt_s(est['wall_s'])} "
               f"wall on {jobs} job(s)")
+        for w in _input_warnings(spec):
+            print(f"warning: {w}")
         if any(d["source"] == "default" for d in est["by_mesh_size"].values()):
             print(f"  (no {args.results}/bench/bench.json: default {DEFAULT_WALL_S_PER_SIM_S_H2:g} wall s per "
                   f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")

@@ -215,6 +215,17 @@ def test_campaign_grid_limit_can_be_raised(tmp_path, capsys):
     assert "20 runs in the grid" in capsys.readouterr().out
 
 
+def test_campaign_dry_run_warns_of_an_unresolved_interface(tmp_path, capsys):
+    from sweep.campaign_cli import main
+
+    spec = tmp_path / "c.toml"
+    spec.write_text(_BASE.replace("h = 4.0\n", "") + "[axes]\nh = [2.0, 4.0]\n")
+    assert main(["run", str(spec), "--dry-run", "--results", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    # l_S = 4 mm: resolved at h = 2 mm (l_S = 2 h), not at h = 4 mm
+    assert "warning: 1 run(s): parameter l_S = 4 mm is below 2 h = 8 mm" in out
+
+
 def test_campaign_refuses_an_unwritable_results_folder(tmp_path, capsys):
     from sweep.campaign_cli import main
 
