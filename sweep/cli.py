@@ -103,9 +103,24 @@ def cmd_run(args) -> int:
     return 0 if res.status == "ok" else 1
 
 
+def _writable_or_exit(command: str, path, what: str) -> int | None:
+    """2 (after one line on stderr) if the folder ``path`` cannot be written, else None."""
+    from solver.output import check_writable_dir
+
+    try:
+        check_writable_dir(path, what)
+    except ValueError as exc:
+        print(f"dchfrac {command}: {exc}", file=sys.stderr)
+        return 2
+    return None
+
+
 def cmd_bench(args) -> int:
     from .bench import run_benchmarks
 
+    bad = _writable_or_exit("bench", Path(args.out).parent, "--out folder")
+    if bad:
+        return bad
     run_benchmarks(args.out, quick=args.quick, reference=args.reference)
     return 0
 
@@ -113,6 +128,9 @@ def cmd_bench(args) -> int:
 def cmd_report(args) -> int:
     from .reference import convergence_report, reference_report
 
+    bad = _writable_or_exit("report", args.out, "--out")
+    if bad:
+        return bad
     if args.kind == "reference":
         if len(args.runs) != 1:
             raise SystemExit("dchfrac report reference takes exactly one run folder")

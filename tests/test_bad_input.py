@@ -157,6 +157,19 @@ def test_dchfrac_run_refuses_an_unwritable_out(tmp_path, capsys, no_simulation, 
     _refused(capsys, main(["run", "--out", out, "--quiet"]), f"--out {out!r} cannot be written")
 
 
+@pytest.mark.parametrize("argv,fragment", [
+    (["bench", "--out", "{file}/bench.json"], "dchfrac bench: --out folder"),
+    (["report", "reference", "{tmp}/run", "--out", "{file}/report"], "dchfrac report: --out"),
+    (["report", "convergence", "{tmp}/a", "{tmp}/b", "--out", "{file}"], "exists and is not a folder"),
+])
+def test_bench_and_report_refuse_an_unwritable_out(tmp_path, capsys, argv, fragment):
+    from sweep.cli import main
+
+    (tmp_path / "f").write_text("a file")
+    argv = [a.replace("{file}", str(tmp_path / "f")).replace("{tmp}", str(tmp_path)) for a in argv]
+    _refused(capsys, main(argv), fragment)
+
+
 def test_dchfrac_run_reads_true_and_false_as_toml_does(tmp_path):
     from argparse import Namespace
 
