@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import json
 import math
-from numbers import Integral, Real
 from dataclasses import asdict, dataclass, field, fields, replace
+from numbers import Integral, Real
 
 import numpy as np
 
@@ -135,13 +135,17 @@ _NUMBERS = (
     ("jacobian_reuse", float, 0.0, 1.0, False, False),
     ("max_wall_time", float, 0.0, None, True, True),
 )
+
+
 def _number(name, v, kind, lo, hi, lo_open, optional):
     """The validated value of one numeric option (numpy scalars become Python numbers)."""
     if v is None and optional:
         return None
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, Integral if kind is int else Real):
+    if isinstance(v, np.generic):  # a numpy scalar: its Python value, so serialization is exact
+        v = v.item()
+    if isinstance(v, bool) or not isinstance(v, Integral if kind is int else Real):
         _fail(name, v, "an integer" if kind is int else "a number")
-    if type(v) not in (int, float):  # a numpy scalar: its Python value, so serialization is exact
+    if type(v) not in (int, float):  # another Real (e.g. a Fraction): a plain number
         v = int(v) if kind is int else float(v)
     if not math.isfinite(v):
         _fail(name, v, "a finite number")

@@ -36,7 +36,7 @@ from solver.options import check_run_inputs
     (dict(stop_front_radius=-5.0), "stop_front_radius=-5.0"),
     (dict(h=np.float32(-1.0)), "run option h=-1.0 is out of range: allowed > 0.0"),
     (dict(h=math.inf), "h=inf is out of range: allowed a finite number"),
-    (dict(mesh_seed=np.float64(3.5)), "is out of range: allowed an integer"),
+    (dict(mesh_seed=np.float64(3.5)), "mesh_seed=3.5 is out of range: allowed an integer"),
     (dict(mesh_seed=-1), "mesh_seed=-1 is out of range: allowed >= 0"),
     (dict(mesh_seed=True), "mesh_seed=True"),
     (dict(newton_max_its=2.5), "newton_max_its=2.5 is out of range: allowed an integer"),
