@@ -47,28 +47,27 @@ def failing_runner(params, options, run_dir):
     return toy_runner(params, options, run_dir)
 
 
-def _wait_for_release(gate: Path) -> None:
-    """Block until the test creates ``gate/release`` (a file the test controls, never a clock)."""
-    while not (gate / "release").exists():
+def _block(run_dir) -> None:
+    """Mark the run as started (its pid in ``run_dir/started``), then block until ``run_dir/release`` exists:
+    a file only a test could create (none does), so no clock decides when the run ends."""
+    Path(run_dir, "started").write_text(str(os.getpid()))
+    while not Path(run_dir, "release").exists():
         time.sleep(0.02)
 
 
 def hanging_runner(params, options, run_dir):
-    """Hangs for cement == 3.0 and eta_o == 0.5 after writing its pid: it waits for $GATE_DIR/release,
-    which the test never creates, so only the timeout's kill ends it."""
+    """Hangs for cement == 3.0 and eta_o == 0.5 after writing its pid: only the timeout's kill ends it."""
     Path(run_dir, "pid").write_text(str(os.getpid()))
     if params["cement"] == 3.0 and params["eta_o"] == 0.5:
-        _wait_for_release(Path(os.environ["GATE_DIR"]))
+        _block(run_dir)
     return toy_runner(params, options, run_dir)
 
 
 def gated_runner(params, options, run_dir):
-    """toy_runner at once for cement == 1.0; every other run marks its start in $GATE_DIR and blocks until
-    the test releases it, so the campaign cannot finish before the test's SIGINT, whatever the load."""
+    """toy_runner at once for cement == 1.0; every other run blocks (never released), so the campaign
+    cannot finish before the test's SIGINT, whatever the load."""
     if params["cement"] != 1.0:
-        gate = Path(os.environ["GATE_DIR"])
-        (gate / f"started-{params['cement']}-{params['eta_o']}").write_text(str(os.getpid()))
-        _wait_for_release(gate)
+        _block(run_dir)
     return toy_runner(params, options, run_dir)
 
 
@@ -159,11 +158,10 @@ def test_retries_rerun_a_failed_attempt(tmp_path, monkeypatch):
     assert sorted(int(p.read_text()) for p in tmp_path.glob("c*")) == [2, 2]
 
 
-def test_timeout_kills_the_hung_run_only(tmp_path, monkeypatch):
+def test_timeout_kills_the_hung_run_only(tmp_path):
     # the hung run waits for a release that never comes: the timeout's kill is the only way it ends.  The
     # limit leaves room for a child's start (python + this test module's imports: ~1-2 s on a loaded
     # 2-core machine), so the five other runs finish inside it
-    monkeypatch.setenv("GATE_DIR", str(tmp_path))
     res = run_campaign(_spec(), tmp_path, runner=hanging_runner, jobs=2, timeout=10.0, version=VERSION, progress=None)
     t = res.table
     assert list(t.loc[t["status"] == "failed", "index"]) == [5], list(t["reason"])
@@ -211,19 +209,19 @@ def _wait_until(condition, proc, limit_s: float = 300.0) -> None:
 def test_resume_after_ctrl_c_runs_only_the_rest_and_gives_the_same_table(tmp_path):
     # the 3 runs at cement = 1 finish at once; the 9 others block until the test releases them, so the
     # SIGINT lands mid-campaign whatever the machine's load (no clock decides the outcome)
-    root, gate = tmp_path / "interrupted", tmp_path / "gate"
-    gate.mkdir()
+    root = tmp_path / "interrupted"
     spec = _spec(axes={"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]})
     proc = subprocess.Popen([sys.executable, "-c", _INTERRUPTED.format(here=str(HERE), repo=str(HERE.parent), root=str(root))],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "GATE_DIR": str(gate)})
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     runs = root / "toy" / "runs"
-    _wait_until(lambda: len(list(runs.glob("*/record.json"))) >= 3 and any(gate.glob("started-*")), proc)
+    _wait_until(lambda: len(list(runs.glob("*/record.json"))) >= 3 and any(runs.glob(".tmp-*/started")), proc)
+    started = [int(p.read_text() or 0) for p in runs.glob(".tmp-*/started")]
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode != 0 and b"KeyboardInterrupt" in err
     # the interrupted campaign stops its workers: the blocked runs never finish (nothing releases them)
-    for marker in gate.glob("started-*"):
-        _wait_until(lambda: not _alive(int(marker.read_text() or 0)), proc)
+    for pid in started:
+        _wait_until(lambda: not _alive(pid), proc)
     before = {k: r for k, r in plan_campaign(spec, root, version=VERSION).records.items()}
     k = len(before)
     assert k == 3  # the runs at cement = 1, finished before the interrupt
