@@ -4,6 +4,9 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
+from numbers import Integral, Real
+
+import numpy as np
 
 from .tomlio import read_toml, write_flat_toml
 
@@ -12,6 +15,8 @@ _TRANSPORTS = ("galerkin", "upwind")
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
 _OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format")
+# written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
+DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
 
 
 @dataclass(frozen=True)
@@ -20,7 +25,7 @@ class RunOptions:
 
     Attributes
     ----------
-    h : mesh size, mm (the paper's reference mesh: 1.0).
+    h : mesh size, mm (the paper's reference mesh: 1.0); below (r_outer - r_inner)/2 (:func:`check_run_inputs`).
     h_inner : mesh size on the inner circle, mm, 0 < h_inner <= h: the annulus mesh is graded from
         h_inner at r_inner to h at r_inner + 5 mm (see ``solver.mesh.annulus_mesh``); None (default)
         or h: the quasi-uniform mesh of size h.  Omitted from :meth:`to_dict` when None, so the run
@@ -35,9 +40,11 @@ class RunOptions:
     dt_grow : factor on dt after an easy step (<= ``easy_newton_its`` Newton iterations).
     dt_cut : factor on dt after a rejected step.
     easy_newton_its : Newton iterations per stagger iteration up to which a step counts as easy.
-    stop_front_radius : stop when the S = 0.5 front connected to the inlet reaches this radius, mm (None: never).
-    snapshot_times : times at which fields are written, s (the initial state t = 0 and the last state are
-        always written).
+    stop_front_radius : stop when the S = 0.5 front connected to the inlet reaches this radius, mm (None: never);
+        inside (r_inner, r_outer] (checked with the parameters by :func:`check_run_inputs`).
+    snapshot_times : distinct times in [0, t_end] at which fields are written, s (the initial state t = 0 and
+        the last state are always written); the default (0.5, 1, 1.5, 2) s is accepted with any t_end, its
+        times after t_end skipped.
     frames : also write N evenly spaced snapshots, at k t_end / N for k = 1..N (for animations; None: none).
         Omitted from :meth:`to_dict` when None, as h_inner.
     newton_rtol : relative Newton tolerance on every field's update (dimensionless; 1e-6: with a reused
@@ -72,7 +79,7 @@ class RunOptions:
     dt_cut: float = 0.25
     easy_newton_its: int = 4
     stop_front_radius: float | None = None
-    snapshot_times: tuple = (0.5, 1.0, 1.5, 2.0)
+    snapshot_times: tuple = DEFAULT_SNAPSHOT_TIMES
     newton_rtol: float = 1e-6
     newton_max_its: int = 25
     stagger_tol: float = 1e-4
@@ -87,7 +94,6 @@ class RunOptions:
     xdmf_format: str | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "snapshot_times", tuple(float(t) for t in self.snapshot_times))
         _check(self)
 
     # -- serialization ------------------------------------------------------
@@ -137,64 +143,40 @@ def _fail(name, value, allowed):
     raise ValueError(f"run option {name}={value!r} is out of range: allowed {allowed}")
 
 
-def _check(o: RunOptions) -> None:
-    def num(name, lo=None, hi=None, lo_open=True, integer=False):
-        v = getattr(o, name)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not isinstance(v, int)):
-            _fail(name, v, "an integer" if integer else "a number")
-        if not math.isfinite(v):
-            _fail(name, v, "a finite number")
-        if lo is not None and (v <= lo if lo_open else v < lo):
-            _fail(name, v, f"{'>' if lo_open else '>='} {lo}")
-        if hi is not None and v > hi:
-            _fail(name, v, f"<= {hi}")
-
-    num("h", 0.0, 24.0)
-    for name in ("h_inner", "h_outer"):
-        if getattr(o, name) is not None:
-            num(name)
-            if not 0.0 < getattr(o, name) <= o.h:
-                _fail(name, getattr(o, name), f"(0, h = {o.h}]")
-    num("t_end", 0.0)
-    num("dt0", 0.0)
-    num("dt_min", 0.0)
-    num("dt_max", 0.0)
-    if not (o.dt_min <= o.dt0 <= o.dt_max):
-        _fail("dt0", o.dt0, f"[dt_min={o.dt_min}, dt_max={o.dt_max}]")
-    num("dt_grow", 1.0, lo_open=False)
-    num("dt_cut", 0.0, 1.0)
-    num("easy_newton_its", 1, lo_open=False, integer=True)
-    num("newton_rtol", 0.0, 1e-2)
-    num("newton_max_its", 1, lo_open=False, integer=True)
-    num("stagger_tol", 0.0, 1.0)
-    num("stagger_max_its", 1, lo_open=False, integer=True)
-    num("damage_max_its", 1, lo_open=False, integer=True)
-    num("jacobian_reuse", 0.0, 1.0, lo_open=False)
-    if o.stop_front_radius is not None:
-        num("stop_front_radius", 0.0)
-    if o.max_wall_time is not None:
-        num("max_wall_time", 0.0)
-    if o.mesh_seed is not None and (not isinstance(o.mesh_seed, int) or o.mesh_seed < 0):
-        _fail("mesh_seed", o.mesh_seed, "None or an integer >= 0")
-    for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", _TRANSPORTS)):
-        if getattr(o, name) not in allowed:
-            _fail(name, getattr(o, name), f"one of {allowed}")
-    if o.frames is not None:
-        num("frames", 1, lo_open=False, integer=True)
-    if o.xdmf_format not in (None, "auto", "hdf5", "xml"):
-        _fail("xdmf_format", o.xdmf_format, "None or one of ('auto', 'hdf5', 'xml')")
-    if any((not math.isfinite(t)) or t < 0 for t in o.snapshot_times):
-        _fail("snapshot_times", list(o.snapshot_times), "finite times >= 0")
+# (name, kind, lower, upper, lower bound open, None allowed): every numeric option's range, checked in one loop.
+# kind float accepts any real number (numpy scalars included, stored as a Python float), int any integer.
+_NUMBERS = (
+    ("h", float, 0.0, 24.0, True, False),
+    ("h_inner", float, None, None, True, True),   # in (0, h]: checked after the loop
+    ("h_outer", float, None, None, True, True),   # in (0, h]: checked after the loop
+    ("frames", int, 1, None, False, True),
+    ("mesh_seed", int, 0, None, False, True),
+    ("t_end", float, 0.0, None, True, False),
+    ("dt0", float, 0.0, None, True, False),
+    ("dt_min", float, 0.0, None, True, False),
+    ("dt_max", float, 0.0, None, True, False),
+    ("dt_grow", float, 1.0, None, False, False),
+    ("dt_cut", float, 0.0, 1.0, True, False),
+    ("easy_newton_its", int, 1, None, False, False),
+    ("stop_front_radius", float, 0.0, None, True, True),
+    ("newton_rtol", float, 0.0, 1e-2, True, False),
+    ("newton_max_its", int, 1, None, False, False),
+    ("stagger_tol", float, 0.0, 1.0, True, False),
+    ("stagger_max_its", int, 1, None, False, False),
+    ("damage_max_its", int, 1, None, False, False),
+    ("jacobian_reuse", float, 0.0, 1.0, False, False),
+    ("max_wall_time", float, 0.0, None, True, True),
+)
 
 
 # unit of every run option ("-": dimensionless; "" for counts, switches and labels): the one declaration the
 # campaign column dictionary reads; the meanings are the RunOptions docstring's
 OPTION_UNITS = {
-    "h": "mm", "h_inner": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
+    "h": "mm", "h_inner": "mm", "h_outer": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
     "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "stop_front_radius": "mm", "snapshot_times": "s",
     "newton_rtol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
     "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
-    "xdmf_format": "",
+    "xdmf_format": "", "transport": "",
 }
 
 
@@ -208,3 +190,81 @@ def option_docs() -> dict[str, str]:
         for name in m.group(1).split(","):
             out[name.strip()] = " ".join(m.group(2).split())
     return out
+
+
+def _number(name, v, kind, lo, hi, lo_open, optional):
+    """The validated value of one numeric option (numpy scalars become Python numbers)."""
+    if v is None and optional:
+        return None
+    if isinstance(v, np.generic):  # a numpy scalar: its Python value, so serialization is exact
+        v = v.item()
+    if isinstance(v, bool) or not isinstance(v, Integral if kind is int else Real):
+        _fail(name, v, "an integer" if kind is int else "a number")
+    if type(v) not in (int, float):  # another Real (e.g. a Fraction): a plain number
+        v = int(v) if kind is int else float(v)
+    if not math.isfinite(v):
+        _fail(name, v, "a finite number")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        _fail(name, v, f"{'>' if lo_open else '>='} {lo}")
+    if hi is not None and v > hi:
+        _fail(name, v, f"<= {hi}")
+    return v
+
+
+def _snapshot_times(v, t_end):
+    """snapshot_times as a tuple of distinct floats in [0, t_end]; the default times beyond t_end are skipped."""
+    allowed = f"a list of distinct times in [0, t_end = {t_end}] s"
+    if isinstance(v, (str, bytes)) or not isinstance(v, (list, tuple, np.ndarray)):
+        _fail("snapshot_times", v, allowed)
+    for t in v:
+        if isinstance(t, (bool, np.bool_)) or not isinstance(t, Real) or not math.isfinite(t) or t < 0:
+            _fail("snapshot_times", v, f"{allowed}; {t!r} is not")
+    times = tuple(float(t) for t in v)
+    if times == DEFAULT_SNAPSHOT_TIMES:  # the default, whatever t_end: times past t_end are not written
+        return times
+    late = [t for t in times if t > t_end * (1 + 1e-12)]
+    if late:
+        _fail("snapshot_times", list(times), f"{allowed}; {late[0]!r} s is after t_end")
+    if len(set(times)) != len(times):
+        _fail("snapshot_times", list(times), f"{allowed}; a time is repeated")
+    return times
+
+
+def _check(o: RunOptions) -> None:
+    for name, kind, lo, hi, lo_open, optional in _NUMBERS:
+        object.__setattr__(o, name, _number(name, getattr(o, name), kind, lo, hi, lo_open, optional))
+    for name in ("h_inner", "h_outer"):
+        if getattr(o, name) is not None and not 0.0 < getattr(o, name) <= o.h:
+            _fail(name, getattr(o, name), f"(0, h = {o.h}]")
+    if not (o.dt_min <= o.dt0 <= o.dt_max):
+        _fail("dt0", o.dt0, f"[dt_min={o.dt_min}, dt_max={o.dt_max}]")
+    for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", _TRANSPORTS),
+                          ("xdmf_format", (None, "auto", "hdf5", "xml"))):
+        if getattr(o, name) not in allowed:
+            _fail(name, getattr(o, name), f"one of {allowed}")
+    if not isinstance(o.write_xdmf, (bool, np.bool_)):
+        _fail("write_xdmf", o.write_xdmf, "true or false (a boolean, not a string)")
+    object.__setattr__(o, "write_xdmf", bool(o.write_xdmf))
+    object.__setattr__(o, "snapshot_times", _snapshot_times(o.snapshot_times, o.t_end))
+
+
+def check_run_inputs(params, options: RunOptions) -> list[str]:
+    """Check that ``options`` can run the model ``params`` (a ``solver.Parameters``) on the annulus mesh.
+
+    Raises ValueError naming the option, its value and the allowed range when the mesh size h (mm) does
+    not fit the annulus (h < (r_outer - r_inner)/2, as ``solver.mesh.annulus_mesh`` requires) or when
+    ``stop_front_radius`` (mm) is not inside (r_inner, r_outer].  Returns warnings (text) for inputs that
+    run but cannot give a resolved answer: a saturation interface width l_S below 2 h (mm).
+    """
+    ri, ro = params.r_inner, params.r_outer
+    if not options.h < (ro - ri) / 2:
+        _fail("h", options.h, f"< (r_outer - r_inner)/2 = {(ro - ri) / 2:g} mm (annulus r_inner = {ri:g}, "
+                              f"r_outer = {ro:g} mm)")
+    r = options.stop_front_radius
+    if r is not None and not ri < r <= ro:
+        _fail("stop_front_radius", r, f"None or a radius in (r_inner = {ri:g}, r_outer = {ro:g}] mm")
+    warnings = []
+    if params.l_S < 2 * options.h:
+        warnings.append(f"parameter l_S = {params.l_S:g} mm is below 2 h = {2 * options.h:g} mm: the mesh does "
+                        "not resolve the diffuse saturation interface (results depend on h)")
+    return warnings

@@ -82,6 +82,31 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
         raise
 
 
+def check_writable_dir(path, what: str = "output folder") -> Path:
+    """Check, before any work, that the folder ``path`` can be created (if absent) and written to.
+
+    Nothing is created: a temporary file is made and removed in ``path`` or, when absent, in its nearest
+    existing parent.  Raises ValueError naming ``what``, the path and the reason.  Returns ``Path(path)``.
+    """
+    path = Path(path)
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ValueError(f"{what} {str(path)!r} cannot be written: {str(probe)!r} exists and is not a folder "
+                         "(allowed: a writable folder, or a new one in a writable folder)")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=probe, prefix=".write-check-")
+    except OSError as exc:
+        raise ValueError(f"{what} {str(path)!r} cannot be written ({exc.strerror} in {str(probe)!r}): "
+                         "allowed a writable folder, or a new one in a writable folder") from None
+    os.close(fd)
+    os.unlink(tmp)
+    return path
+
+
 def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode())
 

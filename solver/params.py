@@ -415,6 +415,17 @@ def _coerce_and_check(p: Parameters) -> None:
         _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")
 
 
+def integer_fields() -> tuple[str, ...]:
+    """Names of the integer parameters (declared ``int``, e.g. ``seed``): a table of conditions that stores
+    them as floats (1.0) must give them back as integers."""
+    return tuple(f.name for f in fields(Parameters) if f.type in ("int", int))
+
+
+def text_fields() -> tuple[str, ...]:
+    """Names of the text parameters (declared ``str``, e.g. ``porosity_field``)."""
+    return tuple(f.name for f in fields(Parameters) if f.type in ("str", str))
+
+
 def field_doc(name: str) -> str:
     """Documentation (meaning, units, paper reference) of the parameter ``name``."""
     if name not in _FIELD_DOCS:

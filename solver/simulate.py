@@ -22,7 +22,7 @@ import pandas as pd
 
 from . import damage, fem, linsolve, metrics, physics
 from .model import MU, P, S, UX, UY, build_discretization, element_fields, residual_and_jacobian, step_data
-from .options import RunOptions
+from .options import RunOptions, check_run_inputs
 from .output import RunWriter
 
 # floors of the per-field update scales used by the Newton test (mm, kPa, -, kPa, 1/mm)
@@ -179,6 +179,9 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     phi0 : optional initial porosity per element (default: ``params.porosity_field``).
     progress : report progress (``solver.progress.StepProgress``: a bar with % of t_end and ETA on a
         terminal, periodic INFO lines of the logger ``dchfrac.solver`` otherwise); or a StepProgress.
+
+    Inputs that cannot run on the annulus (``solver.options.check_run_inputs``: h too large for it,
+    stop_front_radius outside it) raise ValueError before the run folder is written.
     """
     from .params import Parameters
 
@@ -187,6 +190,7 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         raise ValueError(f"params must be a solver.Parameters, got {type(params).__name__}")
     if not isinstance(options, RunOptions):
         raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
+    warnings = check_run_inputs(params, options) if mesh is None else []  # before the run folder is written
     t_wall = time.perf_counter()
     if progress is True:
         from .progress import StepProgress
@@ -195,6 +199,8 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     writer = RunWriter(out_dir) if out_dir is not None else None
     if writer:
         writer.start(params, options)
+        for w in warnings:
+            writer.log(f"WARNING: {w}")
     rows, snaps, rejected = [], [], []
     status, reason = "ok", None
     fact0 = linsolve.STATS["factorizations"]

@@ -33,6 +33,12 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", help="campaign spec, a TOML file (see campaigns/)")
     p.add_argument("--results", default="results", metavar="DIR",
                    help="results root (default: results); the campaign lives in DIR/<name>/")
+    p.add_argument("--max-runs", type=int, default=None, metavar="N",
+                   help="allow grids of up to N runs (default: spec [run] max_runs, else 10000)")
+
+
+class UsageError(ValueError):
+    """A bad argument (e.g. an unwritable --results): one line on stderr, exit code 2."""
 
 
 def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
@@ -91,7 +97,7 @@ def _guarded(fn):
 
         try:
             return fn(args)
-        except SpecError as e:
+        except (SpecError, UsageError) as e:
             print(f"error: {e}", file=sys.stderr)
             return 2
         except ValueError as e:
@@ -111,10 +117,31 @@ def _guarded(fn):
     return wrapper
 
 
-def _spec(args):
+def _spec(args, writes: bool = True):
+    """The validated spec of ``args``; with ``writes``, the campaign folder RESULTS/<name> is checked writable."""
+    from solver.output import check_writable_dir
     from sweep.spec import load_spec
 
-    return load_spec(args.spec)
+    spec = load_spec(args.spec, max_runs=getattr(args, "max_runs", None))
+    if writes:
+        try:
+            check_writable_dir(f"{args.results}/{spec.name}", "--results campaign folder")
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+    return spec
+
+
+def _input_warnings(spec) -> list[str]:
+    """Warnings of ``solver.options.check_run_inputs`` over the grid, each once with its number of runs."""
+    from solver import Parameters, RunOptions
+    from solver.options import check_run_inputs
+    from sweep.sampler import grid_points
+
+    counts: dict[str, int] = {}
+    for p in grid_points(spec):
+        for w in check_run_inputs(Parameters.from_dict(p.params), RunOptions.from_dict(p.options)):
+            counts[w] = counts.get(w, 0) + 1
+    return [f"{n} run(s): {w}" for w, n in counts.items()]
 
 
 def _fmt_s(s: float) -> str:
@@ -140,6 +167,8 @@ def cmd_run(args) -> int:
                   f"wall s per simulated s ({d['source']}) = {_fmt_s(d['wall_s'])} CPU")
         print(f"estimated cost of the runs to do: {_fmt_s(est['cpu_s'])} CPU, about {_fmt_s(est['wall_s'])} "
               f"wall on {jobs} job(s)")
+        for w in _input_warnings(spec):
+            print(f"warning: {w}")
         if any(d["source"] == "default" for d in est["by_mesh_size"].values()):
             print(f"  (no {args.results}/bench/bench.json: default {DEFAULT_WALL_S_PER_SIM_S_H2:g} wall s per "
                   f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")
@@ -182,7 +211,7 @@ def _print_provenance(res) -> None:
 def cmd_status(args) -> int:
     from sweep.campaign import code_counts, plan_campaign, sampler_status
 
-    spec = _spec(args)
+    spec = _spec(args, writes=False)
     plan = plan_campaign(spec, args.results)
     print(f"campaign {spec.name}: {len(plan.points)} runs: {len(plan.done)} done, {len(plan.failed)} failed, "
           f"{len(plan.pending)} pending, {len(plan.stale)} made by other code (stale), {len(plan.damaged)} damaged"

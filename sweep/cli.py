@@ -21,6 +21,9 @@ LOG = logging.getLogger("dchfrac")
 
 
 def _parse_value(text: str):
+    """A Python literal (numbers, lists, None, True/False), TOML's true/false, else the text itself."""
+    if text in ("true", "false"):
+        return text == "true"
     try:
         return ast.literal_eval(text)
     except (ValueError, SyntaxError):
@@ -31,40 +34,70 @@ def _split_sets(pairs):
     out = {}
     for item in pairs or []:
         if "=" not in item:
-            raise SystemExit(f"--set expects name=value, got {item!r}")
+            raise ValueError(f"--set {item!r} is not allowed: name=value")
         k, v = item.split("=", 1)
         out[k.strip()] = _parse_value(v.strip())
     return out
 
 
 def _load_config(path):
-    """A TOML file with optional [parameters] and [options] tables (or a flat parameter table)."""
-    from solver.tomlio import read_toml
+    """A TOML file with optional [parameters] and [options] tables (or a flat parameter table).
 
-    data = read_toml(path)
-    if "parameters" in data or "options" in data:
-        return dict(data.get("parameters", {})), dict(data.get("options", {}))
-    return data, {}
+    Raises ValueError naming the file when it is missing, is not TOML, or its tables are not tables."""
+    from solver.tomlio import TOMLDecodeError, read_toml
+
+    if not Path(path).is_file():
+        raise ValueError(f"--config {str(path)!r}: file not found (allowed: a TOML file with [parameters] "
+                         "and [options] tables)")
+    try:
+        data = read_toml(path)
+    except (TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--config {str(path)!r}: not valid TOML ({exc})") from None
+    if "parameters" not in data and "options" not in data:
+        return data, {}
+    tables = data.get("parameters", {}), data.get("options", {})
+    for name, t in zip(("parameters", "options"), tables):
+        if not isinstance(t, dict):
+            raise ValueError(f"--config {str(path)!r}: [{name}] = {t!r} is not allowed: a table")
+    extra = sorted(set(data) - {"parameters", "options"})
+    if extra:
+        raise ValueError(f"--config {str(path)!r}: unknown key(s) {extra} next to [parameters] and [options]")
+    return dict(tables[0]), dict(tables[1])
 
 
-def cmd_run(args) -> int:
-    from solver import Parameters, RunOptions, simulate
-    from solver.options import RunOptions as RO
+def _run_inputs(args):
+    """(Parameters, RunOptions, warnings) of ``dchfrac run``, validated together with the output folder.
+
+    Raises ValueError naming the input, its value and what is allowed."""
+    from solver import Parameters, RunOptions
+    from solver.options import check_run_inputs
+    from solver.output import check_writable_dir
 
     pdict, odict = _load_config(args.config) if args.config else ({}, {})
-    opt_names = {f for f in RO.__dataclass_fields__}
+    opt_names = set(RunOptions.__dataclass_fields__)
     for k, v in _split_sets(args.set).items():
         (odict if k in opt_names else pdict)[k] = v
     if args.h is not None:
         odict["h"] = args.h
     if args.t_end is not None:
         odict["t_end"] = args.t_end
-    try:
-        params = Parameters.from_dict(pdict)
-        options = RunOptions.from_dict(odict)
-    except ValueError as exc:  # bad input: a clear message before any work
+    params = Parameters.from_dict(pdict)
+    options = RunOptions.from_dict(odict)
+    warnings = check_run_inputs(params, options)
+    check_writable_dir(args.out, "--out")
+    return params, options, warnings
+
+
+def cmd_run(args) -> int:
+    from solver import simulate
+
+    try:  # bad input: one clear line before any work
+        params, options, warnings = _run_inputs(args)
+    except ValueError as exc:
         print(f"dchfrac run: {exc}", file=sys.stderr)
         return 2
+    for w in warnings:
+        LOG.warning("dchfrac run: warning: %s", w)
     res = simulate(params, options, out_dir=args.out, progress=not args.quiet and LOG.isEnabledFor(logging.INFO))
     ts = res.timeseries
     last = ts.iloc[-1] if len(ts) else None
@@ -76,9 +109,24 @@ def cmd_run(args) -> int:
     return 0 if res.status == "ok" else 1
 
 
+def _writable_or_exit(command: str, path, what: str) -> int | None:
+    """2 (after one line on stderr) if the folder ``path`` cannot be written, else None."""
+    from solver.output import check_writable_dir
+
+    try:
+        check_writable_dir(path, what)
+    except ValueError as exc:
+        print(f"dchfrac {command}: {exc}", file=sys.stderr)
+        return 2
+    return None
+
+
 def cmd_bench(args) -> int:
     from .bench import run_benchmarks
 
+    bad = _writable_or_exit("bench", Path(args.out).parent, "--out folder")
+    if bad:
+        return bad
     run_benchmarks(args.out, quick=args.quick, reference=args.reference)
     return 0
 
@@ -86,6 +134,9 @@ def cmd_bench(args) -> int:
 def cmd_report(args) -> int:
     from .reference import convergence_report, reference_report
 
+    bad = _writable_or_exit("report", args.out, "--out")
+    if bad:
+        return bad
     if args.kind == "reference":
         if len(args.runs) != 1:
             raise SystemExit("dchfrac report reference takes exactly one run folder")

@@ -84,6 +84,7 @@ def canonical_json(obj) -> str:
 
 
 def _resolve(where: str, params: dict, options: dict, derived: Mapping[str, str]):
+    from solver.options import check_run_inputs
     from sweep.spec import _options_class, _parameters_class
 
     P, O = _parameters_class(), _options_class()
@@ -105,6 +106,7 @@ def _resolve(where: str, params: dict, options: dict, derived: Mapping[str, str]
             raise SpecError(f"{where}: derived values {extra}: {e}") from None
     try:
         opts = O.from_dict(options)
+        check_run_inputs(base, opts)  # the mesh fits the annulus, the stop radius lies inside it
     except (ValueError, TypeError) as e:
         raise SpecError(f"{where}: {e}") from None
     return _jsonable(base.to_dict()), _jsonable(opts.to_dict())

@@ -50,6 +50,7 @@ Format (all tables optional except ``name``)::
     timeout = 3600.0                    # s per run (None: no limit)
     retries = 0
     runner = "module:function"          # default: solver.simulate + classify_run
+    max_runs = 10000                    # largest grid allowed (default DEFAULT_MAX_RUNS)
 """
 from __future__ import annotations
 
@@ -183,12 +184,37 @@ _TOP_KEYS = {
     "blocks", "sampler", "classify", "diagrams", "run",
 }
 _BLOCK_KEYS = {"label", "base", "options", "axes", "mode", "zip"}
-_RUN_KEYS = {"timeout", "retries", "runner", "jobs", "isolate"}
+_RUN_KEYS = {"timeout", "retries", "runner", "jobs", "isolate", "max_runs"}
+# grids above this many runs are refused (quickly, before expansion) unless [run] max_runs or --max-runs allows them
+DEFAULT_MAX_RUNS = 10_000
 _MODES = ("cross", "zip")
 
 
-def _axis_values(where: str, spec) -> tuple:
-    """Expand one axis spec (list or {values|linear|log|range}) into a tuple of values."""
+def _axis_values(where: str, spec, limit: int) -> tuple:
+    """One axis spec (list or {values|linear|log|range}) as a tuple of distinct values (at most ``limit``)."""
+    vals = _expand_axis(where, spec, limit)
+    if len(vals) > limit:
+        _too_many(where, len(vals), limit)
+    keys = [_value_key(v) for v in vals]
+    if len(set(keys)) != len(keys):
+        dup = next(v for v, k in zip(vals, keys) if keys.count(k) > 1)
+        _fail(where, f"value {dup!r} given twice (allowed: distinct values; a repeated value is one run)")
+    return vals
+
+
+def _value_key(v):
+    """Hashable identity of an axis value: numbers by value (1 == 1.0), others by their JSON text."""
+    import json
+
+    return float(v) if _is_number(v) else json.dumps(v, sort_keys=True, default=str)
+
+
+def _too_many(where: str, n: int, limit: int):
+    _fail(where, f"{n} runs exceed the limit max_runs = {limit} (allowed: at most max_runs; raise it with "
+                 f"[run] max_runs = {n} in the spec or --max-runs {n})")
+
+
+def _expand_axis(where: str, spec, limit: int) -> tuple:
     if isinstance(spec, list):
         return tuple(round_sig(v) for v in spec)
     if not isinstance(spec, dict):
@@ -211,6 +237,8 @@ def _axis_values(where: str, spec) -> tuple:
             _fail(f"{where}.{kind}", f"count={n!r} must be an integer >= 0")
         if kind == "log" and (a <= 0 or b <= 0):
             _fail(f"{where}.log", f"start={a!r} and stop={b!r} must be > 0 for a log range")
+        if n > limit:
+            _too_many(f"{where}.{kind}", n, limit)
         if n == 1:
             vals = [float(a)]
         elif kind == "linear":
@@ -223,6 +251,8 @@ def _axis_values(where: str, spec) -> tuple:
         if n == 0 or (b - a) * n < 0:
             _fail(f"{where}.range", f"step={n!r} must be non-zero and point from start={a!r} to stop={b!r}")
         count = int(math.floor((b - a) / n * (1 + 1e-12) + 1e-9)) + 1
+        if count > limit:
+            _too_many(f"{where}.range", count, limit)
         vals = [a + i * n for i in range(count)]
         ints = ints and isinstance(n, int)
     vals = [round_sig(float(v)) for v in vals]
@@ -247,7 +277,7 @@ def _resolve_name(where: str, name: str, pfields, ofields) -> tuple[str, str]:
     _fail(where, f"unknown key {name!r}: not a field of Parameters {sorted(pfields)} nor of RunOptions {sorted(ofields)}")
 
 
-def _parse_axes(where: str, axes_tbl, pfields, ofields) -> list[Axis]:
+def _parse_axes(where: str, axes_tbl, pfields, ofields, limit: int) -> list[Axis]:
     if not isinstance(axes_tbl, dict):
         _fail(where, f"expected a table, got {axes_tbl!r}")
     out: list[Axis] = []
@@ -259,10 +289,10 @@ def _parse_axes(where: str, axes_tbl, pfields, ofields) -> list[Axis]:
             for sub, sspec in spec.items():
                 if sub not in allowed:
                     _fail(f"{where}.{name}.{sub}", f"unknown key {sub!r}: allowed {sorted(allowed)}")
-                out.append(Axis(sub, name, _axis_values(f"{where}.{name}.{sub}", sspec), _axis_scale(sspec)))
+                out.append(Axis(sub, name, _axis_values(f"{where}.{name}.{sub}", sspec, limit), _axis_scale(sspec)))
             continue
         target, fname = _resolve_name(f"{where}.{name}", name, pfields, ofields)
-        out.append(Axis(fname, target, _axis_values(f"{where}.{name}", spec), _axis_scale(spec)))
+        out.append(Axis(fname, target, _axis_values(f"{where}.{name}", spec, limit), _axis_scale(spec)))
     names = [a.name for a in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -270,7 +300,7 @@ def _parse_axes(where: str, axes_tbl, pfields, ofields) -> list[Axis]:
     return out
 
 
-def _parse_block(where: str, tbl: dict, pfields, ofields, label: str) -> Block:
+def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int) -> Block:
     unknown = sorted(set(tbl) - _BLOCK_KEYS - ({"name", "description", "paper", "derived", "blocks", "sampler",
                                                 "classify", "diagrams", "run"} if where == "<top>" else set()))
     if unknown:
@@ -294,7 +324,7 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str) -> Block:
     axes_tbl = dict(tbl.get("axes", {}))
     mode = tbl.get("mode", axes_tbl.pop("mode", "cross"))
     zips = tbl.get("zip", axes_tbl.pop("zip", []))
-    axes = _parse_axes(f"{w}axes", axes_tbl, pfields, ofields)
+    axes = _parse_axes(f"{w}axes", axes_tbl, pfields, ofields, limit)
     if mode not in _MODES:
         _fail(f"{w}mode", f"mode={mode!r} not allowed: one of {_MODES}")
     if not isinstance(zips, list) or not all(isinstance(g, list) and all(isinstance(n, str) for n in g) for g in zips):
@@ -367,25 +397,28 @@ def evaluate_expression(expr: str, env: Mapping[str, float]) -> float:
 # ---------------------------------------------------------------------------
 # parsing
 # ---------------------------------------------------------------------------
-_NAME_RE = re.compile(r"^[A-Za-z0-9_.-]+$")
+_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")  # a plain folder name: not ".", "..", ".hidden"
 
 
-def spec_from_dict(d: Mapping[str, Any], source: str = "<dict>") -> CampaignSpec:
+def spec_from_dict(d: Mapping[str, Any], source: str = "<dict>", max_runs: int | None = None) -> CampaignSpec:
     """Build and validate a :class:`CampaignSpec` from a parsed TOML dict.
 
     Checks: known keys everywhere, axis syntax, zip lengths, non-empty axes, and that every
     grid point builds a valid ``Parameters``/``RunOptions`` (done by ``sweep.sampler``'s
     expansion in :func:`validate_points`). Raises :class:`SpecError` naming the key.
+
+    max_runs : the largest grid allowed (default: ``[run] max_runs``, else DEFAULT_MAX_RUNS); a larger one
+    is refused from the axes' lengths, before any grid point is built.
     """
     try:
-        return _spec_from_dict(d, source)
+        return _spec_from_dict(d, source, max_runs)
     except SpecError as e:
         if str(e).startswith(source):
             raise
         raise SpecError(f"{source}: {e}") from None
 
 
-def _spec_from_dict(d, source) -> CampaignSpec:
+def _spec_from_dict(d, source, max_runs) -> CampaignSpec:
     if not isinstance(d, Mapping):
         _fail("<top>", f"expected a table, got {d!r}")
     unknown = sorted(set(d) - _TOP_KEYS)
@@ -393,10 +426,16 @@ def _spec_from_dict(d, source) -> CampaignSpec:
         _fail(unknown[0], f"unknown key {unknown[0]!r}; allowed: {sorted(_TOP_KEYS)}")
     name = d.get("name")
     if not isinstance(name, str) or not _NAME_RE.match(name):
-        _fail("name", f"name={name!r} must be a non-empty string of letters, digits, '_', '.', '-'")
+        _fail("name", f"name={name!r} must be a plain folder name: letters, digits, '_', '.', '-', "
+                      "starting with a letter, digit or '_'")
     pfields, ofields = parameter_fields(), option_fields()
+    run = d.get("run", {})
+    if not isinstance(run, dict):
+        _fail("run", f"expected a table, got {run!r}")
+    _check_run(run)
+    limit = run.get("max_runs", DEFAULT_MAX_RUNS) if max_runs is None else _check_max_runs("--max-runs", max_runs)
     top = _parse_block("<top>", {k: d[k] for k in ("base", "options", "axes", "mode", "zip") if k in d},
-                       pfields, ofields, label="")
+                       pfields, ofields, label="", limit=limit)
     blocks_raw = d.get("blocks")
     if blocks_raw is None:
         blocks = (top,)
@@ -406,7 +445,7 @@ def _spec_from_dict(d, source) -> CampaignSpec:
         if top.axes:
             _fail("axes", "top-level axes and [[blocks]] cannot be combined: put the axes in the blocks")
         blocks = tuple(_parse_block(f"blocks[{i}]", b if isinstance(b, dict) else _fail(f"blocks[{i}]", "expected a table"),
-                                    pfields, ofields, label=str(i)) for i, b in enumerate(blocks_raw))
+                                    pfields, ofields, label=str(i), limit=limit) for i, b in enumerate(blocks_raw))
         labels = [b.label for b in blocks]
         if len(set(labels)) != len(labels):
             _fail("blocks", f"block labels must be distinct, got {labels}")
@@ -447,10 +486,9 @@ def _spec_from_dict(d, source) -> CampaignSpec:
         _fail("diagrams", f"expected an array of tables, got {diagrams!r}")
     for i, g in enumerate(diagrams):
         _check_diagram(f"diagrams[{i}]", g, pfields, ofields)
-    run = d.get("run", {})
-    if not isinstance(run, dict):
-        _fail("run", f"expected a table, got {run!r}")
-    _check_run(run)
+    size = sum(grid_size(b) for b in blocks)
+    if size > limit:
+        _too_many("axes" if blocks_raw is None else "blocks", size, limit)
     spec = CampaignSpec(
         name=name, description=str(d.get("description", "")), paper=str(d.get("paper", "")),
         params=dict(top.params), options=dict(top.options), derived=dict(derived), blocks=blocks,
@@ -533,10 +571,26 @@ def _check_run(run: dict) -> None:
     rn = run.get("runner")
     if rn is not None and (not isinstance(rn, str) or ":" not in rn):
         _fail("run.runner", f"runner={rn!r} must be 'module:function'")
+    if rn is not None:  # imported now, so that a dry run refuses a runner a real run could not import
+        from sweep.scheduler import resolve_runner
+
+        try:
+            resolve_runner(rn)
+        except ValueError as e:
+            _fail("run.runner", f"{e} (allowed: 'module:function' of an importable module)")
+    if "max_runs" in run:
+        _check_max_runs("run.max_runs", run["max_runs"])
 
 
-def load_spec(path) -> CampaignSpec:
-    """Read and validate a campaign TOML file (see the module docstring for the format)."""
+def _check_max_runs(where: str, n) -> int:
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        _fail(where, f"max_runs={n!r} must be an integer >= 1 (the largest grid allowed)")
+    return n
+
+
+def load_spec(path, max_runs: int | None = None) -> CampaignSpec:
+    """Read and validate a campaign TOML file (see the module docstring for the format);
+    ``max_runs`` overrides the spec's ``[run] max_runs`` (see :func:`spec_from_dict`)."""
     from solver.tomlio import TOMLDecodeError, read_toml
 
     p = Path(path)
@@ -546,7 +600,7 @@ def load_spec(path) -> CampaignSpec:
         d = read_toml(p)
     except TOMLDecodeError as e:
         raise SpecError(f"{p}: invalid TOML: {e}") from None
-    return spec_from_dict(d, source=str(p))
+    return spec_from_dict(d, source=str(p), max_runs=max_runs)
 
 
 def block_groups(block: Block) -> list[tuple[Axis, ...]]:
@@ -562,6 +616,11 @@ def block_groups(block: Block) -> list[tuple[Axis, ...]]:
         groups.append(tuple(by[n] for n in g))
         used.update(g)
     return groups
+
+
+def grid_size(block: Block) -> int:
+    """Number of grid points of a block (before points shared with other blocks are merged)."""
+    return math.prod(len(g[0].values) for g in block_groups(block))
 
 
 def expand_block(block: Block) -> list[dict[tuple[str, str], Any]]:

@@ -48,18 +48,27 @@ def failing_runner(params, options, run_dir):
     return toy_runner(params, options, run_dir)
 
 
+def _block(run_dir) -> None:
+    """Mark the run as started (its pid in ``run_dir/started``), then block until ``run_dir/release`` exists:
+    a file only a test could create (none does), so no clock decides when the run ends."""
+    Path(run_dir, "started").write_text(str(os.getpid()))
+    while not Path(run_dir, "release").exists():
+        time.sleep(0.02)
+
+
 def hanging_runner(params, options, run_dir):
-    """Hangs (60 s) for cement == 3.0 and eta_o == 0.5 after writing its pid."""
+    """Hangs for cement == 3.0 and eta_o == 0.5 after writing its pid: only the timeout's kill ends it."""
     Path(run_dir, "pid").write_text(str(os.getpid()))
     if params["cement"] == 3.0 and params["eta_o"] == 0.5:
-        time.sleep(60)
+        _block(run_dir)
     return toy_runner(params, options, run_dir)
 
 
-def slow_runner(params, options, run_dir):
-    # 1 s a run: the 9 runs left after the parent sees 3 take >= 4 s, so the SIGINT lands mid-campaign even
-    # on a loaded machine (at 0.3 s the campaign could finish first while two solver jobs ran beside the suite)
-    time.sleep(1.0)
+def gated_runner(params, options, run_dir):
+    """toy_runner at once for cement == 1.0; every other run blocks (never released), so the campaign
+    cannot finish before the test's SIGINT, whatever the load."""
+    if params["cement"] != 1.0:
+        _block(run_dir)
     return toy_runner(params, options, run_dir)
 
 
@@ -147,18 +156,16 @@ def test_retries_rerun_a_failed_attempt(tmp_path, monkeypatch):
 
 
 def test_timeout_kills_the_hung_run_only(tmp_path):
-    t0 = time.perf_counter()
-    # the limit leaves room for the child's start (python + this test module's imports: ~1-2 s on a
-    # loaded 2-core machine) and is far below the 60 s a hung run would take
-    res = run_campaign(_spec(), tmp_path, runner=hanging_runner, jobs=2, timeout=6.0, code_hash=VERSION, progress=None)
-    elapsed = time.perf_counter() - t0
+    # the hung run waits for a release that never comes: the timeout's kill is the only way it ends.  The
+    # limit leaves room for a child's start (python + this test module's imports: ~1-2 s on a loaded
+    # 2-core machine), so the five other runs finish inside it
+    res = run_campaign(_spec(), tmp_path, runner=hanging_runner, jobs=2, timeout=10.0, code_hash=VERSION, progress=None)
     t = res.table
     assert list(t.loc[t["status"] == "failed", "index"]) == [5], list(t["reason"])
     assert (res.n_ok, res.n_failed) == (5, 1)
     hung = t[t["status"] == "failed"]
-    assert all(r.startswith("timeout: the run exceeded 6 s") for r in hung["reason"])
-    assert all(6.0 <= w < 12.0 for w in hung["wall_time_s"])
-    assert elapsed < 40.0
+    assert all(r.startswith("timeout: the run exceeded 10 s") for r in hung["reason"])
+    assert all(w >= 10.0 for w in hung["wall_time_s"])
     for key in hung["key"]:
         pid = int((tmp_path / "toy" / "runs" / key / "pid").read_text())
         with pytest.raises(ProcessLookupError):
@@ -168,30 +175,53 @@ def test_timeout_kills_the_hung_run_only(tmp_path):
 _INTERRUPTED = textwrap.dedent("""
     import sys
     sys.path[:0] = [{here!r}, {repo!r}]
-    from test_campaign_run import _spec, slow_runner, VERSION
+    from test_campaign_run import _spec, gated_runner, VERSION
     from sweep.campaign import run_campaign
     spec = _spec(axes={{"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]}})
-    run_campaign(spec, {root!r}, runner=slow_runner, jobs=2, code_hash=VERSION, progress=None)
+    run_campaign(spec, {root!r}, runner=gated_runner, jobs=2, code_hash=VERSION, progress=None)
 """)
 
 
+def _alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _wait_until(condition, proc, limit_s: float = 300.0) -> None:
+    """Poll ``condition`` until it holds; fail (never pass) if ``proc`` exits first (while it should run)
+    or after ``limit_s``."""
+    t0 = time.monotonic()
+    while not condition():
+        assert proc.returncode is not None or proc.poll() is None, \
+            f"the campaign ended early: {proc.communicate()[1].decode()[-2000:]}"
+        assert time.monotonic() - t0 < limit_s, "the campaign did not reach the awaited state"
+        time.sleep(0.05)
+
+
 def test_resume_after_ctrl_c_runs_only_the_rest_and_gives_the_same_table(tmp_path):
+    # the 3 runs at cement = 1 finish at once; the 9 others block until the test releases them, so the
+    # SIGINT lands mid-campaign whatever the machine's load (no clock decides the outcome)
     root = tmp_path / "interrupted"
     spec = _spec(axes={"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]})
     proc = subprocess.Popen([sys.executable, "-c", _INTERRUPTED.format(here=str(HERE), repo=str(HERE.parent), root=str(root))],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     runs = root / "toy" / "runs"
-    deadline = time.time() + 60
-    while time.time() < deadline:
-        if runs.is_dir() and len([p for p in runs.iterdir() if not p.name.startswith(".")]) >= 3:
-            break
-        time.sleep(0.05)
+    _wait_until(lambda: len(list(runs.glob("*/record.json"))) >= 3 and any(runs.glob(".tmp-*/started")), proc)
+    started = [int(p.read_text() or 0) for p in runs.glob(".tmp-*/started")]
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=120)
     assert proc.returncode != 0 and b"KeyboardInterrupt" in err
+    # the interrupted campaign stops its workers: the blocked runs never finish (nothing releases them)
+    for pid in started:
+        _wait_until(lambda: not _alive(pid), proc)
     before = {k: r for k, r in plan_campaign(spec, root, code_hash=VERSION).records.items()}
     k = len(before)
-    assert 3 <= k < 12
+    assert k == 3  # the runs at cement = 1, finished before the interrupt
     assert (root / "toy" / "table.csv").exists()  # written on the way out
     assert len(pd.read_csv(root / "toy" / "table.csv")) == k
     assert not [p for p in runs.iterdir() if p.name.startswith(".")]  # no half-written run left

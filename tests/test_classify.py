@@ -7,7 +7,6 @@ lengths and radii are checked within one element size h (the open region is a un
 whole elements, the raster adds at most 0.4 h).
 """
 import math
-import time
 
 import numpy as np
 import pytest
@@ -337,22 +336,17 @@ def test_bad_input():
         ClassifierOptions(min_fingers=0)
 
 
-def test_timing_h1():
-    """One h = 1 mm snapshot (~10,400 nodes) well under 1 s, raster build included
-    (measured on 2 idle cores: ~0.1 s with a new mesh, ~10 ms with a cached raster)."""
+def test_raster_cache_changes_no_result_h1():
+    """One h = 1 mm snapshot (~10,400 nodes): a new mesh (cold raster cache) and the same mesh again (the
+    cached raster) give the same classification.  Its speed is not asserted here (no timed tests)."""
     p, t = solver_annulus(1.0)
     phi = background_phi(t)
     phi[slot_mask(centroids(p, t), crack_angles(3, 0.0), [9.0, 15.0, 13.0])] = 1.0
     S = front_S(p, fingers_R(30.0, 8.0, 5))
-    classify_fields(p, t, S, phi)  # warm-up: one-time imports (scipy.signal, skimage)
     p2 = p + 1e-9  # new mesh bytes: cold raster cache
-    t0 = time.perf_counter()
-    classify_fields(p2, t, S, phi)
-    cold = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    classify_fields(p2, t, S, phi)
-    warm = time.perf_counter() - t0
-    assert cold < 1.0 and warm < 0.5
+    cold = classification_to_dict(classify_fields(p2, t, S, phi))
+    warm = classification_to_dict(classify_fields(p2, t, S, phi))
+    assert cold == warm and cold["n_cracks"] == 3
 
 
 # --------------------------------------------------------------------------- run folders

@@ -63,7 +63,9 @@ def cmd_run(args) -> int:
     from pathlib import Path
 
     from solver import RunOptions
+    from solver.output import check_writable_dir
 
+    from .checks import check_data_against_model
     from .data import load_measured
     from .forward import SolverForward, fine_forwards
     from .observables import ObservableUnavailable
@@ -71,19 +73,22 @@ def cmd_run(args) -> int:
     from .spec import load_spec
     from .workflow import run_workflow
 
-    try:
+    out = Path(args.out)
+    cache = Path(args.cache) if args.cache else out / "cache"
+    try:  # bad input and unwritable outputs: one line, before any forward run
         data = load_measured(args.measured)
         spec = load_spec(args.model)
+        check_writable_dir(out, "--out")
+        check_writable_dir(cache, "--cache")
+        jobs = args.jobs if args.jobs is not None else spec.fit.n_jobs
+        fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
+        fine = fine_forwards(spec, cache, jobs)      # one per mesh realization ([discretization] mesh_seeds)
+        check_data_against_model(data, spec, [fwd, *fine])
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
     if not getattr(args, "logging_configured", False):  # `dchfrac -v/-q discrepancy ...` set it already
         show_progress(args.quiet)
-    out = Path(args.out)
-    cache = Path(args.cache) if args.cache else out / "cache"
-    jobs = args.jobs if args.jobs is not None else spec.fit.n_jobs
-    fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
-    fine = fine_forwards(spec, cache, jobs)          # one per mesh realization ([discretization] mesh_seeds)
     try:
         rep = run_workflow(data, spec, fwd, out, figures=not args.no_figures, fine_forward=fine)
     except ObservableUnavailable as exc:       # the solver's time series lacks an observable's column

@@ -17,8 +17,9 @@ Format (a folder, units mm, s, kPa)::
                                  and may be 0 for regime)
 
 Every problem (missing file or column, unknown observable or condition, NaN,
-negative or zero uncertainty, a condition without observations, duplicated ids,
-a pressure that looks like Pa instead of kPa)
+negative or zero uncertainty, a length negative by more than 3 uncertainties, a non-integer value of an integer
+parameter such as ``seed``, a condition without observations, duplicated ids, a pressure that looks like Pa
+instead of kPa)
 is a ValueError naming the file, the row (line number in the file, header = line 1)
 and the column.
 """
@@ -31,7 +32,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from solver.params import CHOICE_FIELDS
 
 from .observables import CURVES, LABELS, UNITS
 
@@ -39,6 +39,8 @@ __all__ = ["OBSERVABLES", "CURVE_OBSERVABLES", "UNITS", "MeasuredData", "load_me
 
 CURVE_OBSERVABLES = CURVES                 # from the observable registry (observables.py)
 OBSERVABLES = CURVES + LABELS
+LENGTH_OBSERVABLES = tuple(n for n in CURVES if UNITS[n] == "mm")
+LENGTH_SIGMAS = 3.0  # a measured length below -3 uncertainties cannot be a noisy 0: it is refused
 OBS_COLUMNS = ("condition", "observable", "time", "value", "uncertainty")
 
 
@@ -62,9 +64,18 @@ class MeasuredData:
         return list(self.conditions.index)
 
     def condition_params(self, cid: str) -> dict:
-        """Parameter overrides of condition ``cid`` (NaN cells dropped; integral floats kept as float)."""
-        row = self.conditions.loc[cid]
-        return {k: _py(v) for k, v in row.items() if not (isinstance(v, float) and math.isnan(v))}
+        """Parameter overrides of condition ``cid`` (NaN cells dropped; integer parameters such as ``seed``
+        as int, whatever dtype their column took; other numbers as float)."""
+        from solver.params import integer_fields
+
+        ints = integer_fields()
+        out = {}
+        for k in self.conditions.columns:
+            v = _py(self.conditions.at[cid, k])
+            if isinstance(v, float) and math.isnan(v):
+                continue
+            out[k] = int(v) if k in ints else v
+        return out
 
     def subset(self, ids) -> "MeasuredData":
         """The data restricted to the conditions ``ids``."""
@@ -125,12 +136,21 @@ def _num(path, df, i, col, *, allow_empty=False):
     return v
 
 
+def _integer(path, df, i, col) -> int:
+    """An integer cell (e.g. ``seed``): 3 or 3.0, not 3.5."""
+    v = _num(path, df, i, col)
+    if not v.is_integer():
+        _err(path, i + 2, col, f"{df.at[i, col]!r} is not an integer (allowed: an integer, e.g. 3)")
+    return int(v)
+
+
 def load_measured(folder) -> MeasuredData:
     """Read and validate a measured-data folder (see the module docstring for the format)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f"measured-data folder {folder} does not exist")
     from solver import Parameters
+    from solver.params import integer_fields, text_fields
 
     cpath, opath = folder / "conditions.csv", folder / "observations.csv"
     cdf = _read_csv(cpath)
@@ -158,10 +178,10 @@ def load_measured(folder) -> MeasuredData:
             if s == "":
                 rec[col] = float("nan")
                 continue
-            if col in CHOICE_FIELDS:
+            if col in text_fields():
                 rec[col] = s
-            elif col == "seed":
-                rec[col] = int(_num(cpath, cdf, i, col))
+            elif col in integer_fields():
+                rec[col] = _integer(cpath, cdf, i, col)
             else:
                 rec[col] = _num(cpath, cdf, i, col)
         try:  # parameters must be valid before any work starts
@@ -201,6 +221,9 @@ def load_measured(folder) -> MeasuredData:
             _err(opath, line, "uncertainty", f"negative uncertainty {u}")
         if u == 0:
             _err(opath, line, "uncertainty", "zero uncertainty (a standard deviation > 0 is required)")
+        if obs in LENGTH_OBSERVABLES and v < -LENGTH_SIGMAS * u:
+            _err(opath, line, "value", f"negative {obs} {v} mm (allowed: a length >= 0 mm, within "
+                                       f"{LENGTH_SIGMAS:g} uncertainties)")
         recs.append((cid, obs, t, v, u))
     curves = pd.DataFrame(recs, columns=list(OBS_COLUMNS))
     check_units(opath, odf)

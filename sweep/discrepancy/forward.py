@@ -150,6 +150,13 @@ class SolverForward(ForwardModel):
         self.n_jobs = int(n_jobs)
         self.n_runs = 0
 
+    @property
+    def regime_labels(self) -> tuple:
+        """The regime labels this model gives (sweep.classify.REGIMES): measured labels must be among them."""
+        from sweep.classify import REGIMES
+
+        return REGIMES
+
     def _pdict(self, overrides: dict) -> dict:
         from solver import Parameters
 

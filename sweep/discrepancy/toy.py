@@ -29,6 +29,8 @@ __all__ = ["ToyForward"]
 class ToyForward(ForwardModel):
     """Closed-form stand-in for the solver (see the module docstring); counts evaluations in ``n_runs``."""
 
+    regime_labels = ("fracturing", "porous_invasion")   # the labels predict_one gives
+
     def __init__(self, base: dict | None = None, h: float = 8.0, anomaly: float = 0.0, beta_mesh: float = 0.0):
         self.base = dict(base or {})
         self.h = float(h)

@@ -18,6 +18,7 @@ import numpy as np
 from solver.effects import get_effect
 
 from . import stats
+from .checks import check_data_against_model
 from .data import MeasuredData
 from .evidence import compare_passing, free_columns, gap, localize, refit, screen, wald_bounds
 from .ledger import RunLedger
@@ -308,6 +309,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     the fine mesh and porosity field): the data are corrected by their mean difference to ``forward`` and
     their deviations enter the covariance (noise.add_discretization_error).
     """
+    check_data_against_model(data, spec, [forward, *realizations(fine_forward)])  # before any forward run
     run = prepare(data, spec, forward, fine_forward)
     calibrate(run)
     search(run)
