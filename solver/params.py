@@ -87,7 +87,7 @@ _UNITS = {
     "eta_o": "kPa·s", "eta_w": "kPa·s", "kbar": "mm²", "cement": "%", "w_i": "mm/s", "E": "kPa", "nu": "-",
     "K_s": "kPa", "gamma": "kPa·mm", "l_S": "mm", "l_d": "mm", "mu_i": "kPa", "mu_o": "kPa", "Gc": "kPa·mm",
     "psi_c": "kPa", "beta": "kPa·s", "cell_height": "mm", "r_inner": "mm", "r_outer": "mm", "bead_diameter": "mm",
-    "phi_mean": "-", "phi_range": "-", "seed": "", "porosity_field": "", "mu_outer_bc": "",
+    "phi_mean": "-", "phi_range": "-", "seed": "", "porosity_field": "", "mu_outer_bc": "", "ch_mobility": "", "outer_saturation_bc": "",
     "volumetric_coupling": "-", "korteweg_factor": "-", "outer_compliance": "mm/kPa", "crack_permeability": "-",
 }
 
@@ -111,6 +111,8 @@ _ALLOWED = {
     "seed": "integer >= 0",
     "porosity_field": f"one of {POROSITY_FIELDS}",
     "mu_outer_bc": f"one of {MU_OUTER_BCS}",
+    "ch_mobility": f"one of {CH_MOBILITIES}",
+    "outer_saturation_bc": f"one of {OUTER_SATURATION_BCS}",
 }
 
 @dataclass(frozen=True)
