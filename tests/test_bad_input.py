@@ -316,7 +316,7 @@ def test_discrepancy_valid_input_reaches_the_workflow(tmp_path, no_workflow):
 
 
 @pytest.mark.parametrize("change,fragment", [
-    (dict(obs=_pa(_OBS)), "p_inj value=60000 is implausible in kPa"),
+    (dict(obs=_pa(_OBS)), "a pressure in Pa? The workflow reads kPa"),
     (dict(obs=_ms(_OBS)), "front_radius_mean time=200 s is after the model's t_end = 0.3 s (allowed: times in [0, t_end] s; were they given in ms?)"),
     (dict(obs=_OBS.replace("c1,front_radius_mean,0.2,9.5,0.2", "c1,front_radius_mean,0.2,-9.5,0.2")),
      "negative front_radius_mean -9.5 mm"),
@@ -397,6 +397,6 @@ def test_workflow_runs_on_conditions_with_a_seed_column(tmp_path):
     assert [type(data.condition_params(c)["seed"]) for c in "abc"] == [int, int, int]
     spec = spec_from_dict({"baseline": {"effects_off": ["damage_viscosity"]},
                            "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3}],
-                           "holdout": {"ids": ["c"]}, "workflow": {"max_nfev": 3}})
+                           "holdout": {"ids": ["c"]}, "fit": {"max_nfev": 3}})
     rep = run_workflow(data, spec, ToyForward(), figures=False)
     assert rep["verdict"] in ("no_missing_effect", "named", "tie", "unexplained_discrepancy")
