@@ -33,6 +33,7 @@ _REAL_RATE = {"w_i": round(EXPERIMENT_W_I, 3)}
 _OIL = {"ch_mobility": "oil"}
 _DEFENDING = {"outer_saturation_bc": "defending_outflow", "mu_outer_bc": "zero_flux"}
 _UPWIND = {"transport": "upwind"}
+_GRADED = {"h_outer": 0.25}  # mm: the boundary layer at the drained outer wall resolved
 
 #: Hypotheses of the study: parameter changes from the paper's model (Sec. 3.5 defaults) and run-option
 #: changes (discretization), each ``name: (params, options)``.
@@ -48,6 +49,9 @@ VARIANTS: dict[str, tuple[dict, dict]] = {
     "ac_oil_upwind": (_OIL, _UPWIND),
     "dc_defending_upwind": (_DEFENDING, _UPWIND),
     "adc_oil_defending_upwind": ({**_OIL, **_DEFENDING}, _UPWIND),
+    "f_graded": ({}, _GRADED),
+    "fg_real_rate_graded": (_REAL_RATE, _GRADED),
+    "fd_mu_zero_flux_graded": ({"mu_outer_bc": "zero_flux"}, _GRADED),
     "g_real_rate": (_REAL_RATE, {}),
     "g_real_rate_mu_zero_flux": ({**_REAL_RATE, "mu_outer_bc": "zero_flux"}, {}),
     "g_real_rate_defending_upwind": ({**_REAL_RATE, **_DEFENDING}, _UPWIND),
