@@ -36,6 +36,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .profiling import phase
+
 STATS = {"factorizations": 0}
 
 
@@ -98,6 +100,10 @@ class _SuperLU:
         self.safe = False
 
     def solve(self, b):
+        with phase("solve"):
+            return self._solve(b)
+
+    def _solve(self, b):
         b = np.asarray(b, float)
         x = self.lu.solve(self.dr * b)
         nb = np.linalg.norm(b)
@@ -105,7 +111,8 @@ class _SuperLU:
         if not self.safe and rel > 1e-8:
             STATS["factorizations"] += 1
             STATS["pivoting_fallbacks"] = STATS.get("pivoting_fallbacks", 0) + 1
-            self.lu = spla.splu(self.As, permc_spec="COLAMD", diag_pivot_thresh=1.0)
+            with phase("numeric_factorization"):
+                self.lu = spla.splu(self.As, permc_spec="COLAMD", diag_pivot_thresh=1.0)
             self.safe = True
             x = self.lu.solve(self.dr * b)
         return x
@@ -151,17 +158,26 @@ class _Pardiso:
         pat = _PARDISO["pattern"]
         same = pat is not None and pat[0].shape == A.indptr.shape and pat[1].shape == A.indices.shape \
             and np.array_equal(pat[0], A.indptr) and np.array_equal(pat[1], A.indices)
-        s.set_phase(22 if same else 12)  # reuse the symbolic analysis of an identical pattern
-        s._call_pardiso(A, np.zeros((A.shape[0], 1)))
-        if not same:
+        rhs = np.zeros((A.shape[0], 1))
+        if not same:  # the symbolic analysis (phase 11) is done once per pattern and reused after
+            with phase("symbolic_factorization"):
+                s.set_phase(11)
+                s._call_pardiso(A, rhs)
             _PARDISO["pattern"] = (A.indptr.copy(), A.indices.copy())
+        s.set_phase(22)
+        s._call_pardiso(A, rhs)
         _PARDISO["owner"] = self
 
     def solve(self, b):
+        with phase("solve"):
+            return self._solve(b)
+
+    def _solve(self, b):
         s = _pardiso_solver()
         if _PARDISO["owner"] is not self:  # another matrix was factorized since: factorize this one again
             STATS["factorizations"] += 1
-            self._factorize()
+            with phase("numeric_factorization"):
+                self._factorize()
         b = np.asarray(b, float)
         x = self._substitute(s, b)
         nb = max(np.linalg.norm(b), 1e-300)
@@ -186,4 +202,7 @@ def factorize(A: sp.spmatrix, kind: str = "auto"):
     """Factorize ``A`` with the chosen backend; returns an object with ``solve(b)``."""
     kind = resolve(kind, A.shape[0])
     STATS["factorizations"] += 1
-    return _Pardiso(A) if kind == "pypardiso" else _SuperLU(A)
+    # charged to the active profile (solver.profiling) as numeric factorization, except PARDISO's symbolic
+    # analysis of a new pattern; SuperLU orders and factorizes in one call, all charged as numeric
+    with phase("numeric_factorization"):
+        return _Pardiso(A) if kind == "pypardiso" else _SuperLU(A)
