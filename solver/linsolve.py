@@ -160,12 +160,11 @@ class _Pardiso:
             and np.array_equal(pat[0], A.indptr) and np.array_equal(pat[1], A.indices)
         rhs = np.zeros((A.shape[0], 1))
         if not same:  # the symbolic analysis (phase 11) is done once per pattern and reused after
-            with phase("symbolic_factorization"):
-                s.set_phase(11)
-                s._call_pardiso(A, rhs)
             _PARDISO["pattern"] = (A.indptr.copy(), A.indices.copy())
-        s.set_phase(22)
-        s._call_pardiso(A, rhs)
+            _PARDISO["one_based"] = ((A.indptr + 1).astype(np.int32), (A.indices + 1).astype(np.int32))
+            with phase("symbolic_factorization"):
+                _call(s, A, 11, rhs)
+        _call(s, A, 22, rhs)
         _PARDISO["owner"] = self
 
     def solve(self, b):
@@ -191,11 +190,34 @@ class _Pardiso:
 
     def _substitute(self, s, b: np.ndarray) -> np.ndarray:
         """Forward and back substitution with the current factors (PARDISO phase 33)."""
-        s.set_phase(33)
         # No internal iterative refinement (PARDISO overwrites iparm(8) with the number of steps it made, so
         # it is reset before every call): solve() checks the residual and refines only when needed.
         s.set_iparm(8, 0)
-        return s._call_pardiso(self.A, np.asfortranarray(b)).reshape(b.shape)
+        return _call(s, self.A, 33, np.asfortranarray(b)).reshape(b.shape)
+
+
+def _call(s, A, phase_id: int, b: np.ndarray) -> np.ndarray:
+    """One PARDISO call (``phase_id`` 11 analysis, 22 numeric factorization, 33 substitution) on the matrix
+    of the current pattern, with its 1-based int32 index arrays made once per pattern: pypardiso's own
+    ``_call_pardiso`` converts them on every call (20 ms per call at h = 1 mm, half a substitution)."""
+    import ctypes
+
+    ia, ja = _PARDISO["one_based"]
+    x = np.zeros_like(b)
+    err = ctypes.c_int32(0)
+    i32, f64 = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
+    s._mkl_pardiso(s.pt.ctypes.data_as(ctypes.POINTER(s._pt_type[0])), ctypes.byref(ctypes.c_int32(1)),
+                   ctypes.byref(ctypes.c_int32(1)), ctypes.byref(ctypes.c_int32(s.mtype)),
+                   ctypes.byref(ctypes.c_int32(phase_id)), ctypes.byref(ctypes.c_int32(A.shape[0])),
+                   A.data.ctypes.data_as(f64), ia.ctypes.data_as(i32), ja.ctypes.data_as(i32),
+                   s.perm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(1 if b.ndim == 1 else b.shape[1])),
+                   s.iparm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(s.msglvl)),
+                   b.ctypes.data_as(f64), x.ctypes.data_as(f64), ctypes.byref(err))
+    if err.value != 0:
+        from pypardiso.pardiso_wrapper import PyPardisoError
+
+        raise PyPardisoError(err.value)
+    return np.ascontiguousarray(x)
 
 
 def factorize(A: sp.spmatrix, kind: str = "auto"):
