@@ -151,6 +151,35 @@ def profiled_run(h: float, t_end: float = 2.0) -> dict:
             "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None, "profile": res.profile}
 
 
+_OVERHEAD_CHILD = """
+import json, sys, tempfile, time
+t0 = time.perf_counter()
+from sweep.scheduler import DefaultRunner
+from solver import Parameters, RunOptions
+with tempfile.TemporaryDirectory() as d:
+    opts = RunOptions(h=float(sys.argv[1]), t_end=1e-3, dt0=1e-3, snapshot_times=[]).to_dict()
+    out = DefaultRunner()(Parameters().to_dict(), opts, d)
+print(json.dumps({"child_s": time.perf_counter() - t0, "solver_s": out["metrics"]["solver_wall_time_s"]}))
+"""
+
+
+def per_run_overhead(h: float = 2.0) -> dict:
+    """Fixed wall seconds of one campaign run besides its time loop (the dry-run estimate's per-run term,
+    ``sweep.campaign.per_run_overhead``): a fresh process runs one 1 ms step at mesh size h (mm) through
+    the campaign runner (imports, mesh and set-up, first factorization, classification, run folder);
+    everything counts but the step's share of a long run's time loop, which the per-simulated-second
+    figure already holds, so the overhead is the whole child's wall time."""
+    import subprocess
+    import sys
+
+    t0 = time.perf_counter()
+    cp = subprocess.run([sys.executable, "-c", _OVERHEAD_CHILD, str(h)], capture_output=True, text=True, check=True,
+                        cwd=Path(__file__).resolve().parent.parent)
+    wall = time.perf_counter() - t0
+    child = json.loads(cp.stdout.strip().splitlines()[-1])
+    return {"h_mm": h, "per_run_overhead_s": wall, "child_inner_s": child["child_s"], "solver_wall_s": child["solver_s"]}
+
+
 def _kernels() -> str:
     from solver import kernels
 
@@ -208,6 +237,9 @@ def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> di
     if reference:
         print("bench: reference run h = 1 mm to 2 s ...", flush=True)
         result["reference_run_h1"] = _coupled_run(1.0, 2.0)
+    print("bench: per-run overhead of a campaign run (h = 2 mm, one step, fresh process) ...", flush=True)
+    result["per_run_overhead"] = per_run_overhead(2.0)
+    result["per_run_overhead_s"] = result["per_run_overhead"]["per_run_overhead_s"]
     _write_json(out_path, result)
     print(json.dumps(result, indent=2))
     return result
