@@ -148,7 +148,10 @@ def profiled_run(h: float, t_end: float = 2.0) -> dict:
     return {"h_mm": h, "t_end_s": t_end, "assembly_threads": threads, "kernels": _kernels(), "status": res.status,
             "wall_s": res.wall_time, "accepted_steps": n, "rejected_steps": len(res.rejected_steps),
             "factorizations": res.factorizations,
-            "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None, "profile": res.profile}
+            "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None, "profile": res.profile,
+            # the injection-pressure curve, to check that a faster solver gives the same physics
+            "p_inj_curve": {"t_s": res.timeseries["t"].tolist() if n else [],
+                            "p_inj_kPa": res.timeseries["p_inj"].tolist() if n else []}}
 
 
 _OVERHEAD_CHILD = """
