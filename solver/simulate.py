@@ -186,7 +186,9 @@ class Simulation:
                 res = damage.solve(d_k, d_n, psi, self.params, dt, self.dmg, max_its=self.options.damage_max_its)
             if not res.converged:
                 raise StepFailure(f"damage active-set did not converge (KKT residual {res.kkt_residual:.2e})")
-            change = float(np.max(np.abs(res.d - d_k)))
+            # the first iteration's change is measured from d_n, not from the predicted start: a good
+            # prediction must not end the stagger before one damage solve has been checked by a second
+            change = float(np.max(np.abs(res.d - (d_n if s == 1 else d_k))))
             d_k = res.d
             if change < self.options.stagger_tol:
                 with phase("stagger"):
