@@ -152,9 +152,8 @@ class Simulation:
         only, d clipped to [d_n, 1].
 
         A start only: Newton converges to the same tolerance and the stagger stops on the same test
-        max |Δd| < ``stagger_tol``, so the accepted state meets the same equations; a good start saves
-        Newton iterations and, when the extrapolated damage is already within ``stagger_tol``, a whole
-        stagger iteration.
+        max |Δd| < ``stagger_tol`` (its first iteration measured from d_n), so the accepted state meets
+        the same equations; a closer start saves Newton iterations in every stagger iteration.
         """
         if self.previous is None:
             return self.U, self.d.copy()
