@@ -68,6 +68,21 @@ def kkt_residual(d, R, lb, ub, c) -> float:
     return float(np.max(np.abs(d - np.clip(d - c * R, lb, ub)))) if len(d) else 0.0
 
 
+def _symmetric_solve(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
+    """Solve A x = b for the symmetric damage block A (a principal submatrix of K-scaled stiffness plus a diagonal).
+
+    SuperLU in symmetric mode (minimum degree on Aᵀ+A, diagonal pivots): A is symmetric and, wherever
+    β/Δt + g''(d) ψ_A > 0, positive definite, so diagonal pivoting is stable and about 4x cheaper than
+    partial pivoting with the unsymmetric ordering.  A solve whose relative residual exceeds 1e-10 is
+    repeated with partial pivoting (COLAMD, threshold 1).
+    """
+    x = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True)).solve(b)
+    nb = max(np.linalg.norm(b), 1e-300)
+    if not np.all(np.isfinite(x)) or np.linalg.norm(A @ x - b) > 1e-10 * nb:
+        x = spla.splu(A, permc_spec="COLAMD", diag_pivot_thresh=1.0).solve(b)
+    return x
+
+
 def solve(d_start, d_n, psi_a, params, dt: float, ops: DamageOperators, tol: float = 1e-10, max_its: int = 50) -> DamageResult:
     """Solve the damage variational inequality d_n <= d <= 1 (all nodal, dimensionless).
 
@@ -98,9 +113,8 @@ def solve(d_start, d_n, psi_a, params, dt: float, ops: DamageOperators, tol: flo
         delta[up] = ub[up] - d[up]
         if inactive.any():
             I = np.flatnonzero(inactive)
-            rhs = -R[I] - J[I][:, ~inactive] @ delta[~inactive]
-            JII = J[I][:, I].tocsc()
-            delta[I] = spla.splu(JII, permc_spec="MMD_AT_PLUS_A").solve(rhs)
+            rhs = -R[I] - (J @ delta)[I]  # delta is zero on the inactive nodes
+            delta[I] = _symmetric_solve(J[I][:, I].tocsc(), rhs)
         d = d + delta
         if err < tol and np.max(np.abs(delta)) < tol:
             R = residual(d, d_n, psi_a, params, dt, ops)

@@ -36,6 +36,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .profiling import phase
+
 STATS = {"factorizations": 0}
 
 
@@ -98,6 +100,10 @@ class _SuperLU:
         self.safe = False
 
     def solve(self, b):
+        with phase("solve"):
+            return self._solve(b)
+
+    def _solve(self, b):
         b = np.asarray(b, float)
         x = self.lu.solve(self.dr * b)
         nb = np.linalg.norm(b)
@@ -105,7 +111,8 @@ class _SuperLU:
         if not self.safe and rel > 1e-8:
             STATS["factorizations"] += 1
             STATS["pivoting_fallbacks"] = STATS.get("pivoting_fallbacks", 0) + 1
-            self.lu = spla.splu(self.As, permc_spec="COLAMD", diag_pivot_thresh=1.0)
+            with phase("numeric_factorization"):
+                self.lu = spla.splu(self.As, permc_spec="COLAMD", diag_pivot_thresh=1.0)
             self.safe = True
             x = self.lu.solve(self.dr * b)
         return x
@@ -151,17 +158,25 @@ class _Pardiso:
         pat = _PARDISO["pattern"]
         same = pat is not None and pat[0].shape == A.indptr.shape and pat[1].shape == A.indices.shape \
             and np.array_equal(pat[0], A.indptr) and np.array_equal(pat[1], A.indices)
-        s.set_phase(22 if same else 12)  # reuse the symbolic analysis of an identical pattern
-        s._call_pardiso(A, np.zeros((A.shape[0], 1)))
-        if not same:
+        rhs = np.zeros((A.shape[0], 1))
+        if not same:  # the symbolic analysis (phase 11) is done once per pattern and reused after
             _PARDISO["pattern"] = (A.indptr.copy(), A.indices.copy())
+            _PARDISO["one_based"] = ((A.indptr + 1).astype(np.int32), (A.indices + 1).astype(np.int32))
+            with phase("symbolic_factorization"):
+                _call(s, A, 11, rhs)
+        _call(s, A, 22, rhs)
         _PARDISO["owner"] = self
 
     def solve(self, b):
+        with phase("solve"):
+            return self._solve(b)
+
+    def _solve(self, b):
         s = _pardiso_solver()
         if _PARDISO["owner"] is not self:  # another matrix was factorized since: factorize this one again
             STATS["factorizations"] += 1
-            self._factorize()
+            with phase("numeric_factorization"):
+                self._factorize()
         b = np.asarray(b, float)
         x = self._substitute(s, b)
         nb = max(np.linalg.norm(b), 1e-300)
@@ -175,15 +190,41 @@ class _Pardiso:
 
     def _substitute(self, s, b: np.ndarray) -> np.ndarray:
         """Forward and back substitution with the current factors (PARDISO phase 33)."""
-        s.set_phase(33)
         # No internal iterative refinement (PARDISO overwrites iparm(8) with the number of steps it made, so
         # it is reset before every call): solve() checks the residual and refines only when needed.
         s.set_iparm(8, 0)
-        return s._call_pardiso(self.A, np.asfortranarray(b)).reshape(b.shape)
+        return _call(s, self.A, 33, np.asfortranarray(b)).reshape(b.shape)
+
+
+def _call(s, A, phase_id: int, b: np.ndarray) -> np.ndarray:
+    """One PARDISO call (``phase_id`` 11 analysis, 22 numeric factorization, 33 substitution) on the matrix
+    of the current pattern, with its 1-based int32 index arrays made once per pattern: pypardiso's own
+    ``_call_pardiso`` converts them on every call (20 ms per call at h = 1 mm, half a substitution)."""
+    import ctypes
+
+    ia, ja = _PARDISO["one_based"]
+    x = np.zeros_like(b)
+    err = ctypes.c_int32(0)
+    i32, f64 = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
+    s._mkl_pardiso(s.pt.ctypes.data_as(ctypes.POINTER(s._pt_type[0])), ctypes.byref(ctypes.c_int32(1)),
+                   ctypes.byref(ctypes.c_int32(1)), ctypes.byref(ctypes.c_int32(s.mtype)),
+                   ctypes.byref(ctypes.c_int32(phase_id)), ctypes.byref(ctypes.c_int32(A.shape[0])),
+                   A.data.ctypes.data_as(f64), ia.ctypes.data_as(i32), ja.ctypes.data_as(i32),
+                   s.perm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(1 if b.ndim == 1 else b.shape[1])),
+                   s.iparm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(s.msglvl)),
+                   b.ctypes.data_as(f64), x.ctypes.data_as(f64), ctypes.byref(err))
+    if err.value != 0:
+        from pypardiso.pardiso_wrapper import PyPardisoError
+
+        raise PyPardisoError(err.value)
+    return np.ascontiguousarray(x)
 
 
 def factorize(A: sp.spmatrix, kind: str = "auto"):
     """Factorize ``A`` with the chosen backend; returns an object with ``solve(b)``."""
     kind = resolve(kind, A.shape[0])
     STATS["factorizations"] += 1
-    return _Pardiso(A) if kind == "pypardiso" else _SuperLU(A)
+    # charged to the active profile (solver.profiling) as numeric factorization, except PARDISO's symbolic
+    # analysis of a new pattern; SuperLU orders and factorizes in one call, all charged as numeric
+    with phase("numeric_factorization"):
+        return _Pardiso(A) if kind == "pypardiso" else _SuperLU(A)

@@ -20,13 +20,18 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import damage, fem, linsolve, metrics, physics
+from . import damage, fem, linsolve, metrics, physics, profiling
 from .model import MU, P, S, UX, UY, build_discretization, element_fields, residual_and_jacobian, step_data
 from .options import RunOptions, check_run_inputs
 from .output import RunWriter
+from .profiling import phase
 
 # floors of the per-field update scales used by the Newton test (mm, kPa, -, kPa, 1/mm)
 _FLOORS = np.array([1e-2, 1e-2, 1.0, 1.0, 1e-2, 0.1, 0.1])
+# fields the step predictor extrapolates (the others start from the last state): displacement and pressure
+# evolve smoothly; S, μ and G carry the moving diffuse interface, where an extrapolated start overshoots
+# [0, 1] and Newton on the double well diverges more often
+_PREDICTED_FIELDS = [UX, UY, P]
 
 
 class StepFailure(Exception):
@@ -47,6 +52,7 @@ class SimulationResult:
     out_dir: str | None = None
     rejected_steps: list = field(default_factory=list)
     factorizations: int = 0
+    profile: dict | None = None  # wall seconds by phase and part of the run (solver.profiling.Profile.to_dict)
 
 
 class Simulation:
@@ -65,6 +71,7 @@ class Simulation:
         self.t = 0.0
         self.floors = _FLOORS[:nf]
         self.lu, self.lu_dt = None, None  # factorized Jacobian kept for reuse
+        self.previous = None  # (U, d, dt) of the step before the last accepted one, for the predictor
         self.fact0 = linsolve.STATS["factorizations"]  # counter at the start of this run
 
     # ------------------------------------------------------------ poromechanics
@@ -89,16 +96,17 @@ class Simulation:
         x_back = None  # state before an update made with a reused Jacobian (rolled back if it diverged)
         for it in range(1, o.newton_max_its + 1):
             need_j = self.lu is None or not reuse
-            with np.errstate(all="ignore"):  # a diverging trial iterate is detected below and handled
+            with phase("assembly"), np.errstate(all="ignore"):  # a diverging trial iterate is handled below
                 R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data, need_jacobian=need_j)
-            disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
+                disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
+                if need_j:
+                    disc.dirichlet.apply_matrix(J)
             if not np.all(np.isfinite(R)):
                 if x_back is None:
                     raise StepFailure("non-finite residual")
                 x, x_back, self.lu, prev = x_back, None, None, None  # stale Jacobian diverged: back off, refresh
                 continue
             if need_j:
-                disc.dirichlet.apply_matrix(J)
                 self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind), data.dt, True
             dx = self.lu.solve(-R)
             if not np.all(np.isfinite(dx)):
@@ -137,25 +145,53 @@ class Simulation:
         return fem.nodal_average(psi, tri, self.disc.geom.areas, self.disc.n_nodes)
 
     # ------------------------------------------------------------ one step
+    def predict(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Start of the stagger iterations of a step of size dt (s): the states (U, d) extrapolated linearly
+        from the last two accepted steps (the state itself on the first step), U in ``_PREDICTED_FIELDS``
+        only, d clipped to [d_n, 1].
+
+        A start only: Newton converges to the same tolerance and the stagger stops on the same test
+        max |Δd| < ``stagger_tol`` (its first iteration measured from d_n), so the accepted state meets
+        the same equations; a closer start saves Newton iterations in every stagger iteration.
+        """
+        if self.previous is None:
+            return self.U, self.d.copy()
+        U_prev, d_prev, dt_prev = self.previous
+        a = dt / dt_prev
+        U = self.U.copy()
+        f = _PREDICTED_FIELDS
+        U[:, f] += a * (self.U[:, f] - U_prev[:, f])
+        return U, np.clip(self.d + a * (self.d - d_prev), self.d, 1.0)
+
+    def commit(self, U: np.ndarray, d: np.ndarray, dt: float) -> None:
+        """Accept the step of size dt (s) that ends at (U, d)."""
+        self.previous = (self.U, self.d, dt)
+        self.U, self.d, self.t = U, d, self.t + dt
+
     def step(self, dt: float):
         """Advance by dt; returns (U, d, info) without committing. Raises StepFailure."""
         d_n = self.d
-        d_k = d_n.copy()
-        U = self.U
+        U, d_k = self.predict(dt)
         newton_total = 0
         for s in range(1, self.options.stagger_max_its + 1):
-            data = step_data(self.disc, self.params, self.U, d_k, dt)
+            with phase("stagger"):
+                data = step_data(self.disc, self.params, self.U, d_k, dt)
             U, its = self.newton(U, d_k, data)
             newton_total += its
-            psi = self.active_energy(U)
-            res = damage.solve(d_k, d_n, psi, self.params, dt, self.dmg, max_its=self.options.damage_max_its)
+            with phase("stagger"):
+                psi = self.active_energy(U)
+            with phase("damage"):
+                res = damage.solve(d_k, d_n, psi, self.params, dt, self.dmg, max_its=self.options.damage_max_its)
             if not res.converged:
                 raise StepFailure(f"damage active-set did not converge (KKT residual {res.kkt_residual:.2e})")
-            change = float(np.max(np.abs(res.d - d_k)))
+            # the first iteration's change is measured from d_n, not from the predicted start: a good
+            # prediction must not end the stagger before one damage solve has been checked by a second
+            change = float(np.max(np.abs(res.d - (d_n if s == 1 else d_k))))
             d_k = res.d
             if change < self.options.stagger_tol:
-                return U, d_k, {"newton_its": newton_total, "stagger_its": s, "damage_kkt": res.kkt_residual,
-                                "data": step_data(self.disc, self.params, self.U, d_k, dt)}
+                with phase("stagger"):
+                    data = step_data(self.disc, self.params, self.U, d_k, dt)
+                return U, d_k, {"newton_its": newton_total, "stagger_its": s, "damage_kkt": res.kkt_residual, "data": data}
         raise StepFailure(f"stagger did not converge in {self.options.stagger_max_its} iterations (last max |Δd| {change:.2e})")
 
 
@@ -196,60 +232,84 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         from .progress import StepProgress
 
         progress = StepProgress(options.t_end)
-    writer = RunWriter(out_dir) if out_dir is not None else None
-    if writer:
-        writer.start(params, options)
-        for w in warnings:
-            writer.log(f"WARNING: {w}")
+    prof = profiling.Profile()
+    with profiling.activate(prof):
+        status, reason, rows, snaps, rejected, nfact = _run(params, options, out_dir, mesh, phi0, progress, t_wall,
+                                                            warnings)
+    ts = pd.DataFrame(rows)
+    wall = time.perf_counter() - t_wall
+    return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact,
+                            profile=prof.to_dict())
+
+
+def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=()):
+    """Set up, run the time loop and write the run folder; returns (status, reason, rows, snapshots,
+    rejected steps, factorizations)."""
     rows, snaps, rejected = [], [], []
     status, reason = "ok", None
     fact0 = linsolve.STATS["factorizations"]
-    try:
-        if mesh is None:
-            from .mesh import annulus_mesh
-
-            mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed, h_inner=options.h_inner,
-                                h_outer=options.h_outer)
-        _validate_mesh(mesh)
-        if phi0 is None:
-            from .porosity import initial_porosity
-
-            phi0 = initial_porosity(mesh, params)
-        sim = Simulation(params, options, mesh, phi0)
+    with phase("output"):
+        writer = RunWriter(out_dir) if out_dir is not None else None
         if writer:
-            writer.write_mesh(sim.disc.points, sim.disc.triangles)
+            writer.start(params, options)
+            for w in warnings:
+                writer.log(f"WARNING: {w}")
+    try:
+        with phase("setup"):
+            sim = _setup(params, options, mesh, phi0)
+        if writer:
+            with phase("output"):
+                writer.write_mesh(sim.disc.points, sim.disc.triangles)
         status, reason = _time_loop(sim, options, rows, snaps, rejected, writer, progress, t_wall)
     except Exception as exc:  # never a traceback as the only trace
         status, reason = "failed", f"{type(exc).__name__}: {exc}"
         if writer:
             writer.log(traceback.format_exc())
-    ts = pd.DataFrame(rows)
-    wall = time.perf_counter() - t_wall
     nfact = linsolve.STATS["factorizations"] - fact0
     if writer:
-        writer.finish(ts, status, reason, wall, rows[-1]["t"] if rows else 0.0, rejected, nfact, xdmf=options.write_xdmf)
+        with phase("output"):
+            writer.finish(pd.DataFrame(rows), status, reason, time.perf_counter() - t_wall, rows[-1]["t"] if rows else 0.0,
+                          rejected, nfact, xdmf=options.write_xdmf)
     if progress:
         progress.close()
-    return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact)
+    return status, reason, rows, snaps, rejected, nfact
+
+
+def _setup(params, options, mesh, phi0) -> Simulation:
+    """The mesh (default: the paper's annulus at ``options.h``, graded by ``h_inner`` / ``h_outer``), initial
+    porosity and discretized model."""
+    if mesh is None:
+        from .mesh import annulus_mesh
+
+        mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed, h_inner=options.h_inner,
+                            h_outer=options.h_outer)
+    _validate_mesh(mesh)
+    if phi0 is None:
+        from .porosity import initial_porosity
+
+        phi0 = initial_porosity(mesh, params)
+    return Simulation(params, options, mesh, phi0)
 
 
 def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, progress, t_wall):
-    p = sim.params
-    disc = sim.disc
     pending = o.frame_times()
     dt = o.dt0
     cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0}
     V0 = _stored_volume(sim, sim.U)
     warned_layer = False
-    _snapshot(sim, snaps, writer)  # the initial state, t = 0
+    prof = profiling.active()
+    with phase("output"):
+        _snapshot(sim, snaps, writer)  # the initial state, t = 0
     while sim.t < o.t_end - 1e-12:
         if o.max_wall_time is not None and time.perf_counter() - t_wall > o.max_wall_time:
             return "failed", f"max_wall_time {o.max_wall_time} s exceeded at t = {sim.t:.4g} s"
+        prof.set_part(sim.t)
         target = min(o.t_end, pending[0]) if pending else o.t_end
         dt_try = min(dt, o.dt_max, target - sim.t)
         try:
             U, d, info = sim.step(dt_try)
         except (StepFailure, np.linalg.LinAlgError, RuntimeError, FloatingPointError, ValueError) as exc:
+            prof.count("rejected_steps")
             rejected.append({"t": sim.t, "dt": dt_try, "reason": str(exc)})
             if writer:
                 writer.log(f"rejected step at t={sim.t:.6g} dt={dt_try:.3g}: {exc}")
@@ -257,19 +317,12 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
             if dt < o.dt_min:
                 return "failed", f"time step below dt_min={o.dt_min} at t = {sim.t:.6g} s (last: {exc})"
             continue
-        # balances from the unconstrained residual at the converged state (reactions)
-        data = info["data"]
-        R, _ = residual_and_jacobian(disc, p, U, data, need_jacobian=False)
-        nf = disc.n_fields
-        Rp, Rs = R[P::nf], R[S::nf]
-        cum["inj"] += dt_try * p.w_i * disc.inner_length
-        cum["out"] += -dt_try * Rp[disc.outer_nodes].sum()
-        cum["src"] += dt_try * _source(sim, U, data)
-        cum["w_in"] += dt_try * Rs[disc.inner_nodes].sum()
-        cum["w_out"] += -dt_try * Rs[disc.outer_nodes].sum()
-        sim.U, sim.d, sim.t = U, d, sim.t + dt_try
-        row = _row(sim, dt_try, info, cum, V0)
+        with phase("metrics"):
+            _accumulate_balances(sim, U, info["data"], dt_try, cum)
+            sim.commit(U, d, dt_try)
+            row = _row(sim, dt_try, info, cum, V0)
         rows.append(row)
+        _count_step(prof, info)
         if row["outer_layer_area"] > 0 and not warned_layer:
             warned_layer = True
             if writer:
@@ -277,23 +330,54 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
         if progress:
             progress.update(sim.t, f"dt = {dt_try:.2e} s, newton {info['newton_its']}, stagger {info['stagger_its']}, "
                                    f"p_inj = {row['p_inj']:.1f} kPa, front = {row['front_radius_mean']:.1f} mm")
-        if pending and abs(sim.t - pending[0]) < 1e-9:
-            pending.pop(0)
-            _snapshot(sim, snaps, writer)
-        if writer and len(rows) % 25 == 0:
-            writer.write_timeseries(pd.DataFrame(rows))
+        with phase("output"):
+            if pending and abs(sim.t - pending[0]) < 1e-9:
+                pending.pop(0)
+                _snapshot(sim, snaps, writer)
+            if writer and len(rows) % 25 == 0:
+                writer.write_timeseries(pd.DataFrame(rows))
         if o.stop_front_radius is not None and np.isfinite(row["front_radius_max"]) and row["front_radius_max"] >= o.stop_front_radius:
             break
-        # an easy step: few Newton iterations per stagger iteration (a reused Jacobian converges
-        # linearly, so allow three times more) and few stagger iterations
-        easy = o.easy_newton_its * (3 if o.jacobian_reuse > 0 else 1)
-        if info["newton_its"] <= easy * info["stagger_its"] and info["stagger_its"] <= 3:
-            dt = dt_try * o.dt_grow
-        else:
-            dt = dt_try
+        dt = _next_dt(o, dt_try, info)
     if not snaps or snaps[-1][0] != sim.t:
-        _snapshot(sim, snaps, writer)
+        with phase("output"):
+            _snapshot(sim, snaps, writer)
     return "ok", None
+
+
+def _next_dt(o: RunOptions, dt: float, info: dict) -> float:
+    """The next step after an accepted step of size dt (s): grown by ``dt_grow`` after an easy step.
+
+    An easy step has few Newton iterations per stagger iteration (a reused Jacobian converges
+    linearly, so three times more are allowed) and few stagger iterations.
+    """
+    easy = o.easy_newton_its * (3 if o.jacobian_reuse > 0 else 1)
+    if info["newton_its"] <= easy * info["stagger_its"] and info["stagger_its"] <= 3:
+        return dt * o.dt_grow
+    return dt
+
+
+def _count_step(prof, info: dict) -> None:
+    """Count an accepted step and its iterations in the profile's part of the run."""
+    prof.count("accepted_steps")
+    prof.count("newton_iterations", info["newton_its"])
+    prof.count("stagger_iterations", info["stagger_its"])
+
+
+def _accumulate_balances(sim, U, data, dt: float, cum: dict) -> None:
+    """Add the step's injected, outflow, source and water volumes (mm²) to ``cum``.
+
+    From the unconstrained residual at the converged state U: its Dirichlet rows are the reactions.
+    """
+    disc, p = sim.disc, sim.params
+    R, _ = residual_and_jacobian(disc, p, U, data, need_jacobian=False)
+    nf = disc.n_fields
+    Rp, Rs = R[P::nf], R[S::nf]
+    cum["inj"] += dt * p.w_i * disc.inner_length
+    cum["out"] += -dt * Rp[disc.outer_nodes].sum()
+    cum["src"] += dt * _source(sim, U, data)
+    cum["w_in"] += dt * Rs[disc.inner_nodes].sum()
+    cum["w_out"] += -dt * Rs[disc.outer_nodes].sum()
 
 
 def _stored_volume(sim, U) -> float:

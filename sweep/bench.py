@@ -7,7 +7,11 @@ Measured (wall-clock seconds, this machine):
 * a 0.2 s coupled run at h = 2 mm (assembly on every core) (wall time, accepted steps, factorizations
   per accepted step, wall seconds per simulated second);
 * the reference case at h = 2 mm to 2 s (not with ``--quick``);
-* optionally the paper's reference run (h = 1 mm to 2 s).
+* optionally the paper's reference run (h = 1 mm to 2 s);
+* with ``--profile`` (:func:`run_profile`): the reference run's wall time split by phase (assembly,
+  symbolic and numeric factorization, solves, damage solve, stagger, metrics, output, Python) and by
+  part of the run (t < 0.05 s against the rest), from the run's own accumulators
+  (:mod:`solver.profiling`), with the h = 1 mm refactorization time measured beside it.
 Speed is measured here, never by timed tests.
 """
 from __future__ import annotations
@@ -124,6 +128,98 @@ def _coupled_run(h: float, t_end: float) -> dict:
             "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None}
 
 
+def _refactorization_h1() -> dict:
+    """The h = 1 mm refactorization time (s) of the default backend on this machine, now: the yardstick
+    stated beside every absolute figure (machines of the same kind differ by 1.6-2.4x)."""
+    from solver import linsolve
+
+    kind = linsolve.resolve("auto", 10**6)
+    it = _newton_iteration(1.0, [kind])
+    return {"backend": kind, "refactorization_s": it["backends"][kind]["factorize_s"],
+            "solve_s": it["backends"][kind]["solve_s"], "residual_and_jacobian_s": it["residual_and_jacobian_s"]}
+
+
+def profiled_run(h: float, t_end: float = 2.0) -> dict:
+    """The reference case at mesh size h (mm) to t_end (s) with its wall time split by phase and part of the
+    run (``SimulationResult.profile``, :mod:`solver.profiling`), plus the run's own figures."""
+    from solver import Parameters, RunOptions, simulate
+
+    threads = os.cpu_count() or 1
+    with _assembly_threads(threads):
+        res = simulate(Parameters(), RunOptions(h=h, t_end=t_end, snapshot_times=[]))
+    n = len(res.timeseries)
+    return {"h_mm": h, "t_end_s": t_end, "assembly_threads": threads, "kernels": _kernels(), "status": res.status,
+            "wall_s": res.wall_time, "accepted_steps": n, "rejected_steps": len(res.rejected_steps),
+            "factorizations": res.factorizations,
+            "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None, "profile": res.profile,
+            # the injection-pressure curve, to check that a faster solver gives the same physics
+            "p_inj_curve": {"t_s": res.timeseries["t"].tolist() if n else [],
+                            "p_inj_kPa": res.timeseries["p_inj"].tolist() if n else []}}
+
+
+_OVERHEAD_CHILD = """
+import json, sys, tempfile, time
+t0 = time.perf_counter()
+from sweep.scheduler import DefaultRunner
+from solver import Parameters, RunOptions
+with tempfile.TemporaryDirectory() as d:
+    opts = RunOptions(h=float(sys.argv[1]), t_end=1e-3, dt0=1e-3, snapshot_times=[]).to_dict()
+    out = DefaultRunner()(Parameters().to_dict(), opts, d)
+print(json.dumps({"child_s": time.perf_counter() - t0, "solver_s": out["metrics"]["solver_wall_time_s"]}))
+"""
+
+
+def per_run_overhead(h: float = 2.0) -> dict:
+    """Fixed wall seconds of one campaign run besides its time loop (the dry-run estimate's per-run term,
+    ``sweep.campaign.per_run_overhead``): a fresh process runs one 1 ms step at mesh size h (mm) through
+    the campaign runner (imports, mesh and set-up, first factorization, classification, run folder);
+    everything counts but the step's share of a long run's time loop, which the per-simulated-second
+    figure already holds, so the overhead is the whole child's wall time."""
+    import subprocess
+    import sys
+
+    t0 = time.perf_counter()
+    cp = subprocess.run([sys.executable, "-c", _OVERHEAD_CHILD, str(h)], capture_output=True, text=True, check=True,
+                        cwd=Path(__file__).resolve().parent.parent)
+    wall = time.perf_counter() - t0
+    child = json.loads(cp.stdout.strip().splitlines()[-1])
+    return {"h_mm": h, "per_run_overhead_s": wall, "child_inner_s": child["child_s"], "solver_wall_s": child["solver_s"]}
+
+
+def _kernels() -> str:
+    from solver import kernels
+
+    return kernels.backend()
+
+
+def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0) -> dict:
+    """``dchfrac bench --profile``: profiled reference runs at each mesh size of ``sizes`` (mm) to ``t_end`` (s),
+    with the h = 1 refactorization time measured in the same process; written as JSON to ``out_path``."""
+    from solver import linsolve
+
+    result = {"machine": {"python": platform.python_version(), "cpu_count": os.cpu_count(), "platform": platform.platform(),
+                          "load_average_1_5_15": list(os.getloadavg()) if hasattr(os, "getloadavg") else None},
+              "backend": linsolve.resolve("auto", 10**6), "runs": []}
+    print("bench: h = 1 mm refactorization (yardstick) ...", flush=True)
+    result["h1_refactorization"] = _refactorization_h1()
+    for h in sizes:
+        print(f"bench: profiled reference run h = {h:g} mm to {t_end:g} s ...", flush=True)
+        result["runs"].append(profiled_run(h, t_end))
+    if hasattr(os, "getloadavg"):
+        result["machine"]["load_average_after"] = list(os.getloadavg())
+    _write_json(out_path, result)
+    print(json.dumps({r["h_mm"]: r["profile"]["total"]["seconds"] for r in result["runs"]}, indent=2))
+    return result
+
+
+def _write_json(out_path, result: dict) -> None:
+    from sweep.store import write_json_atomic
+
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out, result)
+
+
 def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> dict:
     """Run the benchmarks and write them as JSON to ``out_path``; returns the dict."""
     from solver import linsolve
@@ -147,8 +243,9 @@ def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> di
     if reference:
         LOG.info("bench: reference run h = 1 mm to 2 s ...")
         result["reference_run_h1"] = _coupled_run(1.0, 2.0)
-    out = Path(out_path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2))
+    print("bench: per-run overhead of a campaign run (h = 2 mm, one step, fresh process) ...", flush=True)
+    result["per_run_overhead"] = per_run_overhead(2.0)
+    result["per_run_overhead_s"] = result["per_run_overhead"]["per_run_overhead_s"]
+    _write_json(out_path, result)
     print(json.dumps(result, indent=2))
     return result

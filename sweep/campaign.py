@@ -50,6 +50,8 @@ __all__ = [
     "sampler_status",
     "DEFAULT_WALL_S_PER_SIM_S_H2",
     "COST_MESH_EXPONENT",
+    "DEFAULT_PER_RUN_OVERHEAD_S",
+    "per_run_overhead",
 ]
 
 DEFAULT_ROOT = "results"
@@ -61,6 +63,12 @@ DEFAULT_ROOT = "results"
 # exponent: elements ~ h^-2, sparse direct solves ~ n^1.25 in 2-D -> 2.5.
 DEFAULT_WALL_S_PER_SIM_S_H2 = 60.0
 COST_MESH_EXPONENT = 2.5
+# Plus a fixed cost per run, s, whatever its simulated time: the run's child process and imports, the
+# mesh and discretization, the first (symbolic) factorization, classification and writing the run
+# folder.  From <root>/bench/bench.json key "per_run_overhead_s" (``dchfrac bench`` measures it) when
+# present, else this default: the committed h = 2 campaigns spent 2.0-2.5 s per run outside the
+# solver's time loop (wall_time_s - solver_wall_time_s of their tables) plus about 1 s of solver set-up.
+DEFAULT_PER_RUN_OVERHEAD_S = 3.0
 
 
 def as_spec(spec) -> CampaignSpec:
@@ -621,6 +629,15 @@ def wall_per_sim_second(h: float, bench: Mapping[str, Any] | None = None) -> tup
     return float(c2) * (2.0 / float(h)) ** COST_MESH_EXPONENT, src
 
 
+def per_run_overhead(bench: Mapping[str, Any] | None = None) -> tuple[float, str]:
+    """Fixed wall seconds of one campaign run besides its time loop, and where the figure comes from
+    ("bench" or "default"); see DEFAULT_PER_RUN_OVERHEAD_S."""
+    v = (bench or {}).get("per_run_overhead_s")
+    if isinstance(v, (int, float)) and v >= 0:
+        return float(v), "bench"
+    return DEFAULT_PER_RUN_OVERHEAD_S, "default"
+
+
 def estimated_sim_time(params: Mapping[str, Any], options: Mapping[str, Any]) -> float:
     """Simulated time of a run, s: t_end, or less when the front should reach stop_front_radius first.
 
@@ -640,24 +657,27 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
     """Grid size and estimated wall time (s) of the runs to do (pending, damaged, stale unless
     ``accept_stale``, failed with ``retry_failed``) of a campaign on ``jobs`` workers.
 
-    Uses :func:`wall_per_sim_second` (bench figures or the documented default) times
-    :func:`estimated_sim_time` per run, divided by ``jobs`` (perfect packing: a lower bound
-    of the wall time when runs differ much in cost).
+    Per run: :func:`per_run_overhead` plus :func:`wall_per_sim_second` (bench figures or the documented
+    default) times :func:`estimated_sim_time`; the sum divided by ``jobs`` (perfect packing: a lower bound
+    of the wall time when runs differ much in cost). Failed runs count only with ``retry_failed``.
     """
     spec = as_spec(spec)
     plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=accept_stale)
     bench = _load_bench(root)
+    overhead, overhead_src = per_run_overhead(bench)
     per_h: dict[float, dict] = {}
     total = 0.0
     for p, k in _todo(plan, retry_failed):
         h = float(p.options.get("h", 1.0))
         c, src = wall_per_sim_second(h, bench)
         t = estimated_sim_time(p.params, p.options)
-        d = per_h.setdefault(h, {"runs": 0, "sim_s": 0.0, "wall_s": 0.0, "wall_s_per_sim_s": c, "source": src})
+        d = per_h.setdefault(h, {"runs": 0, "sim_s": 0.0, "wall_s": 0.0, "wall_s_per_sim_s": c, "source": src,
+                                 "overhead_s": 0.0})
         d["runs"] += 1
         d["sim_s"] += t
-        d["wall_s"] += c * t
-        total += c * t
+        d["overhead_s"] += overhead
+        d["wall_s"] += c * t + overhead
+        total += c * t + overhead
     return {
         "name": spec.name,
         "grid_size": len(plan.points),
@@ -670,6 +690,8 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
         "cpu_s": total,
         "wall_s": total / max(1, jobs),
         "jobs": jobs,
+        "per_run_overhead_s": overhead,
+        "per_run_overhead_source": overhead_src,
     }
 
 

@@ -164,7 +164,8 @@ def cmd_run(args) -> int:
               f"{est['damaged']} damaged)")
         for h, d in sorted(est["by_mesh_size"].items()):
             print(f"  h = {h:g} mm: {d['runs']} runs, {d['sim_s']:.1f} simulated s x {d['wall_s_per_sim_s']:.3g} "
-                  f"wall s per simulated s ({d['source']}) = {_fmt_s(d['wall_s'])} CPU")
+                  f"wall s per simulated s ({d['source']}) + {d['runs']} x {est['per_run_overhead_s']:.3g} s per run "
+                  f"({est['per_run_overhead_source']}) = {_fmt_s(d['wall_s'])} CPU")
         print(f"estimated cost of the runs to do: {_fmt_s(est['cpu_s'])} CPU, about {_fmt_s(est['wall_s'])} "
               f"wall on {jobs} job(s)")
         for w in _input_warnings(spec):

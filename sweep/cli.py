@@ -4,7 +4,7 @@
     dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
     dchfrac params                                   (every parameter: unit, default, allowed range)
     dchfrac animate RUN [--fields S,phi,d,p] [--out FILE] [--fps 6]
-    dchfrac bench [--out results/bench/bench.json] [--quick]
+    dchfrac bench [--out results/bench/bench.json] [--quick] [--reference] [--profile [--h H] [--t-end T]]
     dchfrac campaign run|status|plot|report SPEC ...
     dchfrac report reference|convergence RUN... --out DIR
     dchfrac discrepancy run --measured DIR --model SPEC --out DIR
@@ -122,12 +122,28 @@ def _writable_or_exit(command: str, path, what: str) -> int | None:
 
 
 def cmd_bench(args) -> int:
-    from .bench import run_benchmarks
+    from .bench import run_benchmarks, run_profile
 
-    bad = _writable_or_exit("bench", Path(args.out).parent, "--out folder")
+    out = args.out or ("results/bench/profile.json" if args.profile else "results/bench/bench.json")
+    bad = _writable_or_exit("bench", Path(out).parent, "--out folder")
     if bad:
         return bad
-    run_benchmarks(args.out, quick=args.quick, reference=args.reference)
+    if args.profile:
+        sizes = args.h or ([2.0, 1.0] if args.reference else [2.0])
+        bad = [h for h in sizes if not 0 < h <= 24]
+        t_end = 2.0 if args.t_end is None else args.t_end
+        if bad:
+            print(f"dchfrac bench: --h {bad[0]!r} is out of range: allowed 0 < h <= 24 (mm)", file=sys.stderr)
+            return 2
+        if not t_end > 0:
+            print(f"dchfrac bench: --t-end {t_end!r} is out of range: allowed > 0 (s)", file=sys.stderr)
+            return 2
+        run_profile(out, sizes, t_end)
+        return 0
+    if args.h or args.t_end is not None:
+        print("dchfrac bench: --h and --t-end apply only with --profile", file=sys.stderr)
+        return 2
+    run_benchmarks(out, quick=args.quick, reference=args.reference)
     return 0
 
 
@@ -280,9 +296,13 @@ def build_parser() -> argparse.ArgumentParser:
     pa = sub.add_parser("params", help="list every model parameter with unit, default and allowed range, and the run options")
     pa.set_defaults(func=cmd_params)
     b = sub.add_parser("bench", help="performance benchmarks (JSON)")
-    b.add_argument("--out", default="results/bench/bench.json")
+    b.add_argument("--out", help="JSON file (default results/bench/bench.json, with --profile results/bench/profile.json)")
     b.add_argument("--quick", action="store_true", help="skip h = 0.5 mm and shorten the coupled run")
     b.add_argument("--reference", action="store_true", help="also time the full reference run (h = 1 mm to 2 s)")
+    b.add_argument("--profile", action="store_true",
+                   help="wall time of the reference run split by phase and part of the run (h = 2 mm; with --reference also h = 1 mm)")
+    b.add_argument("--h", type=float, action="append", help="with --profile: mesh size(s) to profile, mm (repeatable)")
+    b.add_argument("--t-end", type=float, help="with --profile: final time, s (default 2)")
     b.set_defaults(func=cmd_bench)
     rp = sub.add_parser("report", help="figures and paper comparison of a reference run or a mesh-convergence set")
     rp.add_argument("kind", choices=["reference", "convergence"])
