@@ -174,15 +174,21 @@ def _run_all(args) -> None:
     Parallel(n_jobs=args.jobs)(delayed(run_variant)(n, args.h, Path(args.out), f, t) for n, f, t in jobs)
 
 
+def _finished(run_dir: Path) -> bool:
+    """A run folder whose run has ended (ok or failed) and wrote its time series."""
+    f = run_dir / "summary.json"
+    return f.exists() and (run_dir / "timeseries.csv").exists() and json.loads(f.read_text()).get("status") != "running"
+
+
 def _table(args) -> None:
     out = Path(args.out)
     rows = {}
     for n in VARIANTS:
         a, b = out / n, out / f"{n}_eta{ETA_FACTOR:g}"
-        if not (a / "summary.json").exists() or json.loads((a / "summary.json").read_text()).get("status") == "running":
+        if not _finished(a):
             continue
         m = measure(a)
-        if (b / "summary.json").exists():
+        if _finished(b):
             m["dlnp_dlneta"] = elasticity(m, measure(b))
         rows[n] = m
     text = json.dumps({"h": args.h, "variants": {n: {"params": v[0], "options": v[1]} for n, v in VARIANTS.items()},
