@@ -44,6 +44,7 @@ TIMESERIES_COLUMNS = {
     "max_hoop_stress": ("kPa", "largest element hoop (circumferential) effective stress"),
     "front_radius_mean": ("mm", "mean radius of the S = 0.5 front connected to the inlet"),
     "front_radius_max": ("mm", "largest radius of the S = 0.5 front connected to the inlet"),
+    "front_radius_branches": ("mm", "mean radius of the three main invasion branches of that front (Sec. 3.5)"),
     "open_tip_radius": ("mm", "largest radius of the open region (phi >= 0.99) connected to the inlet"),
     "outer_layer_area": ("mm²", "invaded area not connected to the inlet (outer water layer)"),
     "newton_its": ("", "Newton iterations of the step (all stagger iterations)"),
