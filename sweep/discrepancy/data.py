@@ -149,10 +149,21 @@ def load_measured(folder) -> MeasuredData:
     folder = Path(folder)
     if not folder.is_dir():
         raise ValueError(f"measured-data folder {folder} does not exist")
-    from solver import Parameters
-    from solver.params import integer_fields, text_fields
-
     cpath, opath = folder / "conditions.csv", folder / "observations.csv"
+    conditions = _read_conditions(cpath)
+    ids = list(conditions.index)
+    odf = _read_csv(opath)
+    curves, regimes = _read_observations(opath, odf, ids)
+    check_units(opath, odf)
+    _check_coverage(cpath, opath, ids, curves, regimes)
+    curves = curves.sort_values(["condition", "observable", "time"], kind="stable").reset_index(drop=True)
+    return MeasuredData(conditions, curves, regimes)
+
+
+def _read_conditions(cpath: Path) -> pd.DataFrame:
+    """conditions.csv as a DataFrame indexed by id: typed parameter values, each row valid ``Parameters``."""
+    from solver import Parameters
+
     cdf = _read_csv(cpath)
     if "id" not in cdf.columns:
         _err(cpath, 1, "id", "missing column (conditions.csv needs an 'id' column)")
@@ -170,28 +181,37 @@ def load_measured(folder) -> MeasuredData:
         if cid in ids:
             _err(cpath, i + 2, "id", f"duplicated id {cid!r}")
         ids.append(cid)
-        rec = {}
-        for col in cdf.columns:
-            if col == "id":
-                continue
-            s = str(cdf.at[i, col]).strip()
-            if s == "":
-                rec[col] = float("nan")
-                continue
-            if col in text_fields():
-                rec[col] = s
-            elif col in integer_fields():
-                rec[col] = _integer(cpath, cdf, i, col)
-            else:
-                rec[col] = _num(cpath, cdf, i, col)
+        rec = _condition_row(cpath, cdf, i)
         try:  # parameters must be valid before any work starts
             Parameters(**{k: v for k, v in rec.items() if not (isinstance(v, float) and math.isnan(v))})
         except (ValueError, TypeError) as exc:
             _err(cpath, i + 2, None, f"invalid parameters: {exc}")
         rows.append(rec)
-    conditions = pd.DataFrame(rows, index=pd.Index(ids, name="id"))
+    return pd.DataFrame(rows, index=pd.Index(ids, name="id"))
 
-    odf = _read_csv(opath)
+
+def _condition_row(cpath: Path, cdf: pd.DataFrame, i: int) -> dict:
+    """Row ``i`` of conditions.csv as parameter values: text, integer or float by the field's declaration."""
+    from solver.params import integer_fields, text_fields
+
+    rec = {}
+    for col in cdf.columns:
+        if col == "id":
+            continue
+        s = str(cdf.at[i, col]).strip()
+        if s == "":
+            rec[col] = float("nan")
+        elif col in text_fields():
+            rec[col] = s
+        elif col in integer_fields():
+            rec[col] = _integer(cpath, cdf, i, col)
+        else:
+            rec[col] = _num(cpath, cdf, i, col)
+    return rec
+
+
+def _read_observations(opath: Path, odf: pd.DataFrame, ids: list) -> tuple[pd.DataFrame, dict]:
+    """observations.csv as curve rows (condition, observable, time s, value, uncertainty) and regime labels."""
     for col in OBS_COLUMNS:
         if col not in odf.columns:
             _err(opath, 1, col, f"missing column (required: {list(OBS_COLUMNS)})")
@@ -215,28 +235,34 @@ def load_measured(folder) -> MeasuredData:
                 _err(opath, line, "observable", f"second regime observation for condition {cid!r}")
             regimes[cid] = (t, label)
             continue
-        v = _num(opath, odf, i, "value")
-        u = _num(opath, odf, i, "uncertainty")
-        if u < 0:
-            _err(opath, line, "uncertainty", f"negative uncertainty {u}")
-        if u == 0:
-            _err(opath, line, "uncertainty", "zero uncertainty (a standard deviation > 0 is required)")
-        if obs in LENGTH_OBSERVABLES and v < -LENGTH_SIGMAS * u:
-            _err(opath, line, "value", f"negative {obs} {v} mm (allowed: a length >= 0 mm, within "
-                                       f"{LENGTH_SIGMAS:g} uncertainties)")
-        recs.append((cid, obs, t, v, u))
-    curves = pd.DataFrame(recs, columns=list(OBS_COLUMNS))
-    check_units(opath, odf)
+        recs.append((cid, obs, t, *_value_and_uncertainty(opath, odf, i, obs)))
+    return pd.DataFrame(recs, columns=list(OBS_COLUMNS)), regimes
+
+
+def _value_and_uncertainty(opath: Path, odf: pd.DataFrame, i: int, obs: str) -> tuple[float, float]:
+    """Value and uncertainty (> 0) of a curve observation; a length may not be negative beyond its noise."""
+    line = i + 2
+    v = _num(opath, odf, i, "value")
+    u = _num(opath, odf, i, "uncertainty")
+    if u < 0:
+        _err(opath, line, "uncertainty", f"negative uncertainty {u}")
+    if u == 0:
+        _err(opath, line, "uncertainty", "zero uncertainty (a standard deviation > 0 is required)")
+    if obs in LENGTH_OBSERVABLES and v < -LENGTH_SIGMAS * u:
+        _err(opath, line, "value", f"negative {obs} {v} mm (allowed: a length >= 0 mm, within "
+                                   f"{LENGTH_SIGMAS:g} uncertainties)")
+    return v, u
+
+
+def _check_coverage(cpath: Path, opath: Path, ids: list, curves: pd.DataFrame, regimes: dict) -> None:
+    """Every condition observed; no (condition, observable, time) twice."""
     for cid in ids:
         if not (curves.condition == cid).any() and cid not in regimes:
-            line = ids.index(cid) + 2
-            _err(cpath, line, "id", f"condition {cid!r} has no observations in {opath.name}")
+            _err(cpath, ids.index(cid) + 2, "id", f"condition {cid!r} has no observations in {opath.name}")
     dup = curves.duplicated(["condition", "observable", "time"])
     if dup.any():
         i = int(np.flatnonzero(dup.to_numpy())[0])
         _err(opath, None, "time", f"duplicated (condition, observable, time) {tuple(curves.iloc[i][:3])}")
-    curves = curves.sort_values(["condition", "observable", "time"], kind="stable").reset_index(drop=True)
-    return MeasuredData(conditions, curves, regimes)
 
 
 # ------------------------------------------------------------------------------ unit plausibility checks
