@@ -479,11 +479,7 @@ def run_campaign(
         while points:
             plan = plan_campaign(spec, root, code_hash=code_hash, points=points, accept_stale=accept_stale)
             todo = _todo(plan, retry_failed)
-            stale = [k for _, k in plan.stale]
-            result.damaged_rerun += [k for _, k in plan.damaged]
-            result.stale_reused += stale if accept_stale else []
-            result.stale_rerun += [] if accept_stale else stale
-            result.n_points = len(points)
+            _book_round(result, plan, len(points), accept_stale)
             if progress is not None:
                 print(f"[{spec.name}] {len(points)} runs: {_counts_text(plan)}; executing {len(todo)} on {backend} "
                       f"with {jobs} job(s)", file=progress, flush=True)
@@ -498,10 +494,7 @@ def run_campaign(
                 break
             if not accept_stale:
                 result.reclassified += _reclassify_keys(plan, [k for _, k in plan.misclassified], spec.classify)
-            table = build_table(spec, root, plan=plan)
-            new = [p for p in sampler.refine(spec, table) if run_key(p.params, p.options) not in set(plan.keys)]
-            _write_sampler_state(sampler, spec, table, store)
-            points = points + new if new else []
+            points = _refined_points(sampler, spec, root, plan, store, points)
         result.n_skipped = result.n_points - result.n_executed
         if result.reclassified:
             result.table_paths = write_table(spec, root, plan=plan)
@@ -510,6 +503,23 @@ def run_campaign(
     finally:
         store.clean_tmp()
         store.release_lock()
+
+
+def _book_round(result: CampaignResult, plan: Plan, n_points: int, accept_stale: bool) -> None:
+    """Count a round's damaged runs (rerun) and stale runs (rerun, or reused with ``accept_stale``)."""
+    stale = [k for _, k in plan.stale]
+    result.damaged_rerun += [k for _, k in plan.damaged]
+    result.stale_reused += stale if accept_stale else []
+    result.stale_rerun += [] if accept_stale else stale
+    result.n_points = n_points
+
+
+def _refined_points(sampler, spec: CampaignSpec, root, plan: Plan, store: ResultsStore, points: list) -> list:
+    """The points of the next round: ``points`` plus the sampler's new ones, or [] when it adds none."""
+    table = build_table(spec, root, plan=plan)
+    new = [p for p in sampler.refine(spec, table) if run_key(p.params, p.options) not in set(plan.keys)]
+    _write_sampler_state(sampler, spec, table, store)
+    return points + new if new else []
 
 
 def _check_run_settings(spec: CampaignSpec, jobs, timeout, retries, isolate):
