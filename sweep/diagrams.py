@@ -512,6 +512,44 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k:
     else:
         lx = ly = np.empty(0)
         x0, x1, y0, y1 = -2.0, 2.0, -2.0, 2.0
+    _shade_regimes(ax, shade, lx, ly, rg, (x0, x1, y0, y1), grid, k)
+    counts = {}
+    for r in REGIMES:
+        m = rg == r
+        counts[r] = int(m.sum())
+        st = REGIME_STYLE[r]
+        if m.any():
+            ax.scatter(nb[m], nf[m], marker=st["marker"], color=st["color"],
+                       s=60 if st["marker"] == "*" else 30, label=st["label"], zorder=3)
+    if "order" in df.columns:
+        for xv, yv, o in zip(nb, nf, df["order"].to_numpy()[ok]):
+            if o == o:
+                ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=5)
+    ax.axhline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    ax.axvline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    if experimental_range is not None:
+        x0, x1, y0, y1 = _experimental_box(ax, experimental_range, (x0, x1, y0, y1))
+    ax.set_xlim(10**x0, 10**x1)
+    ax.set_ylim(10**y0, 10**y1)
+    ax.set_xlabel("branching number $N_b$")
+    ax.set_ylabel("fracturing number $N_f$")
+    t = title or ""
+    if dp_cri is not None:
+        t = (t + "\n" if t else "") + f"$\\delta p_{{cri}}$ = {dp_cri:.3g} kPa"
+    if t:
+        ax.set_title(t, fontsize=9)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
+              frameon=False)
+    _place_thumbnails(fig, ax, df, thumbnails or ())
+    paths = _save(fig, out_path, formats)
+    return {"paths": paths, "n_dropped": n_drop, "counts": counts}
+
+
+def _shade_regimes(ax, shade, lx, ly, rg, bounds, grid: int, k: int) -> None:
+    """Shade the (log N_b, log N_f) plane within ``bounds`` by regime: the classifier's probabilities
+    (``shade`` True or "classifier") or the k-nearest-run staircase ("nearest")."""
+    x0, x1, y0, y1 = bounds
+    nb, nf = 10**lx, 10**ly
     if shade not in (True, False, "classifier", "nearest"):
         raise ValueError(f"shade={shade!r}: must be true/\"classifier\" (smooth, from the regime classifier), "
                          "\"nearest\" (nearest-neighbour staircase) or false")
@@ -531,50 +569,33 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k:
         model = fit_regime_model(np.c_[nb, nf], rg, axes, degree=3, prior_sd=10.0)
         gx, gy = np.meshgrid(np.linspace(x0, x1, grid), np.linspace(y0, y1, grid))
         _shade_classifier(ax, model, 10**gx, 10**gy)
-    counts = {}
-    for r in REGIMES:
-        m = rg == r
-        counts[r] = int(m.sum())
-        st = REGIME_STYLE[r]
-        if m.any():
-            ax.scatter(nb[m], nf[m], marker=st["marker"], color=st["color"],
-                       s=60 if st["marker"] == "*" else 30, label=st["label"], zorder=3)
-    if "order" in df.columns:
-        for xv, yv, o in zip(nb, nf, df["order"].to_numpy()[ok]):
-            if o == o:
-                ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=5)
-    ax.axhline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
-    ax.axvline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
-    if experimental_range is not None:
-        from matplotlib.patches import Rectangle
 
-        if isinstance(experimental_range, Mapping):
-            try:
-                e = [float(experimental_range[k_]) for k_ in ("nb_min", "nb_max", "nf_min", "nf_max")]
-            except KeyError as exc:
-                raise ValueError(f"experimental_range: missing key {exc}; needs nb_min, nb_max, "
-                                 "nf_min, nf_max") from None
-        else:
-            e = [float(v) for v in experimental_range]
-        if len(e) != 4 or min(e) <= 0 or e[1] <= e[0] or e[3] <= e[2]:
-            raise ValueError(f"experimental_range={experimental_range!r}: needs 0 < nb_min < "
-                             "nb_max and 0 < nf_min < nf_max")
-        ax.add_patch(Rectangle((e[0], e[2]), e[1] - e[0], e[3] - e[2], fill=False, ec="red",
-                               lw=1.5, zorder=4, label="experiments"))
-        x0, x1 = min(x0, math.log10(e[0]) - 0.2), max(x1, math.log10(e[1]) + 0.2)
-        y0, y1 = min(y0, math.log10(e[2]) - 0.2), max(y1, math.log10(e[3]) + 0.2)
-    ax.set_xlim(10**x0, 10**x1)
-    ax.set_ylim(10**y0, 10**y1)
-    ax.set_xlabel("branching number $N_b$")
-    ax.set_ylabel("fracturing number $N_f$")
-    t = title or ""
-    if dp_cri is not None:
-        t = (t + "\n" if t else "") + f"$\\delta p_{{cri}}$ = {dp_cri:.3g} kPa"
-    if t:
-        ax.set_title(t, fontsize=9)
-    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
-              frameon=False)
-    for th in thumbnails or ():
+def _experimental_box(ax, experimental_range, bounds) -> tuple:
+    """Draw the experiments' (N_b, N_f) rectangle; returns the log10 axis bounds widened to hold it."""
+    x0, x1, y0, y1 = bounds
+    from matplotlib.patches import Rectangle
+
+    if isinstance(experimental_range, Mapping):
+        try:
+            e = [float(experimental_range[k_]) for k_ in ("nb_min", "nb_max", "nf_min", "nf_max")]
+        except KeyError as exc:
+            raise ValueError(f"experimental_range: missing key {exc}; needs nb_min, nb_max, "
+                             "nf_min, nf_max") from None
+    else:
+        e = [float(v) for v in experimental_range]
+    if len(e) != 4 or min(e) <= 0 or e[1] <= e[0] or e[3] <= e[2]:
+        raise ValueError(f"experimental_range={experimental_range!r}: needs 0 < nb_min < "
+                         "nb_max and 0 < nf_min < nf_max")
+    ax.add_patch(Rectangle((e[0], e[2]), e[1] - e[0], e[3] - e[2], fill=False, ec="red",
+                           lw=1.5, zorder=4, label="experiments"))
+    x0, x1 = min(x0, math.log10(e[0]) - 0.2), max(x1, math.log10(e[1]) + 0.2)
+    y0, y1 = min(y0, math.log10(e[2]) - 0.2), max(y1, math.log10(e[3]) + 0.2)
+    return x0, x1, y0, y1
+
+
+def _place_thumbnails(fig, ax, df, thumbnails) -> None:
+    """Inset snapshots of chosen runs (see :func:`plot_nf_vs_nb`'s ``thumbnails``)."""
+    for th in thumbnails:
         if not isinstance(th, Mapping) or "pos" not in th:
             raise ValueError(f"thumbnails: entry {th!r} must be a mapping with 'pos'")
         if "row" in th:
@@ -582,7 +603,6 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k:
             run_dir, xy = row["run_dir"], (float(row["N_b"]), float(row["N_f"]))
         else:
             run_dir, xy = th["run_dir"], tuple(th["xy"])
-        _thumbnail(fig, ax, run_dir, xy, tuple(th["pos"]), float(th.get("size", 0.18)),
-                   th.get("at", "last"))
-    paths = _save(fig, out_path, formats)
-    return {"paths": paths, "n_dropped": n_drop, "counts": counts}
+        _thumbnail(fig, ax, run_dir, xy, tuple(th["pos"]), float(th.get("size", 0.18)), th.get("at", "last"))
+
+
