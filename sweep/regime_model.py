@@ -13,6 +13,12 @@ probable labels. Its location uncertainty at a point x is the Laplace standard d
 g_ab divided by the length of its gradient, measured in *tolerance units*: each axis is
 divided by its tolerance (axis units, decades on a log axis), so 1 means one tolerance.
 
+The prior sd of the slopes sets the sharpest transition between regimes the model expects. It
+is a hyperparameter weighed by its Laplace evidence over a factor-2 grid (``prior_span``), and
+the location uncertainty averages over that posterior: a fuzzy transition (labels mixed over a
+width) keeps the soft members probable and widens the band, where a fixed sharp prior would
+read a few mixed labels as a sharp boundary with a narrow band.
+
 Units: the axes' own (model units, mm, s, kPa; decades on log axes); probabilities and
 uncertainty ratios are dimensionless.
 """
