@@ -20,17 +20,26 @@ Campaign TOML::
     label = "regime"            # table column classified (e.g. "fracturing" for the Ca*-C diagram)
     labels = []                 # the label set (>= 2; default: the labels seen); others are ignored
     degree = 3                  # total degree of the classifier's Legendre basis
-    prior_sd = 100.0            # prior sd of its degree-1 coefficients (default: 8 per tolerance
+    prior_sd = 100.0            # largest prior sd of its degree-1 coefficients (default: 8 per tolerance
                                 #   unit of the finest axis, sharp enough for a sharp boundary)
+    prior_span = 64             # the prior sd is a hyperparameter over [prior_sd / prior_span, prior_sd]
+                                #   (factor-2 grid, weighted by its evidence); 1 fixes it at prior_sd
     smoothness = 0.3            # prior sd ratio per extra degree (curvature is a priori small)
     confidence = 0.95           # of the boundary's uncertainty band
 
 Each round fits :func:`sweep.regime_model.fit_regime_model` to the labelled runs, measures the
-boundary-location uncertainty (z sigma / |grad g| on the MAP boundaries, in tolerance units) and,
+boundary-location uncertainty (z sigma_loc on the MAP boundaries, in tolerance units) and,
 unless it is <= 1 along the whole boundary or the budget is spent, picks the next batch by the
 straddle score z sigma_loc - distance to the boundary (both in tolerance units) over a seeded
 candidate set, each pick excluding the candidates within its own band (batch spread out); no point
 within half a tolerance of a sampled one.
+
+The prior sd of the classifier's slopes is the inverse of the regimes' transition width. It is not
+fixed: each fit weighs a grid of prior sds by their evidence (marginal likelihood of the labels), and
+sigma_loc is the root-mean-square deviation of the boundary under that posterior (Laplace sd of each
+member plus the spread of the members' boundaries). Labels mixed across a fuzzy transition keep the
+soft members probable, so the band widens and the sampler places more runs before it stops; sharp
+labels leave the sharpest member alone, as with a fixed prior sd.
 
 Resuming needs no state file: the sequence is replayed from the campaign table. Round r + 1 is a
 function of the seed and of the labels of rounds 0..r only, so a killed campaign, rerun, replays its
@@ -73,6 +82,7 @@ class BoundarySettings:
     degree: int = 3
     prior_sd: float | None = None
     smoothness: float = 0.3
+    prior_span: float = 64.0
     confidence: float = 0.95
 
 
@@ -104,6 +114,7 @@ _CHECKS: dict[str, tuple] = {
     "degree": (lambda v: _is_int(v) and 1 <= v <= 6, "an integer in [1, 6]"),
     "prior_sd": (lambda v: v is None or (_is_num(v) and v > 0), "a number > 0"),
     "smoothness": (lambda v: _is_num(v) and 0 < v <= 1, "a number in (0, 1]"),
+    "prior_span": (lambda v: _is_num(v) and v >= 1, "a number >= 1 (1: prior_sd fixed)"),
     "confidence": (lambda v: _is_num(v) and 0.5 <= v < 1, "a number in [0.5, 1)"),
 }
 
@@ -301,7 +312,7 @@ class BoundarySampler:
         labels = s.labels or None
         prior_sd = s.prior_sd or 8.0 * max(a.tol_per_u for a in cfg.axes)
         return fit_regime_model(X, y, cfg.axes, degree=s.degree, prior_sd=prior_sd, smoothness=s.smoothness,
-                                confidence=s.confidence, labels=labels)
+                                confidence=s.confidence, labels=labels, prior_span=s.prior_span)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -117,10 +117,10 @@ def fit_exponential_separatrix(C: Any, ca_star: Any, fracturing: Any,
 class SeparatrixInterval(NamedTuple):
     """Profile-likelihood intervals of the separatrix Ca*_c = A exp(B C) at ``level``.
 
-    A (-) and B (1/%) are the maximum-likelihood values; ``A_interval``, ``B_interval`` their
-    intervals (each parameter profiled over the other and the transition's sharpness); ``separable``:
-    the labels are perfectly separated (the sharpness reaches its cap; the intervals then bound the
-    separatrices that separate the labels, plus the threshold's margin).
+    A (-) and B (1/%) are the penalized maximum-likelihood values; ``A_interval``, ``B_interval`` their
+    intervals (each parameter profiled over the other and the transition's sharpness); ``sharpness`` the
+    fitted logistic slope s per unit of ln Ca* (-); ``separable``: every label lies on its side of the
+    fitted separatrix (the data alone then bound s from below only; the Jeffreys penalty keeps it finite).
     """
 
     A: float
@@ -129,34 +129,44 @@ class SeparatrixInterval(NamedTuple):
     B_interval: tuple[float, float]
     level: float
     separable: bool
+    sharpness: float = math.nan
 
 
-_SHARPNESS_CAP = 1e3   # scale of the weak ridge on the logistic slope per unit of ln Ca* (sharp labels reach it)
-
-
-def _sep_nll(theta, X, y):
+def _sep_objective(phi, M, X, y):
+    """Negative Jeffreys-penalized log-likelihood of the logistic model z = X theta at theta = M phi, and
+    its gradient in phi. Penalty: 0.5 log det of the full model's Fisher information X' W X (Firth 1993);
+    its gradient gives the modified score X' (y - p + h (1/2 - p)), h the hat values."""
+    theta = M @ phi
     z = X @ theta
-    ridge = 0.5 * (theta[0] / _SHARPNESS_CAP) ** 2
-    g = X.T @ (0.5 * (1 + np.tanh(0.5 * z)) - y)
-    g[0] += theta[0] / _SHARPNESS_CAP**2
-    return float(np.sum(np.logaddexp(0.0, z) - y * z) + ridge), g
+    p = 0.5 * (1.0 + np.tanh(0.5 * z))
+    w = np.maximum(p * (1.0 - p), 1e-300)
+    info = (X * w[:, None]).T @ X
+    sign, logdet = np.linalg.slogdet(info)
+    if sign <= 0:
+        return math.inf, np.zeros_like(phi)
+    h = w * np.einsum("ni,ij,nj->n", X, np.linalg.inv(info), X)
+    nll = float(np.sum(np.logaddexp(0.0, z) - y * z)) - 0.5 * logdet
+    return nll, -(M.T @ (X.T @ (y - p + h * (0.5 - p))))
 
 
-def _sep_hess(theta, X, y):
-    pr = 0.5 * (1 + np.tanh(0.5 * (X @ theta)))
-    H = (X * (pr * (1 - pr))[:, None]).T @ X
-    H[0, 0] += 1.0 / _SHARPNESS_CAP**2
-    return H
+def _sep_fisher(phi, M, X, y):
+    """Fisher information of the likelihood part in phi: the trust region's model Hessian."""
+    z = X @ (M @ phi)
+    p = 0.5 * (1.0 + np.tanh(0.5 * z))
+    XM = X @ M
+    return (XM * (p * (1.0 - p))[:, None]).T @ XM
 
 
-def _sep_min(X, y):
-    """Minimum negative log-likelihood of the logistic model z = X theta (convex; Newton trust region).
-    The sharpness theta[0] carries a weak ridge (scale _SHARPNESS_CAP) so that separable labels stay finite."""
+def _sep_min(X, y, M):
+    """Minimum negative penalized log-likelihood over theta = M phi, and theta at the minimum (Newton trust
+    region on the Fisher information, from a unit sharpness). The Jeffreys penalty keeps the minimum finite
+    on separable labels."""
     from scipy.optimize import minimize
 
-    res = minimize(_sep_nll, np.r_[1.0, np.zeros(X.shape[1] - 1)], args=(X, y), jac=True, hess=_sep_hess,
-                   method="trust-exact", options={"gtol": 1e-8, "maxiter": 500})
-    return res.fun, res.x
+    phi0 = np.linalg.lstsq(M, np.r_[1.0, np.zeros(X.shape[1] - 1)], rcond=None)[0]
+    res = minimize(_sep_objective, phi0, args=(M, X, y), jac=True, hess=_sep_fisher, method="trust-exact",
+                   options={"gtol": 1e-8, "maxiter": 500})
+    return float(res.fun), M @ res.x
 
 
 def _profile_bounds(rise, v0: float, step: float) -> tuple[float, float]:
@@ -175,10 +185,16 @@ def _profile_bounds(rise, v0: float, step: float) -> tuple[float, float]:
 def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: float = 0.95) -> SeparatrixInterval:
     """Fit Ca*_c = A exp(B C) with profile-likelihood intervals of A and B (scipy only).
 
-    Model: P(fracturing) = expit(s (ln Ca* - ln A - B C)), s the transition's sharpness (weak ridge, scale 1e3).
-    With ln A fixed the model is linear in (s, s B), with B fixed linear in (s, s ln A): each profile
-    point is a convex fit. The interval is where twice the profile's rise stays below the chi-square(1)
-    quantile of ``level``. C in %, Ca* > 0 (-), fracturing bools (both outcomes needed).
+    Model: P(fracturing) = expit(s (ln Ca* - ln A - B C)), s > 0 the transition's sharpness per unit of
+    ln Ca*; linear in theta = (s, s B, s ln A). The likelihood carries Jeffreys' prior (Firth's penalty
+    0.5 log det I(theta)), the reference prior of the model, with no scale to choose: on labels that a
+    separatrix separates, the unpenalized likelihood grows without bound as s grows and its profile
+    shrinks to the separating separatrices, whatever the true transition width; the penalty keeps s
+    finite and the profile honest (Heinze and Schemper 2002: profile penalized likelihood intervals).
+    ln A fixed (theta_3 = v theta_1) or B fixed (theta_2 = v theta_1) is a linear constraint on theta,
+    so each profile point is a fit in a plane of theta. The interval is where twice the penalized
+    profile's rise stays below the chi-square(1) quantile of ``level``. C in %, Ca* > 0 (-),
+    fracturing bools (both outcomes needed).
     """
     from scipy.stats import chi2
 
@@ -189,22 +205,25 @@ def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: fl
         raise ValueError("C, ca_star, fracturing: need equal lengths >= 3 and both outcomes")
     if not 0 < level < 1:
         raise ValueError(f"level={level!r}: must be in (0, 1)")
-    full, th = _sep_min(np.c_[L, -Cc, -np.ones_like(L)], y)
-    s_hat = max(th[0], 1e-12)
-    B_hat, lnA_hat = th[1] / s_hat, th[2] / s_hat
+    X = np.c_[L, -Cc, -np.ones_like(L)]
+    full, th = _sep_min(X, y, np.eye(3))
+    if not th[0] > 0:
+        raise ValueError("fracturing: does not increase with Ca* (fitted sharpness <= 0); no separatrix Ca*_c(C)")
+    B_hat, lnA_hat = th[1] / th[0], th[2] / th[0]
     thr = chi2.ppf(level, 1) / 2.0
 
     def rise_lnA(v):
-        return _sep_min(np.c_[L - v, -Cc], y)[0] - full - thr
+        return _sep_min(X, y, np.array([[1.0, 0.0], [0.0, 1.0], [v, 0.0]]))[0] - full - thr
 
     def rise_B(v):
-        return _sep_min(np.c_[L - v * Cc, -np.ones_like(L)], y)[0] - full - thr
+        return _sep_min(X, y, np.array([[1.0, 0.0], [v, 0.0], [0.0, 1.0]]))[0] - full - thr
 
     span_L, span_C = max(np.ptp(L), 1e-6), max(np.ptp(Cc), 1e-6)
     lo_a, hi_a = _profile_bounds(rise_lnA, lnA_hat, 0.02 * span_L)
     b_iv = _profile_bounds(rise_B, B_hat, 0.02 * span_L / span_C)
+    separable = bool(np.all((X @ th > 0) == (y > 0.5)))
     return SeparatrixInterval(float(np.exp(lnA_hat)), float(B_hat), (float(np.exp(lo_a)), float(np.exp(hi_a))),
-                              b_iv, level, bool(th[0] >= 0.1 * _SHARPNESS_CAP))
+                              b_iv, level, separable, float(th[0]))
 
 
 # --------------------------------------------------------------------------- helpers

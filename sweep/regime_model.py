@@ -13,6 +13,12 @@ probable labels. Its location uncertainty at a point x is the Laplace standard d
 g_ab divided by the length of its gradient, measured in *tolerance units*: each axis is
 divided by its tolerance (axis units, decades on a log axis), so 1 means one tolerance.
 
+The prior sd of the slopes sets the sharpest transition between regimes the model expects. It
+is a hyperparameter weighed by its Laplace evidence over a factor-2 grid (``prior_span``), and
+the location uncertainty averages over that posterior: a fuzzy transition (labels mixed over a
+width) keeps the soft members probable and widens the band, where a fixed sharp prior would
+read a few mixed labels as a sharp boundary with a narrow band.
+
 Units: the axes' own (model units, mm, s, kPa; decades on log axes); probabilities and
 uncertainty ratios are dimensionless.
 """
@@ -103,10 +109,30 @@ def legendre_basis(u: np.ndarray, degree: int, grad: bool = False):
     return cols, G
 
 
+def _pair_moments(W: np.ndarray, cov: np.ndarray, Phi: np.ndarray, G: np.ndarray, a: np.ndarray, b: np.ndarray,
+                  scale: np.ndarray):
+    """For one coefficient set: g = f_a - f_b at each point (pair a, b given per point), its Laplace sd, and
+    the length of its gradient per tolerance unit."""
+    K, p = W.shape
+    dw = W[a] - W[b]                                                   # (n, p)
+    g = np.einsum("np,np->n", dw, Phi)
+    grad_t = np.einsum("np,npd->nd", dw, G) / scale                    # dg / d(tolerance unit)
+    C = cov.reshape(K, p, K, p)
+    var = np.empty(len(Phi))
+    for ka, kb in {(int(i), int(j)) for i, j in zip(a, b)}:
+        m = (a == ka) & (b == kb)
+        S = C[ka, :, ka] - C[ka, :, kb] - C[kb, :, ka] + C[kb, :, kb]
+        var[m] = np.einsum("np,pq,nq->n", Phi[m], S, Phi[m])
+    return g, np.sqrt(np.maximum(var, 0.0)), np.maximum(np.linalg.norm(grad_t, axis=1), 1e-12)
+
+
 @dataclass(frozen=True)
 class RegimeModel:
     """A fitted classifier: ``labels`` (K,), coefficients ``W`` (K, p), Laplace covariance ``cov``
-    (K p, K p) of vec(W) (row-major), the axes, the basis ``degree`` and ``confidence`` of the band."""
+    (K p, K p) of vec(W) (row-major), the axes, the basis ``degree``, ``confidence`` of the band,
+    ``prior_sd`` the prior scale sigma of the degree-1 coefficients in ``W`` (unit coordinates), and
+    ``mixture``: the posterior over sigma, ((weight, W_k, cov_k, sigma_k), ...) with weights summing to
+    1 (``W``, ``cov`` are its most probable member; see ``fit_regime_model``)."""
 
     labels: tuple
     W: np.ndarray
@@ -114,6 +140,8 @@ class RegimeModel:
     axes: tuple[AxisScale, ...]
     degree: int
     confidence: float = 0.95
+    prior_sd: float = math.nan
+    mixture: tuple = ()
 
     @property
     def z(self) -> float:
@@ -134,27 +162,26 @@ class RegimeModel:
         return softmax(self.latent(self.unit(X)), axis=1)
 
     def pair_stats(self, U: np.ndarray) -> dict[str, np.ndarray]:
-        """At unit coordinates U: the two most probable labels (a, b), g = f_a - f_b >= 0, its
-        Laplace sd, and sigma_loc = sd / |grad g| in tolerance units (the boundary-location sd)."""
+        """At unit coordinates U: the two most probable labels (a, b), g = f_a - f_b >= 0 and its Laplace
+        sd, ``dist`` = g / |grad g| (distance to the boundary, linearized) and ``sigma_loc``, the
+        boundary-location sd, all lengths in tolerance units.
+
+        sigma_loc is the root-mean-square deviation of the boundary of the pair (a, b) from this model's,
+        under the posterior over the prior scale sigma (``mixture``): member k, whose boundary lies at
+        signed distance dist_k - dist from this one with Laplace sd sd_k / |grad g_k|, contributes
+        weight_k ((sd_k / |grad g_k|)^2 + (dist_k - dist)^2). With one member it is sd / |grad g|."""
         Phi, G = legendre_basis(U, self.degree, grad=True)
         F = Phi @ self.W.T
         order = np.argsort(-F, axis=1)
         a, b = order[:, 0], order[:, 1]
-        rows = np.arange(len(U))
-        g = F[rows, a] - F[rows, b]
-        dw = self.W[a] - self.W[b]                                     # (n, p)
         scale = np.array([ax.tol_per_u for ax in self.axes])           # d(tol units)/du
-        grad_t = np.einsum("np,npd->nd", dw, G) / scale                # dg / d(tolerance unit)
-        K, p = self.W.shape
-        C = self.cov.reshape(K, p, K, p)
-        var = np.empty(len(U))
-        for ka, kb in {(int(i), int(j)) for i, j in zip(a, b)}:
-            m = (a == ka) & (b == kb)
-            S = C[ka, :, ka] - C[ka, :, kb] - C[kb, :, ka] + C[kb, :, kb]
-            var[m] = np.einsum("np,pq,nq->n", Phi[m], S, Phi[m])
-        sd = np.sqrt(np.maximum(var, 0.0))
-        gn = np.maximum(np.linalg.norm(grad_t, axis=1), 1e-12)
-        return {"a": a, "b": b, "g": g, "sd": sd, "sigma_loc": sd / gn, "dist": g / gn}
+        g, sd, gn = _pair_moments(self.W, self.cov, Phi, G, a, b, scale)
+        members = self.mixture or ((1.0, self.W, self.cov, self.prior_sd),)
+        msd = np.zeros(len(U))
+        for weight, Wk, Ck, _ in members:
+            gk, sdk, gnk = _pair_moments(Wk, Ck, Phi, G, a, b, scale)
+            msd += weight * ((sdk / gnk) ** 2 + (gk / gnk - g / gn) ** 2)
+        return {"a": a, "b": b, "g": g, "sd": sd, "sigma_loc": np.sqrt(msd), "dist": g / gn}
 
 
 def project_to_boundary(model: RegimeModel, U: np.ndarray, steps: int = 3) -> np.ndarray:
@@ -172,47 +199,28 @@ def project_to_boundary(model: RegimeModel, U: np.ndarray, steps: int = 3) -> np
     return U
 
 
-def _design(U: np.ndarray, degree: int) -> np.ndarray:
-    return legendre_basis(U, degree)
+def _prior_precision(axes_dim: int, degree: int, prior_sd: float, smoothness: float, intercept_sd: float) -> np.ndarray:
+    """Prior precision of one label's coefficients: sd ``prior_sd * smoothness**(k - 1)`` for a term of
+    total degree k >= 1, ``intercept_sd`` for the intercept."""
+    tdeg = np.array([sum(e) for e in _exponents(axes_dim, degree)], float)
+    sd = np.where(tdeg == 0, intercept_sd, prior_sd * smoothness ** np.maximum(tdeg - 1, 0))
+    return 1.0 / sd**2
 
 
-def fit_regime_model(X: Any, y: Sequence, axes: Sequence[AxisScale], *, degree: int = 3,
-                     prior_sd: float = 10.0, smoothness: float = 0.3, confidence: float = 0.95,
-                     labels: Sequence | None = None) -> RegimeModel:
-    """MAP fit and Laplace covariance of the multinomial logistic model.
-
-    X (n, d) axis values (axis units); y (n,) labels; ``labels`` the label set (default: the
-    sorted distinct y; at least two; labels outside it are ignored). Prior: independent normal
-    coefficients, sd ``prior_sd`` for the degree-1 terms, ``prior_sd * smoothness**(k - 1)`` for a
-    term of total degree k (a smoothness prior: without it a sharp boundary bends the cubic terms
-    into spurious islands), 10 ``prior_sd`` for the intercept.
-    """
-    X = np.atleast_2d(np.asarray(X, float))
-    y = np.asarray([str(v) for v in y], dtype=object)
-    labs = tuple(str(v) for v in (labels if labels is not None else sorted(set(y))))
-    if len(labs) < 2:
-        raise ValueError(f"labels={labs!r}: at least two labels are needed to locate a boundary")
-    idx = {lab: i for i, lab in enumerate(labs)}
-    keep = np.array([v in idx for v in y], bool)
-    X, y = X[keep], y[keep]
-    axes = tuple(axes)
-    U = np.stack([a.to_u(X[:, j]) for j, a in enumerate(axes)], axis=1) if len(X) else np.zeros((0, len(axes)))
-    Phi = _design(U, degree)
+def _map_fit(Phi: np.ndarray, Y: np.ndarray, prec: np.ndarray, w0: np.ndarray):
+    """MAP coefficients (K p,), Hessian of the negative log posterior there, and its value (without the
+    prior's normalization), for the multinomial logistic model with independent normal coefficients of
+    precisions ``prec`` (K p,)."""
     n, p = Phi.shape
-    K = len(labs)
-    Y = np.zeros((n, K))
-    Y[np.arange(n), [idx[v] for v in y]] = 1.0
-    tdeg = np.array([sum(e) for e in _exponents(len(axes), degree)], float)
-    prec = 1.0 / (prior_sd * np.where(tdeg == 0, 10.0, smoothness ** (tdeg - 1))) ** 2
-    prec_full = np.tile(prec, K)
+    K = Y.shape[1]
 
     def nlp(w):
         F = Phi @ w.reshape(K, p).T
-        return float(np.sum(logsumexp(F, axis=1)) - np.sum(F * Y) + 0.5 * np.sum(prec_full * w * w))
+        return float(np.sum(logsumexp(F, axis=1)) - np.sum(F * Y) + 0.5 * np.sum(prec * w * w))
 
     def grad(w):
         P = softmax(Phi @ w.reshape(K, p).T, axis=1)
-        return ((P - Y).T @ Phi).ravel() + prec_full * w
+        return ((P - Y).T @ Phi).ravel() + prec * w
 
     outer = Phi[:, :, None] * Phi[:, None, :]                          # (n, p, p)
 
@@ -220,12 +228,67 @@ def fit_regime_model(X: Any, y: Sequence, axes: Sequence[AxisScale], *, degree: 
         P = softmax(Phi @ w.reshape(K, p).T, axis=1)
         Wkl = np.einsum("nk,kl->nkl", P, np.eye(K)) - P[:, :, None] * P[:, None, :]
         H = np.tensordot(Wkl, outer, axes=(0, 0)).transpose(0, 2, 1, 3)   # (k, p, l, q)
-        return H.reshape(K * p, K * p) + np.diag(prec_full)
+        return H.reshape(K * p, K * p) + np.diag(prec)
 
-    res = minimize(nlp, np.zeros(K * p), jac=grad, hess=hess, method="trust-exact",
-                   options={"gtol": 1e-8, "maxiter": 300})
-    cov = np.linalg.inv(hess(res.x))
-    return RegimeModel(labs, res.x.reshape(K, p), 0.5 * (cov + cov.T), axes, degree, confidence)
+    res = minimize(nlp, w0, jac=grad, hess=hess, method="trust-exact", options={"gtol": 1e-8, "maxiter": 300})
+    return res.x, hess(res.x), float(res.fun)
+
+
+def _log_evidence(H: np.ndarray, prec: np.ndarray, nlp_min: float) -> float:
+    """Laplace log marginal likelihood: -nlp(w*) + (1/2) log det(prior precision) - (1/2) log det H."""
+    return -nlp_min + 0.5 * float(np.sum(np.log(prec))) - 0.5 * float(np.linalg.slogdet(H)[1])
+
+
+def fit_regime_model(X: Any, y: Sequence, axes: Sequence[AxisScale], *, degree: int = 3,
+                     prior_sd: float = 10.0, smoothness: float = 0.3, confidence: float = 0.95,
+                     labels: Sequence | None = None, prior_span: float = 1.0) -> RegimeModel:
+    """MAP fit and Laplace covariance of the multinomial logistic model.
+
+    X (n, d) axis values (axis units); y (n,) labels; ``labels`` the label set (default: the
+    sorted distinct y; at least two; labels outside it are ignored). Prior: independent normal
+    coefficients, sd ``sigma`` for the degree-1 terms, ``sigma * smoothness**(k - 1)`` for a
+    term of total degree k (a smoothness prior: without it a sharp boundary bends the cubic terms
+    into spurious islands), 10 ``prior_sd`` for the intercept.
+
+    ``sigma`` is the scale of the latent slopes, i.e. the inverse of the transition width between
+    regimes (in unit coordinates), a hyperparameter with a flat prior on log sigma over the grid
+    ``prior_sd / 2**k`` >= ``prior_sd / prior_span`` (``prior_span`` = 1: sigma = ``prior_sd``). Each
+    sigma gets its MAP fit, Laplace covariance and Laplace evidence (marginal likelihood of the labels);
+    the evidences give the posterior over sigma (``RegimeModel.mixture``). The returned ``W``, ``cov``
+    are those of the most probable sigma (type-II maximum likelihood); the boundary-location sd
+    (``RegimeModel.pair_stats``) averages over the posterior. Labels that change sharply favour the
+    largest sigma, the sharpest transition the prior admits; labels mixed across a fuzzy transition
+    favour the sigma of its width; a few labels that cannot tell the two apart keep both, and the band
+    is then as wide as the softer transition allows.
+    """
+    X = np.atleast_2d(np.asarray(X, float))
+    y = np.asarray([str(v) for v in y], dtype=object)
+    labs = tuple(str(v) for v in (labels if labels is not None else sorted(set(y))))
+    if len(labs) < 2:
+        raise ValueError(f"labels={labs!r}: at least two labels are needed to locate a boundary")
+    if not prior_span >= 1.0:
+        raise ValueError(f"prior_span={prior_span!r}: must be >= 1 (ratio of the largest to the smallest prior sd)")
+    idx = {lab: i for i, lab in enumerate(labs)}
+    keep = np.array([v in idx for v in y], bool)
+    X, y = X[keep], y[keep]
+    axes = tuple(axes)
+    U = np.stack([a.to_u(X[:, j]) for j, a in enumerate(axes)], axis=1) if len(X) else np.zeros((0, len(axes)))
+    Phi = legendre_basis(U, degree)
+    K = len(labs)
+    Y = np.zeros((len(U), K))
+    Y[np.arange(len(U)), [idx[v] for v in y]] = 1.0
+    fits, w = [], np.zeros(K * Phi.shape[1])
+    for k in range(int(math.floor(math.log2(prior_span) + 1e-9)) + 1):
+        sigma = prior_sd / 2.0**k
+        prec = np.tile(_prior_precision(len(axes), degree, sigma, smoothness, 10.0 * prior_sd), K)
+        w, H, nlp_min = _map_fit(Phi, Y, prec, w)
+        cov = np.linalg.inv(H)
+        fits.append((_log_evidence(H, prec, nlp_min), w.reshape(K, -1), 0.5 * (cov + cov.T), sigma))
+    ev = np.array([f[0] for f in fits])
+    weights = np.exp(ev - ev.max()) / np.sum(np.exp(ev - ev.max()))
+    mixture = tuple((float(q), Wk, Ck, sk) for q, (_, Wk, Ck, sk) in zip(weights, fits))
+    _, W, cov, sigma = fits[int(np.argmax(ev))]
+    return RegimeModel(labs, W, cov, axes, degree, confidence, sigma, mixture)
 
 
 def unit_grid(dim: int, n: int) -> np.ndarray:
