@@ -99,7 +99,9 @@ def _tri_plot(ax, pts, tri, values, title, cmap="viridis", S=None, vmin=None, vm
 
 
 def reference_report(run_dir, out_dir, paper_path=None) -> dict:
-    """Write the reference-run figures and ``comparison.md``/``comparison.json`` into ``out_dir``."""
+    """Write the reference-run figures and ``comparison.md``/``comparison.json`` into ``out_dir``.
+
+    Returns {"meta": run status, t reached (s), wall time (s), regime; "table": the ours-vs-paper rows}."""
     from solver.output import load_run
     from sweep.classify import classify_fields
 
@@ -109,8 +111,22 @@ def reference_report(run_dir, out_dir, paper_path=None) -> dict:
     summary = json.loads((run_dir / "summary.json").read_text())
     pts, tri, snaps = load_run(run_dir)
     paper = paper_reported(paper_path)["reference_experiment"]
+    _plot_injection_pressure(ts, paper, out)
+    _plot_fields(pts, tri, snaps, out)
+    t_last, f_last = snaps[-1]
+    c = classify_fields(pts, tri, f_last["S"], f_last["phi"], r_inner=5.0, r_outer=53.0)
+    rows = _comparison_rows(ts, c, paper)
+    table = pd.DataFrame(rows, columns=["quantity", "paper", "dchfrac", "how measured"])
+    table["t_compared_s"] = t_last
+    meta = {"run_dir": str(run_dir), "status": summary.get("status"), "t_reached": summary.get("t_reached"),
+            "wall_time_s": summary.get("wall_time_s"), "regime": c.regime}
+    _write_comparison(out, rows, table, meta, ts)
+    return {"meta": meta, "table": table}
 
-    # injection pressure and damage (Fig. injection-pressure, Appendix B)
+
+def _plot_injection_pressure(ts: pd.DataFrame, paper: dict, out: Path) -> None:
+    """injection_pressure.png: p_inj (kPa) against t (s) with the paper's peak and plateau onset, and p_inj
+    beside the mean damage, each over its maximum (Fig. injection-pressure, Appendix B)."""
     fig, ax = _figure(1, 2, (11, 4))
     ax[0, 0].plot(ts["t"], ts["p_inj"], "k-", label="dchfrac")
     ax[0, 0].axhline(paper["peak_injection_pressure"], color="tab:red", ls="--", label="paper peak 470 kPa")
@@ -127,9 +143,13 @@ def reference_report(run_dir, out_dir, paper_path=None) -> dict:
     fig.tight_layout()
     save_figure(fig, out / "injection_pressure.png")
 
+
+def _plot_fields(pts, tri, snaps, out: Path) -> None:
+    """fields.png (porosity first and last, damage, saturation, volumetric strain, pressure in kPa) and
+    supplementary_fields.png (hoop stress in kPa, log10 permeability in mm², water flux in mm/s), last
+    snapshot with the S = 0.5 front in white."""
     t_last, f_last = snaps[-1]
     f_first = snaps[0][1]
-    c = classify_fields(pts, tri, f_last["S"], f_last["phi"], r_inner=5.0, r_outer=53.0)
     fig, ax = _figure(2, 3, (15, 9.5))
     _tri_plot(ax[0, 0], pts, tri, f_first["phi"], f"porosity φ (-), t = {snaps[0][0]:.2g} s", cmap="cividis", vmin=0, vmax=1)
     _tri_plot(ax[0, 1], pts, tri, f_last["phi"], f"porosity φ (-), t = {t_last:.3g} s (S = 0.5 white)", cmap="cividis", S=f_last["S"], vmin=0, vmax=1)
@@ -146,9 +166,13 @@ def reference_report(run_dir, out_dir, paper_path=None) -> dict:
     fig.tight_layout()
     save_figure(fig, out / "supplementary_fields.png")
 
+
+def _comparison_rows(ts: pd.DataFrame, c, paper: dict) -> list:
+    """(quantity, paper's figure, ours, how measured) for each compared quantity; ``c`` is the last
+    snapshot's classification (sweep.classify.classify_fields).  Units in the quantity names."""
     onset = plateau_onset(ts["t"].values, ts["p_inj"].values)
     fronts = np.asarray(c.finger_radii) if getattr(c, "finger_radii", None) is not None else np.array([])
-    rows = [
+    return [
         ("peak injection pressure (kPa)", paper["peak_injection_pressure"], float(ts["p_inj"].max()),
          "maximum of the mean inner-circle pressure"),
         ("pressure plateau onset (s)", paper["pressure_plateau_onset"], onset,
@@ -163,13 +187,14 @@ def reference_report(run_dir, out_dir, paper_path=None) -> dict:
          "the paper measures 'from the centre to the end of phi = 1 regions'"),
         ("crack length beyond r_i (mm)", paper["mean_crack_length"], float(c.crack_length), "tip radius - 5 mm"),
     ]
-    table = pd.DataFrame(rows, columns=["quantity", "paper", "dchfrac", "how measured"])
-    table["t_compared_s"] = t_last
-    meta = {"run_dir": str(run_dir), "status": summary.get("status"), "t_reached": summary.get("t_reached"),
-            "wall_time_s": summary.get("wall_time_s"), "regime": c.regime}
+
+
+def _write_comparison(out: Path, rows: list, table: pd.DataFrame, meta: dict, ts: pd.DataFrame) -> None:
+    """comparison.md (the table with the run's status), comparison.csv, comparison.json and the run's
+    timeseries.csv beside them."""
     md = ["# Reference run (Sec. 3.5): dchfrac vs paper", "",
           f"Run: status {meta['status']}, t reached {meta['t_reached']} s, wall time {meta['wall_time_s']:.0f} s; "
-          f"classified regime: {c.regime}.", "",
+          f"classified regime: {meta['regime']}.", "",
           "| quantity | paper | dchfrac | how measured |", "|---|---|---|---|"]
     for q, pv, ov, how in rows:
         md.append(f"| {q} | {pv} | {ov:.3g} | {how} |" if isinstance(ov, float) else f"| {q} | {pv} | {ov} | {how} |")
@@ -178,7 +203,6 @@ def reference_report(run_dir, out_dir, paper_path=None) -> dict:
     table.to_csv(out / "comparison.csv", index=False)
     (out / "comparison.json").write_text(json.dumps({"meta": meta, "rows": table.to_dict(orient="records")}, indent=2, default=float))
     ts.to_csv(out / "timeseries.csv", index=False)
-    return {"meta": meta, "table": table}
 
 
 def convergence_report(run_dirs, out_dir) -> pd.DataFrame:

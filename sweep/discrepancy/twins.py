@@ -34,6 +34,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -208,88 +209,149 @@ def _link_resolutions(summary: dict) -> None:
             rb.update({k: other.get(k) for k in ("passed", "verdict", "conditions", "observables")})
 
 
+@dataclass(frozen=True)
+class _TwinSetup:
+    """What every twin of a campaign shares: the campaign and its SPEC, the observation times (s), the data's
+    and the workflow's run options, the output and cache folders, the parallel runs and the optional
+    ``[reference_check]``."""
+    camp: dict
+    spec: object
+    times: np.ndarray
+    data_opts: object
+    wf_opts: object
+    results: Path
+    cache: Path
+    n_jobs: int
+    ref: object = None
+
+
 def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
     """Run the twin experiments of ``campaign`` (path or dict); returns the summary dict.
 
-    n_jobs : parallel solver runs (default: the spec's ``[fit] n_jobs``).
+    n_jobs : parallel solver runs (default: the spec's ``[fit] n_jobs``).  Every twin is validated before
+    any run starts; each twin's entry is merged into ``<results>/summary.json`` as soon as it ends.
     """
+    setup = _prepare_campaign(campaign, results, cache, n_jobs)
+    summary_path = setup.results / "summary.json"
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    setup = _check_before_runs(setup, only)
+    for twin in setup.camp["twin"]:
+        name = twin["name"]
+        if only and name not in only:
+            continue
+        summary[name] = _run_one_twin(setup, twin)
+        _write_summary_entry(summary_path, name, summary[name])
+    return json.loads(summary_path.read_text()) if summary_path.is_file() else summary
+
+
+def _prepare_campaign(campaign, results, cache, n_jobs) -> _TwinSetup:
+    """The campaign (loaded when a path), its SPEC, observation times and run options (validated here)."""
     from solver import RunOptions
 
-    from .data import load_measured
-    from .forward import SolverForward, fine_forwards
     from .spec import spec_from_dict
-    from .twin import make_twin
-    from .workflow import run_workflow
 
     camp = load_twin_campaign(campaign) if not isinstance(campaign, dict) else campaign
     spec = spec_from_dict(camp["spec"])
     n_jobs = spec.fit.n_jobs if n_jobs is None else int(n_jobs)
     dat = camp["data"]
     a, b, n = dat["times"]
-    times = np.linspace(float(a), float(b), int(n))
-    results, cache = Path(results), Path(cache)
     data_opts = RunOptions.from_dict({k: v for k, v in dat.items() if k not in ("times", "observables", "noise", "seed")})
-    wf_opts = RunOptions.from_dict(spec.options)
-    summary_path = results / "summary.json"
-    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    return _TwinSetup(camp, spec, np.linspace(float(a), float(b), int(n)), data_opts,
+                      RunOptions.from_dict(spec.options), Path(results), Path(cache), n_jobs)
+
+
+def _check_before_runs(setup: _TwinSetup, only) -> _TwinSetup:
+    """The ``[reference_check]`` (and the paper's figures it compares with), every twin and ``--only``
+    checked before any run starts; returns ``setup`` with the loaded reference check."""
+    import dataclasses
+
     ref = None
-    if "reference_check" in camp:    # validated, and the paper's figures found, before any run starts
+    if "reference_check" in setup.camp:
         from sweep.reference import paper_reported
 
         from .reference_check import load_reference_check
-        ref = load_reference_check(camp["reference_check"])
+        ref = load_reference_check(setup.camp["reference_check"])
         paper_reported()
-    validate_twin_campaign(camp, spec)     # every twin, before any run starts
-    unknown = sorted(set(only or ()) - {t["name"] for t in camp["twin"]})
+    validate_twin_campaign(setup.camp, setup.spec)
+    names = [t["name"] for t in setup.camp["twin"]]
+    unknown = sorted(set(only or ()) - set(names))
     if unknown:
-        raise ValueError(f"--only {unknown}: no such twin among {[t['name'] for t in camp['twin']]}")
-    for twin in camp["twin"]:
-        name = twin["name"]
-        if only and name not in only:
-            continue
-        t0 = time.time()
-        log.info("twin %s (hidden %s, expect %s)", name, twin.get("hidden", {}), twin["expect"])
-        hidden = dict(twin.get("hidden", {}))
-        law = [k for k, v in hidden.items() if v == "law"]   # "law": the parameter follows its law of C (β = 65.7 √C)
-        gen_base = {k: v for k, v in spec.baseline_overrides().items() if k not in law}
-        hidden = {k: v for k, v in hidden.items() if k not in law}
-        gen = SolverForward(gen_base, data_opts, cache / "data", n_jobs=n_jobs)
-        conds = twin_conditions(camp, twin, spec)
-        folder = make_twin(results / name / "data", gen, conds, times, hidden,
-                           noise=dat.get("noise"), seed=int(dat.get("seed", 0)),
-                           observables=twin_observables(camp, twin), regime=False)
-        fwd = SolverForward(spec.baseline_overrides(), wf_opts, cache / "workflow", n_jobs=n_jobs)
-        # one fine model per mesh realization ([spec.discretization] mesh_seeds): the data are one realization
-        # (their own mesh_seed) the workflow cannot know; the cache key includes mesh_seed
-        fine = fine_forwards(spec, cache / "workflow", n_jobs)
-        rep = run_workflow(load_measured(folder), spec, fwd, results / name, fine_forward=fine)
-        summary[name] = {"hidden": twin.get("hidden", {}), "expect": twin["expect"], "verdict": rep["verdict"],
-                         "named_effect": rep["named_effect"], "strength": rep["strength"],
-                         "strength_interval": rep["strength_interval"],
-                         "strength_interval_rough": rep.get("strength_interval_rough"), "tie": rep["tie"],
-                         "not_identifiable": rep["not_identifiable"],
-                         "gap_before": rep["gap_before"].get("total"), "gap_after": rep["gap_after"].get("total"),
-                         "passed": twin_passed(twin, rep), "wall_time_s": round(time.time() - t0, 1),
-                         "forward_runs": rep["forward_runs"], "forward_runs_by_stage": rep.get("forward_runs_by_stage"),
-                         "data_runs": gen.n_runs,
-                         "realization_spread_rms": rep["realization_spread_rms"],
-                         "realization_covariance": rep.get("realization_covariance"), "conditions": list(conds),
-                         "model_jitter_rms": {k: (v or {}).get("rms") for k, v in (rep.get("model_jitter") or {}).items()} or None,
-                         "strength_interval_raw": (rep["accepted"][0].get("strength_interval_raw")
-                                                   if rep["named_effect"] and rep.get("accepted") else None),
-                         "observables": list(twin_observables(camp, twin))}
-        if ref is not None:
-            from .reference_check import reference_models, run_reference_check
+        raise ValueError(f"--only {unknown}: no such twin among {names}")
+    return dataclasses.replace(setup, ref=ref)
 
-            truth = {**gen_base, **hidden}
-            rc = run_reference_check(ref, reference_models(spec, rep, truth, ref.conditions),
-                                     results / name / "reference_check", cache / "reference", n_jobs)
-            summary[name]["reference_check"] = {"status": rc["status"], "gap_to_paper": rc["gap_to_paper"],
-                                                "quantities": {q: rc["quantities"].get(q) for q in rc["gap_to_paper"]["truth"]}}
-        if twin.get("resolved_by"):
-            summary[name]["resolved_by"] = {"twin": twin["resolved_by"]}    # filled in by _link_resolutions
-        _write_summary_entry(summary_path, name, summary[name])
-    return json.loads(summary_path.read_text()) if summary_path.is_file() else summary
+
+def _run_one_twin(setup: _TwinSetup, twin: dict) -> dict:
+    """One twin: its synthetic data, the workflow on them, the optional reference check; its summary entry."""
+    from .data import load_measured
+    from .forward import SolverForward, fine_forwards
+    from .workflow import run_workflow
+
+    t0 = time.time()
+    name, spec, cache = twin["name"], setup.spec, setup.cache
+    log.info("twin %s (hidden %s, expect %s)", name, twin.get("hidden", {}), twin["expect"])
+    gen, truth, conds, folder = _make_twin_data(setup, twin)
+    fwd = SolverForward(spec.baseline_overrides(), setup.wf_opts, cache / "workflow", n_jobs=setup.n_jobs)
+    # one fine model per mesh realization ([spec.discretization] mesh_seeds): the data are one realization
+    # (their own mesh_seed) the workflow cannot know; the cache key includes mesh_seed
+    fine = fine_forwards(spec, cache / "workflow", setup.n_jobs)
+    rep = run_workflow(load_measured(folder), spec, fwd, setup.results / name, fine_forward=fine)
+    entry = _summary_entry(setup, twin, rep, conds, gen.n_runs, time.time() - t0)
+    if setup.ref is not None:
+        entry["reference_check"] = _reference_entry(setup, name, rep, truth)
+    if twin.get("resolved_by"):
+        entry["resolved_by"] = {"twin": twin["resolved_by"]}    # filled in by _link_resolutions
+    return entry
+
+
+def _make_twin_data(setup: _TwinSetup, twin: dict):
+    """Write the twin's synthetic measured data (``<results>/<name>/data``) from the data-generating model.
+
+    Returns (the data's forward model, the data-generating overrides, the twin's conditions, the data folder).  A hidden value
+    "law" lets the parameter follow its law of C (β = 65.7 √C): it is left out of the overrides."""
+    from .forward import SolverForward
+    from .twin import make_twin
+
+    camp, spec, dat = setup.camp, setup.spec, setup.camp["data"]
+    hidden = dict(twin.get("hidden", {}))
+    law = [k for k, v in hidden.items() if v == "law"]
+    gen_base = {k: v for k, v in spec.baseline_overrides().items() if k not in law}
+    hidden = {k: v for k, v in hidden.items() if k not in law}
+    gen = SolverForward(gen_base, setup.data_opts, setup.cache / "data", n_jobs=setup.n_jobs)
+    conds = twin_conditions(camp, twin, spec)
+    folder = make_twin(setup.results / twin["name"] / "data", gen, conds, setup.times, hidden,
+                       noise=dat.get("noise"), seed=int(dat.get("seed", 0)),
+                       observables=twin_observables(camp, twin), regime=False)
+    return gen, {**gen_base, **hidden}, conds, folder
+
+
+def _summary_entry(setup: _TwinSetup, twin: dict, rep: dict, conds: dict, data_runs: int, wall_s: float) -> dict:
+    """One twin's row of summary.json from its workflow report (verdict, strength, gaps, cost, pass/fail)."""
+    return {"hidden": twin.get("hidden", {}), "expect": twin["expect"], "verdict": rep["verdict"],
+            "named_effect": rep["named_effect"], "strength": rep["strength"],
+            "strength_interval": rep["strength_interval"],
+            "strength_interval_rough": rep.get("strength_interval_rough"), "tie": rep["tie"],
+            "not_identifiable": rep["not_identifiable"],
+            "gap_before": rep["gap_before"].get("total"), "gap_after": rep["gap_after"].get("total"),
+            "passed": twin_passed(twin, rep), "wall_time_s": round(wall_s, 1),
+            "forward_runs": rep["forward_runs"], "forward_runs_by_stage": rep.get("forward_runs_by_stage"),
+            "data_runs": data_runs,
+            "realization_spread_rms": rep["realization_spread_rms"],
+            "realization_covariance": rep.get("realization_covariance"), "conditions": list(conds),
+            "model_jitter_rms": {k: (v or {}).get("rms") for k, v in (rep.get("model_jitter") or {}).items()} or None,
+            "strength_interval_raw": (rep["accepted"][0].get("strength_interval_raw")
+                                      if rep["named_effect"] and rep.get("accepted") else None),
+            "observables": list(twin_observables(setup.camp, twin))}
+
+
+def _reference_entry(setup: _TwinSetup, name: str, rep: dict, truth: dict) -> dict:
+    """Run the workflow's models on the paper's reference experiment; their summary.json record."""
+    from .reference_check import reference_models, run_reference_check
+
+    ref = setup.ref
+    rc = run_reference_check(ref, reference_models(setup.spec, rep, truth, ref.conditions),
+                             setup.results / name / "reference_check", setup.cache / "reference", setup.n_jobs)
+    return {"status": rc["status"], "gap_to_paper": rc["gap_to_paper"],
+            "quantities": {q: rc["quantities"].get(q) for q in rc["gap_to_paper"]["truth"]}}
 
 
 def main(argv=None) -> int:
@@ -300,7 +362,7 @@ def main(argv=None) -> int:
     ap.add_argument("--results", required=True)
     ap.add_argument("--cache", required=True)
     ap.add_argument("--only", nargs="*")
-    ap.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: the spec's workflow.n_jobs)")
+    ap.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: the spec's [fit] n_jobs)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     a = ap.parse_args(argv)
     from .cli import show_progress
