@@ -1044,3 +1044,27 @@ def test_show_progress_prints_to_stderr_unless_quiet(capsys):
     finally:
         lg.handlers[:] = saved[0]
         lg.setLevel(saved[1])
+
+
+# ----------------------------------------------------------------------------- report: split observables, bounds
+def test_report_with_observables_split_across_conditions_and_a_pinned_parameter(tmp_path):
+    """One experiment split by observable (the training condition measures p_inj only, the held-out one the
+    front only, as results/fidelity/discrepancy/): the figures are drawn (a condition without an observable
+    leaves its panel empty); and a calibrated parameter whose range excludes the truth (E in [150, 250] kPa,
+    truth 331) is reported as pinned at its upper bound."""
+    import pandas as pd
+
+    data_dir = make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0), {"a": {"w_i": 50.0}, "d": {"w_i": 50.0}},
+                         TIMES, {}, seed=1, observables=("p_inj", "front_radius_mean"))
+    obs = pd.read_csv(data_dir / "observations.csv")
+    keep = ((obs.condition == "a") & (obs.observable == "p_inj")) | ((obs.condition == "d") & (obs.observable != "p_inj"))
+    obs[keep].to_csv(data_dir / "observations.csv", index=False)
+    spec = spec_from_dict({"baseline": {"effects_off": OFF},
+                           "calibrate": [{"name": "E", "lower": 150.0, "upper": 250.0, "initial": 200.0}],
+                           "candidates": {"effects": ["compliant_boundary"]}, "holdout": {"ids": ["d"]},
+                           "options": {"h": 8.0, "t_end": 1.0}})
+    rep = run_workflow(load_measured(data_dir), spec, ToyForward({}, h=8.0), out_dir=tmp_path / "out", figures=True)
+    assert rep["calibrated_at_bound"] == {"E": "upper"}
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "figures failed" not in md and "E is at its upper bound" in md
+    assert any((tmp_path / "out").glob("*.png"))

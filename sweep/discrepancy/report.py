@@ -69,6 +69,7 @@ def build_report(run, forward) -> dict:
               "profile_not_identifiable": run.profile_unidentified,
               "gap_before": run.gap_before, "gap_after": run.gap_cur if named_ok else run.gap_before,
               "calibrated_baseline": run.fit0.values(),
+              "calibrated_at_bound": at_bounds(run.problem.spec.calibrate, run.fit0.values()),
               "final_values": run.current.values() if named_ok else run.fit0.values(),
               "train": run.train, "holdout": run.holdout,
               "localization_before": run.loc0, "localization_after": run.loc if named_ok else None,
@@ -96,6 +97,9 @@ def _fig_curves(problem, fit_before, fit_after, path):
         for i, o in enumerate(obs):
             ax = axes[i, j]
             m = (problem.cond == cid) & (problem.obs == o)
+            if not np.any(m):              # this condition does not measure o
+                ax.axis("off")
+                continue
             t = problem.t[m]
             ax.errorbar(t, problem.y[m], problem.sig[m], fmt=".", ms=3, color="k", alpha=0.5, label="measured")
             ax.plot(t, pb[cid][o], "C0-", label="baseline (calibrated)")
@@ -248,6 +252,25 @@ def _noise_lines(report: dict) -> list[str]:
     return L
 
 
+def at_bounds(calibrate, values: dict, rel: float = 1e-3) -> dict:
+    """Calibrated parameters whose fitted value sits on a bound of their [[calibrate]] range: name ->
+    "lower" | "upper".  A pinned parameter absorbs no more of a signature, and the data ask for a value outside
+    the range, so the report says so beside the value.  ``rel``: the distance to the bound, as a fraction of
+    the range (in decades on a log scale)."""
+    out = {}
+    for c in calibrate:
+        v = values.get(c.name)
+        if v is None:
+            continue
+        f = (lambda x: math.log10(x)) if c.scale == "log" else (lambda x: x)
+        span = f(c.upper) - f(c.lower)
+        if f(v) - f(c.lower) <= rel * span:
+            out[c.name] = "lower"
+        elif f(c.upper) - f(v) <= rel * span:
+            out[c.name] = "upper"
+    return out
+
+
 def _candidate_lines(report: dict) -> list[str]:
     """Where the runs went, the calibrated baseline and the first round's candidates."""
     L = []
@@ -256,6 +279,8 @@ def _candidate_lines(report: dict) -> list[str]:
     L += [f"Training conditions: {report['train']}; held out: {report['holdout']}; forward runs: {report['forward_runs']}"
           + (f" (by stage: {by_stage})" if by_stage else "") + ".", "",
           "## Calibrated baseline", "", _f(report["calibrated_baseline"]), "",
+          *[f"**{k} is at its {b} bound**: the data ask for a value outside its [[calibrate]] range." for k, b in
+            (report.get("calibrated_at_bound") or {}).items()], "",
           "## Candidates (first round)", "",
           "| effect | score | ΔBIC | identifiable | tied with | strength | interval | explained | passed |",
           "|---|---|---|---|---|---|---|---|---|"]
