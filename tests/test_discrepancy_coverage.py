@@ -135,7 +135,7 @@ def test_wilson_interval_known_values():
 
 
 @pytest.mark.parametrize("kw,msg", [({"h": 0.0}, "h=0.0"), ({"spread": -1.0}, "spread=-1.0"),
-                                    ({"realization": -2}, "realization=-2")])
+                                    ({"realization": -2}, "realization=-2"), ({"shape": "jagged"}, "shape='jagged'")])
 def test_mesh_toy_refuses_bad_settings(kw, msg):
     with pytest.raises(ValueError, match=msg):
         MeshToy(**kw)
@@ -146,3 +146,17 @@ def test_spec_refuses_an_unknown_profile_likelihood():
         spec_from_dict({"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
                         "candidates": {"effects": OFF}, "holdout": {"ids": ["d"]}, "options": {"h": 4.0},
                         "profile": {"likelihood": "exact"}})
+
+
+def test_wander_deviation_is_a_unit_process_with_exponential_correlation():
+    """The "wander" realizations' paths: unit variance and correlation exp(−Δt/τ) (τ = 0.1 s).  From 2000
+    paths the sample correlation has sd ≈ (1 − ρ²)/√2000 ≈ 0.02 and the variance ≈ √(2/2000) ≈ 0.03."""
+    from sweep.discrepancy.toy import _ou
+
+    rng = np.random.default_rng(4)
+    t = np.array([0.1, 0.15, 0.2, 0.3])
+    x = np.array([_ou(rng, t, 0.1) for _ in range(2000)])
+    assert x.var(axis=0) == pytest.approx(np.ones(4), abs=0.12)
+    c = np.corrcoef(x.T)
+    for (i, j) in ((0, 1), (0, 2), (0, 3)):
+        assert c[i, j] == pytest.approx(np.exp(-(t[j] - t[i]) / 0.1), abs=0.08)

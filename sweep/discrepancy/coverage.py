@@ -80,6 +80,11 @@ class Variant:
     spread: float = 1.0
     bias: float = 1.0
     tables: dict = field(default_factory=dict)
+    shape: str = "smooth"
+
+    def toy(self, h: float, realization: int) -> MeshToy:
+        """The variant's MeshToy on mesh size ``h`` (mm), mesh realization ``realization``."""
+        return MeshToy(h, realization, self.spread, self.bias, self.shape)
 
 
 _REMEDY = {"noise": {"disc_error_fraction": 0.0}, "profile": {"likelihood": "gaussian"}}
@@ -93,6 +98,11 @@ VARIANTS = {v.name: v for v in (
     Variant("remedy_k30", k=30, tables=_REMEDY),
     Variant("remedy_no_spread", spread=0.0, tables=_REMEDY),
     Variant("remedy_spread3", spread=3.0, tables=_REMEDY),
+    Variant("wander_default", shape="wander"),
+    Variant("wander_remedy", shape="wander", tables=_REMEDY),
+    Variant("wander_remedy_marginal", shape="wander", tables={**_REMEDY, "profile": {"likelihood": "marginal"}}),
+    Variant("wander_remedy_k30", shape="wander", k=30, tables=_REMEDY),
+    Variant("wander_fit_correction", shape="wander", tables={"profile": {"fine": False}}),
     Variant("strong_bias", bias=4.0),
     Variant("strong_bias_fit_correction", bias=4.0, tables={"profile": {"fine": False}}),
     Variant("strong_bias_remedy", bias=4.0, tables=_REMEDY),
@@ -122,12 +132,12 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
     hidden = {get_effect(o).parameter: get_effect(o).off for o in OFF}
     hidden.update({e.parameter: truth, su.calibrate: cal})
     base = 1000 * (seed * 10007 + draw + 1)            # mesh realizations of this draw: data, then the checks
-    fines = [MeshToy(2.0, base + 1 + i, variant.spread, variant.bias) for i in range(variant.k)]
+    fines = [variant.toy(2.0, base + 1 + i) for i in range(variant.k)]
     with tempfile.TemporaryDirectory() as tmp:
-        data = load_measured(make_twin(Path(tmp) / "d", MeshToy(2.0, base, variant.spread, variant.bias),
+        data = load_measured(make_twin(Path(tmp) / "d", variant.toy(2.0, base),
                                        su.conditions(), TIMES, hidden, noise=NOISE, seed=base,
                                        observables=tuple(NOISE), regime=False))
-    run = prepare(data, _spec(su, variant.tables), MeshToy(4.0, 0, variant.spread, variant.bias), fines)
+    run = prepare(data, _spec(su, variant.tables), variant.toy(4.0, 0), fines)
     calibrate(run)
     search(run)
     row = {"setup": su.name, "draw": draw, "truth": truth, "cal_truth": cal, "named": bool(run.accepted)}
@@ -143,8 +153,30 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
                 "corr": _correlation(fit.J, j)})
     row["covered"] = bool(row["lower"] <= truth <= row["upper"])
     pf = _Profile(run.problem, fit, j, run.train, 3.841, run.fine if run.spec.profile.fine else None)
-    row.update({"dchi2_truth": pf.dchi2(fit.params[j].to_x(truth)), "threshold": pf.thr})
+    row.update({"dchi2_truth": pf.dchi2(fit.params[j].to_x(truth)), "threshold": pf.thr,
+                "dchi2_truth_others_fixed": _dchi2_others_fixed(pf, truth)})
     return row
+
+
+def _dchi2_others_fixed(pf: _Profile, value: float) -> float:
+    """Δχ² of the strength at ``value`` with the calibrated parameters held at the fit instead of profiled
+    (the correction re-estimated there when the profile does so): the interval that ignores their
+    correlation with the strength holds the truth when this is below the threshold."""
+    from .noise import correction_at
+
+    problem, others = pf.problem, np.delete(pf.x_hat, pf.j)
+    problem.fixed = {pf.p.name: value}
+    old = None
+    try:
+        if pf.fines:
+            vals = {**{q.name: q.from_x(x) for q, x in zip(pf.free, others)}, pf.p.name: value}
+            old = problem.noise.shift_correction(correction_at(problem, pf.fines, vals))
+        r = problem.residual_batch(pf.free, [others], pf.ids)[0]
+    finally:
+        if old is not None:
+            problem.noise.shift_correction(old)
+        problem.fixed = {}
+    return float(pf.deviance(r) - pf.chi2_hat)
 
 
 def _correlation(J: np.ndarray, j: int) -> float:
@@ -192,7 +224,7 @@ def run_study(setups, draws: int, variant: Variant, seed: int = 0, log=None, fir
                 log(rows[-1])
     by = {su.name: summarize([r for r in rows if r["setup"] == su.name]) for su in setups}
     return {"variant": variant.name, "tables": variant.tables, "k": variant.k, "spread": variant.spread,
-            "bias": variant.bias, "seed": seed, "rows": rows, "by_setup": by, "pooled": summarize(rows)}
+            "bias": variant.bias, "shape": variant.shape, "seed": seed, "rows": rows, "by_setup": by, "pooled": summarize(rows)}
 
 
 def combine(studies: list) -> dict:

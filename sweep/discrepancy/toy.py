@@ -90,27 +90,39 @@ class MeshToy(ForwardModel):
     scales the four coefficients a_b = 0.005, a_f = 0.01, a_E = 0.01, a_β = 0.05; 0: no discretization
     error).  β: damage viscosity (kPa·s), v: volumetric coupling (-), both continuous strengths correlated
     with E, k̄, K_s through the early pressure.  δp, δf: the deviation of mesh realization ``realization``,
-    a smooth random curve per condition (``spread`` scales it; 0: none):
+    a random curve per condition (``spread`` scales it; 0: none), of one of two shapes (``shape``):
 
-        δp = spread (P0/483) (3 a (1 − e^{−t/0.1}) + 2 b t/0.3),   δf = spread (0.4 c t/0.3 + 0.15 d sin(πt/0.3))
+    "smooth"   δp = spread (P0/483) (3 a (1 − e^{−t/0.1}) + 2 b t/0.3),  δf = spread (0.4 c t/0.3 + 0.15 d sin(πt/0.3)),
+               a, b, c, d standard normal: two smooth components, correlated over the whole curve;
+    "wander"   δp = spread (P0/483) 3 g(t) u_p(t),  δf = spread 0.4 g(t) u_f(t),  g = 1 − e^{−t/0.05}, u_p, u_f
+               unit Ornstein–Uhlenbeck processes with correlation time 0.1 s (stationary, on a 2.5 ms grid
+               from t = 0, interpolated): the exponential correlation in time the workflow's covariance assumes.
 
-    with a, b, c, d standard normal, drawn from (realization, condition) so a realization is the same mesh
-    whatever the fitted parameters.  Counts evaluations in ``n_runs``.
+    The draws come from (realization, condition), so a realization is the same mesh whatever the fitted
+    parameters.  Counts evaluations in ``n_runs``.
     """
 
     regime_labels = ("porous_invasion",)
 
-    def __init__(self, h: float = 4.0, realization: int = 0, spread: float = 1.0, bias: float = 1.0):
-        if not (h > 0 and spread >= 0 and bias >= 0 and int(realization) >= 0):
+    SHAPES = ("smooth", "wander")
+
+    def __init__(self, h: float = 4.0, realization: int = 0, spread: float = 1.0, bias: float = 1.0,
+                 shape: str = "smooth"):
+        if not (h > 0 and spread >= 0 and bias >= 0 and int(realization) >= 0 and shape in self.SHAPES):
             raise ValueError(f"MeshToy: h={h!r} (> 0), spread={spread!r} (>= 0), bias={bias!r} (>= 0), "
-                             f"realization={realization!r} (integer >= 0)")
+                             f"realization={realization!r} (integer >= 0), shape={shape!r} (one of {self.SHAPES})")
         self.h, self.realization, self.spread, self.bias = float(h), int(realization), float(spread), float(bias)
+        self.shape = shape
         self.n_runs = 0
 
     def _deviation(self, p, P0: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(δp, δf) of this realization for the condition of ``p`` at times ``t``."""
         key = [self.realization, int(round(p.w_i * 1e3)), int(round(p.cement * 1e4)), int(round(p.eta_o * 1e6))]
-        a, b, c, d = np.random.default_rng(key).standard_normal(4)
+        rng = np.random.default_rng(key)
+        if self.shape == "wander":
+            g = self.spread * (1 - np.exp(-t / 0.05))
+            return 3.0 * (P0 / 483.0) * g * _ou(rng, t, 0.1), 0.4 * g * _ou(rng, t, 0.1)
+        a, b, c, d = rng.standard_normal(4)
         dp = self.spread * (P0 / 483.0) * (3.0 * a * (1 - np.exp(-t / 0.1)) + 2.0 * b * t / 0.3)
         df = self.spread * (0.4 * c * t / 0.3 + 0.15 * d * np.sin(np.pi * t / 0.3))
         return dp, df
@@ -141,3 +153,16 @@ class MeshToy(ForwardModel):
             else:
                 raise ValueError(f"MeshToy: observable {obs!r} is not modelled (p_inj, front_radius_mean, regime)")
         return out
+
+
+def _ou(rng, t: np.ndarray, tau: float, dt: float = 0.0025) -> np.ndarray:
+    """A unit stationary Ornstein–Uhlenbeck path (correlation exp(−|Δt|/τ), τ and t in s) drawn on the grid
+    0, dt, 2 dt, … up to max(t) and interpolated at ``t``."""
+    n = int(np.ceil(max(float(np.max(t)), dt) / dt)) + 2
+    rho = math.exp(-dt / tau)
+    xi = rng.standard_normal(n)
+    x = np.empty(n)
+    x[0] = xi[0]
+    for i in range(1, n):                     # n ~ 120 points per path: a short recursion
+        x[i] = rho * x[i - 1] + math.sqrt(1 - rho * rho) * xi[i]
+    return np.interp(t, dt * np.arange(n), x)
