@@ -108,8 +108,10 @@ def test_marginal_likelihood_is_gaussian_for_many_realizations_and_student_t_for
 
 def test_interval_covers_the_truth_on_toy_twins_outside_the_twinned_set_up():
     """kbar calibrated, cement as the condition axis, hidden β of random strength, three check realizations
-    (sweep.discrepancy.coverage), with the likelihood's settings ([noise] disc_error_fraction = 0: the
-    correction's uncertainty is its k-realization covariance; [profile] likelihood = "gaussian").
+    whose deviations wander with the exponential correlation the covariance model assumes
+    (sweep.discrepancy.coverage, variant wander_remedy_marginal), with the likelihood's settings:
+    [noise] disc_error_fraction = 0 (the correction's uncertainty is its k-realization covariance) and
+    [profile] likelihood = "marginal" (that covariance's scale estimated from three realizations).
 
     40 twins: if the interval is a 95 % interval, the number covered is Binomial(40, 0.95) (mean 38, sd 1.4),
     fewer than 34 with probability 0.3 %.  The likelihood-ratio statistic at the truth is χ²₁: below its median
@@ -118,7 +120,7 @@ def test_interval_covers_the_truth_on_toy_twins_outside_the_twinned_set_up():
     from sweep.discrepancy.coverage import SETUPS, VARIANTS, one_draw
 
     su = {s.name: s for s in SETUPS}["kbar_cement_beta"]
-    rows = [one_draw(su, d, VARIANTS["remedy"], seed=5) for d in range(40)]
+    rows = [one_draw(su, d, VARIANTS["wander_remedy_marginal"], seed=5) for d in range(40)]
     named = [r for r in rows if r["named"] and "covered" in r]
     assert len(named) >= 36
     assert sum(r["covered"] for r in named) >= 34 * len(named) / 40
