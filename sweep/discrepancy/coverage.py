@@ -257,6 +257,8 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     from sweep.store import write_json_atomic
 
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+
     if a.combine:
         import json
 
