@@ -114,6 +114,27 @@ class NoiseModel:
             out[pos] = W @ e[pos]
         return out
 
+    def marginal_deviance(self, r: np.ndarray, mask: np.ndarray) -> float:
+        """−2 ln of the likelihood of standardized residuals ``r`` (:meth:`standardize` on ``mask``'s rows)
+        with the realization covariance's scale integrated over its sampling distribution
+        (:meth:`RealizationCovariance.scale_mixture`), up to a constant that does not depend on r; r·r without
+        an estimated realization covariance (k < 2), where the Gaussian likelihood is exact.  The mixture's
+        tails are heavier than the Gaussian's: a series whose realization variance came out too small costs
+        less than r·r says, as the finite number of realizations warrants."""
+        from scipy.special import logsumexp
+
+        r = np.asarray(r, float)
+        terms = self._whiteners.get(("mixture", mask.tobytes()))
+        if terms is None:
+            terms = self.real_cov.scale_mixture(mask, self.sig_diag) if self.real_cov is not None else []
+            self._whiteners[("mixture", mask.tobytes())] = terms
+        total = float(r @ r)
+        for pos, Q, logdet in terms:
+            rs = r[pos]
+            q = np.einsum("i,mij,j->m", rs, Q, rs)
+            total += -2.0 * (logsumexp(-0.5 * (q + logdet)) - np.log(q.size)) - float(rs @ rs)
+        return total
+
     def null_calibration(self, mask: np.ndarray, seed: int) -> dict | None:
         """The residual test's null for the estimated realization covariance on ``mask``'s rows (None
         without one): :meth:`RealizationCovariance.null_calibration`."""

@@ -116,6 +116,10 @@ class ProfileOptions(_Checked):
     smoothing: str = _rule("none", "choice", choices=("none", "quadratic"),
                            doc="quadratic: the interval from a quadratic through noisy profile points (MCAP)")
     grid: int = _rule(4, "int", 2, 20, doc="with quadratic smoothing: extra profile points per side")
+    likelihood: str = _rule("weighted", "choice", choices=("weighted", "gaussian", "marginal"),
+                            doc="delta chi2 of the profile: weighted (series weights n_eff/n from the fit's "
+                                "lag-1 autocorrelation), gaussian (the whitened chi2), marginal (the realization "
+                                "covariance's scale integrated over its sampling distribution from k realizations)")
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,12 @@ profile's minimum.
 The Wald interval trusts a linearization at the fit; when the effect's signature saturates or trades against
 a calibrated parameter along a curved valley (β against E: a smaller β with a stiffer E reproduces the early
 pressure) it is falsely narrow.  The profile refits the other parameters with the strength held at trial
-values; the interval is where the weighted χ² (the per-series weights n_eff/n and the misfit scale of the
-Wald interval) rises by less than ``level``·scale (3.84: 95 % for one parameter).  Settings:
-:class:`~.options.ProfileOptions`.  Units: each parameter's own; Δχ² dimensionless.
+values; the interval is where the profile's χ² rises by less than ``level``·scale (3.84: 95 % for one
+parameter; scale: the misfit scale of the Wald interval).  Which χ² is ``[profile] likelihood``: "weighted"
+(per-series weights n_eff/n from the fit's lag-1 autocorrelation, for correlations no covariance models),
+"gaussian" (the whitened χ², −2 ln of the Gaussian likelihood with the modelled covariance: the exact
+interval of a linear model) or "marginal" (the realization covariance's scale integrated over its sampling
+distribution from k realizations).  Settings: :class:`~.options.ProfileOptions`.  Units: each parameter's own; Δχ² dimensionless.
 """
 from __future__ import annotations
 
@@ -37,13 +40,24 @@ class _Profile:
         self.x_hat = np.asarray(fit.x, float)
         self.p = fit.params[j]
         self.free = fit.params[:j] + fit.params[j + 1:]
-        self.w = stats.series_weights(fit.r, problem.series[problem.mask(ids)])
-        self.chi2_hat, n = stats.effective_chi2(fit.r, self.w)
-        self.thr = level * max(1.0, self.chi2_hat / max(n - len(fit.params), 1.0))
+        self.mask = problem.mask(ids)
+        self.w = (stats.series_weights(fit.r, problem.series[self.mask]) if self.po.likelihood == "weighted"
+                  else np.ones(fit.r.size))
+        chi2_w, n = stats.effective_chi2(fit.r, self.w)
+        self.chi2_hat = self.deviance(fit.r)
+        self.thr = level * max(1.0, chi2_w / max(n - len(fit.params), 1.0))
         self.x_lo, self.x_hi = self.p.x_bounds
         self.wald = wald_bounds(fit, j, self.w)[:2]
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
         self.fines = realizations(fine_forward)
+
+    def deviance(self, r: np.ndarray) -> float:
+        """The profile's χ² of residuals ``r``: Σ w r² ("weighted", "gaussian": w = 1) or −2 ln of the
+        likelihood with the realization covariance's scale integrated out ("marginal",
+        :meth:`NoiseModel.marginal_deviance`)."""
+        if self.po.likelihood == "marginal":
+            return self.problem.noise.marginal_deviance(r, self.mask)
+        return stats.effective_chi2(r, self.w)[0]
 
     def dchi2(self, xj: float) -> float:
         """Δχ² with the parameter held at ``xj`` (internal coordinates), the others refitted; with fine models
@@ -55,7 +69,7 @@ class _Profile:
         try:
             f = problem.fit(self.free, [np.delete(self.x_hat, self.j)], self.ids)
             if self.fines:
-                row["delta_chi2_fit_correction"] = float(stats.effective_chi2(f.r, self.w)[0] - self.chi2_hat)
+                row["delta_chi2_fit_correction"] = float(self.deviance(f.r) - self.chi2_hat)
                 old = problem.noise.shift_correction(
                     correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)}))
                 try:
@@ -64,7 +78,7 @@ class _Profile:
                     problem.noise.shift_correction(old)
         finally:
             problem.fixed = {}
-        d = float(stats.effective_chi2(f.r, self.w)[0] - self.chi2_hat)
+        d = float(self.deviance(f.r) - self.chi2_hat)
         row.update({"delta_chi2": d, "others": jsonable(f.values())})
         self.points.append(row)
         log.info("profile %s = %.5g: delta chi2 %.2f (threshold %.2f), point %d", p.name, row["value"], d,

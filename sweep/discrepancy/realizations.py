@@ -127,6 +127,47 @@ class RealizationCovariance:
             out.append((np.searchsorted(rows_m, r), stats.symmetric_whitener(R)))
         return out
 
+    def _scaled_blocks(self, mask: np.ndarray, sig_diag: np.ndarray):
+        """Per series with rows in ``mask``: (series, its rows, the kept rows, A, J), A and J the realization
+        and jitter terms on the kept rows over σ_diag² (D^(−1/2) C D^(−1/2)); J None without a jitter term."""
+        for s, (rows, C) in self.blocks.items():
+            keep = mask[rows]
+            if not keep.any():
+                continue
+            r = rows[keep]
+            dd = np.outer(sig_diag[r], sig_diag[r])
+            J = self.jitter[s][1][np.ix_(keep, keep)] / dd if self.jitter and s in self.jitter else None
+            yield s, rows, r, C[np.ix_(keep, keep)] / dd, J
+
+    def scale_mixture(self, mask: np.ndarray, sig_diag: np.ndarray, n_nodes: int = 32) -> list:
+        """Terms of the whitened residuals' likelihood with the realization term's scale integrated out.
+
+        The realization covariance is estimated from k realizations: the data's true one is λ C with
+        λ = v_true/v_est ~ ν/χ²_ν per series (ν from :meth:`scale_dof`, as :meth:`null_calibration`); the
+        jitter term is known.  With R = I + A + J (A, J: the realization and jitter terms over σ_diag², the
+        whitening's covariance) and R(λ) = I + λA + J, a whitened residual r = R^(−1/2) e has
+        −2 ln p(r) = −2 ln E_λ[exp(−(eᵀ R(λ)⁻¹ e + ln det R(λ))/2)] + const, e = R^(1/2) r.  The expectation is a
+        mean over ``n_nodes`` equal-probability nodes of λ (their mid quantiles).  Returns, per series with
+        rows in ``mask``, (positions in the masked vector, Q (n_nodes, m, m) with eᵀR(λ)⁻¹e = rᵀ Q r,
+        ln det R(λ) − ln det R (n_nodes,)); [] when k < 2 (no estimated scale)."""
+        from scipy.stats import chi2
+
+        if self.k < 2:
+            return []
+        rows_m = np.flatnonzero(mask)
+        out = []
+        for s, rows, r, A, J in self._scaled_blocks(mask, sig_diag):
+            J = 0.0 if J is None else J
+            nu = self.scale_dof(rows)
+            lam = nu / chi2.ppf(1.0 - (np.arange(n_nodes) + 0.5) / n_nodes, nu)
+            w, V = np.linalg.eigh(np.eye(r.size) + A + J)
+            half = (V * np.sqrt(np.maximum(w, 1e-300))) @ V.T                 # R^(1/2)
+            Rl = np.eye(r.size) + lam[:, None, None] * A + J
+            sign, logdet = np.linalg.slogdet(Rl)
+            Q = half @ np.linalg.solve(Rl, np.broadcast_to(half, Rl.shape))
+            out.append((np.searchsorted(rows_m, r), Q, logdet - np.sum(np.log(np.maximum(w, 1e-300)))))
+        return out
+
     def scale_dof(self, rows: np.ndarray) -> float:
         """Degrees of freedom ν of the series' realization-variance scale (the mean of its smoothed v).
 
@@ -165,21 +206,15 @@ class RealizationCovariance:
         rng = np.random.default_rng(seed)
         rows_m = np.flatnonzero(mask)
         out = {}
-        for s, (rows, C) in self.blocks.items():
-            keep = mask[rows]
-            if not keep.any():
-                continue
-            r = rows[keep]
-            d = sig_diag[r]
-            a, U = np.linalg.eigh(C[np.ix_(keep, keep)] / np.outer(d, d))
+        for s, rows, r, A, J in self._scaled_blocks(mask, sig_diag):
+            a, U = np.linalg.eigh(A)
             a = np.maximum(a, 0.0)
             nu = self.scale_dof(rows)
             lam = nu / rng.chisquare(nu, size=n_draws)
             order = np.argsort(np.searchsorted(rows_m, r), kind="stable")   # the residual vector's order
             xi = rng.standard_normal((n_draws, r.size))
-            if self.jitter and s in self.jitter:
-                mix = _mixture_with_jitter(xi, lam, C[np.ix_(keep, keep)] / np.outer(d, d),
-                                           self.jitter[s][1][np.ix_(keep, keep)] / np.outer(d, d))
+            if J is not None:
+                mix = _mixture_with_jitter(xi, lam, A, J)
             else:
                 mix = ((xi @ U) * np.sqrt((1.0 + lam[:, None] * a) / (1.0 + a))) @ U.T
             _, z0, m0 = stats.series_statistics(xi[:, order])

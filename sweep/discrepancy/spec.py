@@ -49,6 +49,8 @@ Example (units mm, s, kPa)::
     fine = true                      # with [discretization]: correct each profile point where it is
     smoothing = "none"               # "quadratic": interval from a quadratic through noisy points (MCAP)
     grid = 4                         # with "quadratic": extra profile points per side
+    likelihood = "weighted"          # delta chi2: "weighted" (lag-1 series weights), "gaussian" (whitened chi2),
+                                     # "marginal" (realization-covariance scale integrated over its k-run estimate)
 
 The former ``[workflow]`` table is refused with each of its keys named and where it went
 (:data:`.options.REMOVED_WORKFLOW_KEYS`).

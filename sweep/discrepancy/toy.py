@@ -19,11 +19,13 @@ discretization error grows with its strength (damage on a mesh that barely resol
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .forward import ForwardModel
 
-__all__ = ["ToyForward"]
+__all__ = ["ToyForward", "MeshToy"]
 
 
 class ToyForward(ForwardModel):
@@ -73,3 +75,94 @@ class ToyForward(ForwardModel):
                 raise ValueError(f"ToyForward: observable {obs!r} is not modelled (p_inj, front_radius_mean, "
                                  "crack_length, regime)")
         return out
+
+
+class MeshToy(ForwardModel):
+    """A closed-form stand-in with the structure the interval's coverage depends on (units kPa, mm, s).
+
+    With rate = w_i/50, P0 = 0.05 w_i η_o/k̄ · (1 + 0.25 (C − 1.2)), τ = 0.3 (331/E_h)(0.5 + 800/K_s):
+
+        p(t)     = P0 (1 − e^{−t/τ}) (1 + a_b h) + 0.5 β_h rate √(C/1.2) e^{−t/0.2} + 25 v e^{−t/0.2} + δp(t)
+        front(t) = 5 + 15 t rate (η_o/0.29)^(−0.2) (k̄/0.0015)^0.3 (1 + 0.1 v) (1 − a_f h) + δf(t)
+
+    E_h = E (1 + a_E h), β_h = β (1 + a_β h): a discretization error growing with the mesh size h (mm)
+    that depends on the parameters, so a correction estimated at one point is wrong elsewhere (``bias``
+    scales the four coefficients a_b = 0.005, a_f = 0.01, a_E = 0.01, a_β = 0.05; 0: no discretization
+    error).  β: damage viscosity (kPa·s), v: volumetric coupling (-), both continuous strengths correlated
+    with E, k̄, K_s through the early pressure.  δp, δf: the deviation of mesh realization ``realization``,
+    a random curve per condition (``spread`` scales it; 0: none), of one of two shapes (``shape``):
+
+    "smooth"   δp = spread (P0/483) (3 a (1 − e^{−t/0.1}) + 2 b t/0.3),  δf = spread (0.4 c t/0.3 + 0.15 d sin(πt/0.3)),
+               a, b, c, d standard normal: two smooth components, correlated over the whole curve;
+    "wander"   δp = spread (P0/483) 3 g(t) u_p(t),  δf = spread 0.4 g(t) u_f(t),  g = 1 − e^{−t/0.05}, u_p, u_f
+               unit Ornstein–Uhlenbeck processes with correlation time 0.1 s (stationary, on a 2.5 ms grid
+               from t = 0, interpolated): the exponential correlation in time the workflow's covariance assumes.
+
+    The draws come from (realization, condition), so a realization is the same mesh whatever the fitted
+    parameters.  Counts evaluations in ``n_runs``.
+    """
+
+    regime_labels = ("porous_invasion",)
+
+    SHAPES = ("smooth", "wander")
+
+    def __init__(self, h: float = 4.0, realization: int = 0, spread: float = 1.0, bias: float = 1.0,
+                 shape: str = "smooth"):
+        if not (h > 0 and spread >= 0 and bias >= 0 and int(realization) >= 0 and shape in self.SHAPES):
+            raise ValueError(f"MeshToy: h={h!r} (> 0), spread={spread!r} (>= 0), bias={bias!r} (>= 0), "
+                             f"realization={realization!r} (integer >= 0), shape={shape!r} (one of {self.SHAPES})")
+        self.h, self.realization, self.spread, self.bias = float(h), int(realization), float(spread), float(bias)
+        self.shape = shape
+        self.n_runs = 0
+
+    def _deviation(self, p, P0: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(δp, δf) of this realization for the condition of ``p`` at times ``t``."""
+        key = [self.realization, int(round(p.w_i * 1e3)), int(round(p.cement * 1e4)), int(round(p.eta_o * 1e6))]
+        rng = np.random.default_rng(key)
+        if self.shape == "wander":
+            g = self.spread * (1 - np.exp(-t / 0.05))
+            return 3.0 * (P0 / 483.0) * g * _ou(rng, t, 0.1), 0.4 * g * _ou(rng, t, 0.1)
+        a, b, c, d = rng.standard_normal(4)
+        dp = self.spread * (P0 / 483.0) * (3.0 * a * (1 - np.exp(-t / 0.1)) + 2.0 * b * t / 0.3)
+        df = self.spread * (0.4 * c * t / 0.3 + 0.15 * d * np.sin(np.pi * t / 0.3))
+        return dp, df
+
+    def predict_one(self, overrides: dict, times: dict) -> dict:
+        from solver import Parameters
+
+        self.n_runs += 1
+        p = Parameters.from_dict(overrides)
+        hb = self.h * self.bias
+        rate = p.w_i / 50.0
+        P0 = 0.05 * p.w_i * p.eta_o / p.kbar * (1 + 0.25 * (p.cement - 1.2))
+        tau = 0.3 * (331.0 / (p.E * (1 + 0.01 * hb))) * (0.5 + 800.0 / p.K_s)
+        beta = p.damage_viscosity * (1 + 0.05 * hb)
+        v = p.volumetric_coupling
+        out = {}
+        for obs, t in times.items():
+            t = np.asarray(t, float)
+            dp, df = self._deviation(p, P0, t)
+            if obs == "p_inj":
+                out[obs] = (P0 * (1 - np.exp(-t / tau)) * (1 + 0.005 * hb)
+                            + (0.5 * beta * rate * math.sqrt(p.cement / 1.2) + 25 * v) * np.exp(-t / 0.2) + dp)
+            elif obs == "front_radius_mean":
+                out[obs] = (5 + 15 * t * rate * (p.eta_o / 0.29) ** -0.2 * (p.kbar / 0.0015) ** 0.3
+                            * (1 + 0.1 * v) * (1 - 0.01 * hb) + df)
+            elif obs == "regime":
+                out[obs] = "porous_invasion"
+            else:
+                raise ValueError(f"MeshToy: observable {obs!r} is not modelled (p_inj, front_radius_mean, regime)")
+        return out
+
+
+def _ou(rng, t: np.ndarray, tau: float, dt: float = 0.0025) -> np.ndarray:
+    """A unit stationary Ornstein–Uhlenbeck path (correlation exp(−|Δt|/τ), τ and t in s) drawn on the grid
+    0, dt, 2 dt, … up to max(t) and interpolated at ``t``."""
+    n = int(np.ceil(max(float(np.max(t)), dt) / dt)) + 2
+    rho = math.exp(-dt / tau)
+    xi = rng.standard_normal(n)
+    x = np.empty(n)
+    x[0] = xi[0]
+    for i in range(1, n):                     # n ~ 120 points per path: a short recursion
+        x[i] = rho * x[i - 1] + math.sqrt(1 - rho * rho) * xi[i]
+    return np.interp(t, dt * np.arange(n), x)
