@@ -102,9 +102,9 @@ def _fig_curves(problem, fit_before, fit_after, path):
                 continue
             t = problem.t[m]
             ax.errorbar(t, problem.y[m], problem.sig[m], fmt=".", ms=3, color="k", alpha=0.5, label="measured")
-            ax.plot(t, pb[cid][o], "C0-", label="baseline (calibrated)")
+            ax.plot(t, pb[cid][o], "C0-o", ms=3, label="baseline (calibrated)")
             if fit_after is not fit_before:
-                ax.plot(t, pa[cid][o], "C3--", label="with named effect")
+                ax.plot(t, pa[cid][o], "C3--s", ms=3, label="with named effect")
             ax.set_title(f"{cid}{' (held out)' if cid in problem.spec.holdout(ids) else ''}", fontsize=8)
             ax.set_xlabel("t (s)", fontsize=7)
             ax.set_ylabel(f"{o} ({UNITS[o]})", fontsize=7)
