@@ -306,6 +306,10 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
             no_fit = str(exc)   # said on the figure: a missing line must not look like an omission
     elif fit:
         no_fit = "both regimes are needed to fit a separatrix"
+    if sep is not None and _outside_sampled_range(sep, C, cs):
+        no_fit = (f"the fitted line (A = {sep.A:.3g}, B = {sep.B:.3g} /%) lies outside the sampled Ca* range "
+                  f"[{cs.min():.3g}, {cs.max():.3g}] over C: the labels do not locate it")
+        sep = None
     if no_fit:
         ax.text(0.5, -0.27, "no exponential separatrix: " + no_fit, transform=ax.transAxes, fontsize=6.5,
                 va="top", ha="center", wrap=True)
@@ -324,6 +328,13 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
               frameon=False)
     paths = _save(fig, out_path, formats)
     return {"paths": paths, "fit": sep, "no_fit_reason": no_fit, "n_dropped": n_drop}
+
+
+def _outside_sampled_range(sep, C, cs) -> bool:
+    """True when the separatrix Ca*_c(C) stays above or below every sampled Ca* over the sampled C: an
+    extrapolated line the runs do not locate (it is then not drawn, and the figure says why)."""
+    line = sep(np.linspace(C.min(), C.max(), 50))
+    return bool(np.all(line < cs.min()) or np.all(line > cs.max()))
 
 
 # --------------------------------------------------------------------------- N_f vs N_b

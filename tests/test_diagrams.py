@@ -111,6 +111,23 @@ def test_plot_ca_star(tmp_path):
         plot_ca_star_vs_cement(df.drop(columns="cement"), tmp_path / "x")
 
 
+def test_plot_ca_star_does_not_draw_a_separatrix_outside_the_sampled_range(tmp_path):
+    """Labels fracturing at both ends of Ca* and porous in between (the mixed grid of
+    results/ca_star_vs_cement_h2_wall): the fit increases with Ca* overall but its line lies decades below every
+    run; it is not drawn, and the figure says why."""
+    rows = {0.5: "FFFFp", 1.0: "F-FFF", 1.5: "FFFFF", 2.0: "FpFFF", 2.5: "FpFFF", 3.0: "FpFFF"}  # Ca* up
+    ca = [5.2e6, 1.65e7, 5.2e7, 1.65e8, 5.2e8]
+    pts = [(c, ca[i], ch == "F") for c, lab in rows.items() for i, ch in enumerate(lab) if ch != "-"]
+    C, cs, fr = (np.array(v) for v in zip(*pts))
+    df = pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": fr})
+    out = plot_ca_star_vs_cement(df, tmp_path / "mixed.png")
+    assert out["fit"] is None and "outside the sampled Ca* range" in out["no_fit_reason"]
+    # a separatrix through the sampled range is still drawn (the first test's fit)
+    C2, cs2, y2 = draw(0, n=120)
+    assert plot_ca_star_vs_cement(pd.DataFrame({"cement": C2, "Ca_star": cs2, "fracturing": y2}),
+                                  tmp_path / "ok.png")["fit"] is not None
+
+
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     from scipy.spatial import Delaunay
