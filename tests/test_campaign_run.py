@@ -173,8 +173,9 @@ def test_timeout_kills_the_hung_run_only(tmp_path):
 
 
 _INTERRUPTED = textwrap.dedent("""
-    import sys
-    sys.path[:0] = [{here!r}, {repo!r}]
+    import signal, sys
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's Ctrl-C, whatever disposition the test
+    sys.path[:0] = [{here!r}, {repo!r}]                        # process passed on (an ignored SIGINT is inherited)
     from test_campaign_run import _spec, gated_runner, VERSION
     from sweep.campaign import run_campaign
     spec = _spec(axes={{"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]}})
