@@ -96,15 +96,21 @@ def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
                                  tie_cos=problem.spec.acceptance.tie_cos)
 
 
-def free_columns(fit: Fit, rtol: float = 1e-4) -> np.ndarray:
-    """Columns of the calibrated parameters NOT pinned at a bound: a parameter at its bound cannot absorb
-    a signature any further, so projecting it out would hide an effect the data call for."""
-    keep = []
+def bound_sides(fit: Fit, rtol: float = 1e-4) -> list:
+    """Per calibrated parameter of ``fit``: "lower" or "upper" when it is pinned at that bound (within
+    ``rtol`` of its range in fit coordinates), else None."""
+    sides = []
     for j, p in enumerate(fit.params):
         lo, hi = p.x_bounds
         tol = rtol * (hi - lo)
-        keep.append(lo + tol < fit.x[j] < hi - tol)
-    return np.array(keep, bool) if keep else np.zeros(0, bool)
+        sides.append("lower" if fit.x[j] <= lo + tol else "upper" if fit.x[j] >= hi - tol else None)
+    return sides
+
+
+def free_columns(fit: Fit, rtol: float = 1e-4) -> np.ndarray:
+    """Columns of the calibrated parameters NOT pinned at a bound: a parameter at its bound cannot absorb
+    a signature any further, so projecting it out would hide an effect the data call for."""
+    return np.array([s is None for s in bound_sides(fit, rtol)], bool)
 
 
 def wald_bounds(fit: Fit, j: int, w) -> tuple[float, float, float]:

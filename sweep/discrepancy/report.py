@@ -11,6 +11,7 @@ import numpy as np
 from . import stats
 from .observables import CURVES as CURVE_OBSERVABLES
 from .observables import UNITS
+from .evidence import bound_sides
 from .problem import Fit
 
 __all__ = ["build_report", "write_report", "jsonable", "ROUGH_NOTE"]
@@ -69,7 +70,7 @@ def build_report(run, forward) -> dict:
               "profile_not_identifiable": run.profile_unidentified,
               "gap_before": run.gap_before, "gap_after": run.gap_cur if named_ok else run.gap_before,
               "calibrated_baseline": run.fit0.values(),
-              "calibrated_at_bound": at_bounds(run.problem.spec.calibrate, run.fit0.values()),
+              "calibrated_at_bound": {p.name: side for p, side in zip(run.fit0.params, bound_sides(run.fit0)) if side},
               "final_values": run.current.values() if named_ok else run.fit0.values(),
               "train": run.train, "holdout": run.holdout,
               "localization_before": run.loc0, "localization_after": run.loc if named_ok else None,
@@ -250,25 +251,6 @@ def _noise_lines(report: dict) -> list[str]:
                   f"sweep/discrepancy/jitter.py): RMS {_f(mj['rms'])} (kPa, mm), correlation time "
                   f"{_f(mj['correlation_time'])} s; added to the covariance the residuals are whitened with.", ""]
     return L
-
-
-def at_bounds(calibrate, values: dict, rel: float = 1e-3) -> dict:
-    """Calibrated parameters whose fitted value sits on a bound of their [[calibrate]] range: name ->
-    "lower" | "upper".  A pinned parameter absorbs no more of a signature, and the data ask for a value outside
-    the range, so the report says so beside the value.  ``rel``: the distance to the bound, as a fraction of
-    the range (in decades on a log scale)."""
-    out = {}
-    for c in calibrate:
-        v = values.get(c.name)
-        if v is None:
-            continue
-        f = (lambda x: math.log10(x)) if c.scale == "log" else (lambda x: x)
-        span = f(c.upper) - f(c.lower)
-        if f(v) - f(c.lower) <= rel * span:
-            out[c.name] = "lower"
-        elif f(c.upper) - f(v) <= rel * span:
-            out[c.name] = "upper"
-    return out
 
 
 def _candidate_lines(report: dict) -> list[str]:
