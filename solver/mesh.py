@@ -389,67 +389,84 @@ N_SWEEPS = 3  # Laplacian sweeps per round
 
 @lru_cache(maxsize=16)
 def _annulus_cached(ri: float, ro: float, h: float, seed, hi=None, gl=None, ho=None, glo=None) -> Mesh:
+    """Rings of nodes, a random perturbation, smoothing with re-triangulation, and the boundary tags."""
     graded = hi is not None or ho is not None
 
     def size(r):
         return annulus_size(r, h, hi, ri, gl, ho, ro, glo)
 
+    radii, ring_h = _ring_radii(ri, ro, h, size, graded, hi, gl, ho, glo)
+    pts, ring_id = _ring_nodes(radii, ring_h)
+    n_r = len(radii) - 1
+    inner, outer = ring_id == 0, ring_id == n_r
+    free = ~(inner | outer)
+    if seed is not None:
+        _perturb(pts, free, ring_h[ring_id[free]] / h if graded else 1.0, h, seed)
+    # keep perturbed / smoothed interior nodes strictly inside the annulus
+    margins = (0.25 * ring_h[0], 0.25 * ring_h[-1])
+    tri = _smooth(pts, free, inner, ri, ro, margins, size if graded else None)
+    return Mesh(points=pts, triangles=tri, boundary_edges=_tag_boundary(pts, tri, inner, outer))
+
+
+def _ring_radii(ri, ro, h, size, graded, hi, gl, ho, glo):
+    """Radii of the node rings (mm) and the target size on each (mm)."""
     if graded:
         # inner grading alone keeps its closed form (its meshes stay bit for bit)
         radii = _graded_radii(ri, ro, h, hi, gl) if ho is None else _piecewise_graded_radii(ri, ro, h, size, hi, gl, ho, glo)
-        n_r = len(radii) - 1
-        ring_h = size(radii)
-    else:
-        n_r = max(2, int(math.ceil((ro - ri) / (h * math.sqrt(3.0) / 2.0) - 1e-9)))
-        radii = np.linspace(ri, ro, n_r + 1)
-        ring_h = np.full(n_r + 1, h)
+        return radii, size(radii)
+    n_r = max(2, int(math.ceil((ro - ri) / (h * math.sqrt(3.0) / 2.0) - 1e-9)))
+    return np.linspace(ri, ro, n_r + 1), np.full(n_r + 1, h)
+
+
+def _ring_nodes(radii, ring_h):
+    """Nodes evenly spaced on each ring at its target size, odd rings rotated by half a spacing; (points, ring id)."""
     rings, ring_id = [], []
     for j, r in enumerate(radii):
         n = max(6, int(round(2.0 * math.pi * r / ring_h[j])))
         theta = 2.0 * math.pi * (np.arange(n) + 0.5 * (j % 2)) / n
         rings.append(np.column_stack([r * np.cos(theta), r * np.sin(theta)]))
         ring_id.append(np.full(n, j))
-    pts = np.concatenate(rings)
-    ring_id = np.concatenate(ring_id)
-    inner = ring_id == 0
-    outer = ring_id == n_r
-    fixed = inner | outer
-    free = ~fixed
-    if seed is not None:
-        rng = np.random.default_rng(seed)
-        rad = rng.uniform(0.0, 0.15 * h, free.sum())
-        if graded:  # up to 0.15 of the local target size
-            rad *= ring_h[ring_id[free]] / h
-        ang = rng.uniform(0.0, 2.0 * math.pi, free.sum())
-        pts[free] += np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
-    # keep perturbed / smoothed interior nodes strictly inside the annulus
-    margin_in, margin_out = 0.25 * ring_h[0], 0.25 * ring_h[-1]
+    return np.concatenate(rings), np.concatenate(ring_id)
 
-    def triangulate(p):
-        tri = Delaunay(p).simplices.astype(np.int64)
-        c = p[tri].mean(axis=1)
-        keep = (np.hypot(c[:, 0], c[:, 1]) > ri) & ~inner[tri].all(axis=1)
-        return _ccw(p, tri[keep])
 
-    tri = triangulate(pts)
+def _perturb(pts, free, local, h, seed):
+    """Move the free nodes in place by up to 0.15 of the local target size (``local`` h_local / h), seeded."""
+    rng = np.random.default_rng(seed)
+    rad = rng.uniform(0.0, 0.15 * h, free.sum())
+    rad *= local
+    ang = rng.uniform(0.0, 2.0 * math.pi, free.sum())
+    pts[free] += np.column_stack([rad * np.cos(ang), rad * np.sin(ang)])
+
+
+def _triangulate(p, inner, ri):
+    """Delaunay triangles of p without those in the hole (centroid inside r_inner, or all nodes on it), ccw."""
+    tri = Delaunay(p).simplices.astype(np.int64)
+    c = p[tri].mean(axis=1)
+    keep = (np.hypot(c[:, 0], c[:, 1]) > ri) & ~inner[tri].all(axis=1)
+    return _ccw(p, tri[keep])
+
+
+def _smooth(pts, free, inner, ri, ro, margins, size=None):
+    """Smooth the free nodes in place (``N_RETRIANGULATE`` rounds of ``N_SWEEPS`` sweeps on fixed
+    connectivity, each round re-triangulated: Delaunay dominates the cost); returns the triangles.
+
+    Uniform meshes (``size`` None): each free node -> the mean of its edge neighbours.  Graded meshes: plain
+    Laplacian smoothing would pull the nodes towards the side with more neighbours (the fine side) and
+    collapse the first rows onto the boundary.  Instead, each free node -> the weighted mean of the
+    centroids c_T of its triangles, weights |T| / size(c_T)² (the number of target-size elements T covers):
+    the small triangles of the fine side are many but light, and a mesh that follows the size function is
+    at equilibrium.
+    """
+    tri = _triangulate(pts, inner, ri)
     n = len(pts)
     for _ in range(N_RETRIANGULATE):
-        # Laplacian smoothing on fixed connectivity: each free node -> mean of its
-        # edge neighbours; then re-triangulate (Delaunay dominates the cost).
         e = _unique_edges(tri)
         src = np.concatenate([e[:, 0], e[:, 1]])
         dst = np.concatenate([e[:, 1], e[:, 0]])
         deg = np.bincount(src, minlength=n)
         v = tri.ravel()
         for _ in range(N_SWEEPS):
-            if graded:
-                # graded: plain Laplacian smoothing would pull the nodes towards the side
-                # with more neighbours (the fine side) and collapse the first rows onto
-                # the inner circle.  Instead, each free node -> weighted mean of the
-                # centroids c_T of its triangles, weights |T| / size(c_T)² (the number
-                # of target-size elements T covers): the small triangles of the fine
-                # side are many but light, and a mesh that follows the size
-                # function is at equilibrium.
+            if size is not None:
                 x = pts[tri]
                 c = x.mean(axis=1)
                 e1, e2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
@@ -463,11 +480,15 @@ def _annulus_cached(ri: float, ro: float, h: float, seed, hi=None, gl=None, ho=N
                 nb_sum = np.column_stack([np.bincount(src, pts[dst, k], minlength=n) for k in range(2)])
                 new = nb_sum[free] / deg[free, None]
             r = np.hypot(new[:, 0], new[:, 1])
-            rc = np.clip(r, ri + margin_in, ro - margin_out)
+            rc = np.clip(r, ri + margins[0], ro - margins[1])
             new *= (rc / r)[:, None]
             pts[free] = new
-        tri = triangulate(pts)
+        tri = _triangulate(pts, inner, ri)
+    return tri
 
+
+def _tag_boundary(pts, tri, inner, outer) -> dict:
+    """Boundary edges tagged "inner" and "outer", each sorted by angle; raises if the rings were not recovered."""
     bnd = _boundary_edges_oriented(tri)
     mid = pts[bnd].mean(axis=1)
     on_inner = inner[bnd].all(axis=1)
@@ -479,7 +500,7 @@ def _annulus_cached(ri: float, ro: float, h: float, seed, hi=None, gl=None, ho=N
     for name, mask in (("inner", on_inner), ("outer", on_outer)):
         sel = bnd[mask]
         edges[name] = sel[np.argsort(ang[mask], kind="stable")]
-    return Mesh(points=pts, triangles=tri, boundary_edges=edges)
+    return edges
 
 
 # ---------------------------------------------------------------------------

@@ -39,9 +39,9 @@ import scipy.sparse as sp
 
 from . import ad, codegen, fem, kernels, physics
 from .ad import Dual
+from .options import TRANSPORTS
 
 UX, UY, P, S, MU, GX, GY = range(7)
-TRANSPORTS = ("galerkin", "upwind")
 FIELD_NAMES = ("ux", "uy", "p", "S", "mu", "Gx", "Gy")
 
 
@@ -68,6 +68,7 @@ class Discretization:
     lumped_mass: np.ndarray  # (N,) mm²
     inner_length: float  # mm
     upwind_length: np.ndarray | None = None  # (M,) mm, h_e/2 with transport = "upwind"; None: Galerkin
+    stab_tau: np.ndarray | None = None  # (M,) mm²/kPa, pressure stabilization τ_e; None: plain Galerkin
     chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
 
     @property
@@ -75,11 +76,13 @@ class Discretization:
         return len(self.points)
 
 
-def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galerkin") -> Discretization:
+def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galerkin",
+                         pressure_stabilization: float | None = None) -> Discretization:
     """Assemble the mesh-dependent operators for ``params`` (units mm, s, kPa).
 
     ``transport``: "galerkin" (mobilities at the point's saturation) or "upwind" (mobilities at the
     saturation shifted upstream by half the element size, see :func:`upwind_saturation`).
+    ``pressure_stabilization``: factor s of :func:`pressure_stabilization` (None or 0: none).
     """
     if transport not in TRANSPORTS:
         raise ValueError(f"transport={transport!r}: allowed one of {TRANSPORTS}")
@@ -148,7 +151,26 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
         inject=inject, dirichlet=asm.dirichlet_rows(dofs), dirichlet_values=values,
         lumped_mass=lumped, inner_length=float(L.sum()), chunks=fem.element_chunks(len(tri)),
         upwind_length=0.5 * np.sqrt(2.0 * geom.areas) if transport == "upwind" else None,
+        stab_tau=pressure_stabilization_tau(pts, tri, params, phi0, pressure_stabilization),
     )
+
+
+def pressure_stabilization_tau(pts, tri, params, phi0, factor: float | None):
+    """τ_e = s b (1 − φ0) h_e² / (4 (λ + 2μ)) per element, mm²/kPa (None when s is None or 0).
+
+    The equal-order P1 / P1 pair of (u, p) is not inf-sup stable in the undrained limit
+    k Δt / η ≪ h² / (λ + 2μ); there the pressure oscillates from node to node (Murad and Loula 1994).
+    The perturbation τ_e ∫ ∇q·∇(p − p_n)/Δt of the mass balance (Aguilar et al. 2008) with
+    τ = α_m α_f h² / (4 (λ + 2μ)) (Rodrigo et al. 2016, the coupling coefficients of the momentum balance,
+    b, and of the mass balance, 1 − φ0 in φ = φ0 + (1 − φ0)(ε_v + p/K_s)) removes them; it vanishes as
+    O(h²) ∂p/∂t.  h_e is the element's longest edge (mm); λ + 2μ the undamaged P-wave modulus (kPa).
+    """
+    if not factor:
+        return None
+    e = pts[tri[:, [1, 2, 0]]] - pts[tri]
+    h2 = np.max(np.sum(e * e, axis=2), axis=1)
+    p_modulus = params.lame_lambda + 2.0 * params.lame_mu
+    return factor * params.biot * (1.0 - np.asarray(phi0, float)) * h2 / (4.0 * p_modulus)
 
 
 @dataclass(frozen=True)
@@ -162,12 +184,16 @@ class StepData:
     ev_n: np.ndarray  # volumetric strain per element (M,)
     up_x: np.ndarray | None = None  # upwind shift per element (M,), mm (None: Galerkin transport)
     up_y: np.ndarray | None = None
+    tau: np.ndarray | None = None  # pressure stabilization τ_e per element (M,), mm²/kPa (None: none)
+    px_n: np.ndarray | None = None  # previous pressure gradient per element (M,), kPa/mm (with tau)
+    py_n: np.ndarray | None = None
 
     def take(self, sl: slice) -> "StepData":
         """The same data restricted to the elements of ``sl`` (views, no copies)."""
         cut = lambda a: None if a is None else a[sl]
         return StepData(dt=self.dt, d_q=self.d_q[sl], phi_n=self.phi_n[sl], S_n=self.S_n[sl], ev_n=self.ev_n[sl],
-                        up_x=cut(self.up_x), up_y=cut(self.up_y))
+                        up_x=cut(self.up_x), up_y=cut(self.up_y), tau=cut(self.tau), px_n=cut(self.px_n),
+                        py_n=cut(self.py_n))
 
 
 def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: float) -> StepData:
@@ -180,7 +206,9 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     S_n = fem.at_quadrature(U_n[:, S], tri, q)
     phi_n = physics.porosity(disc.phi0[:, None], ev_n[:, None], p_n, params.K_s)
     up_x, up_y = upwind_shift(disc, grads[:, P]) if disc.upwind_length is not None else (None, None)
-    return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n, up_x=up_x, up_y=up_y)
+    stab = {} if disc.stab_tau is None else {"tau": disc.stab_tau, "px_n": grads[:, P, 0], "py_n": grads[:, P, 1]}
+    return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n, up_x=up_x, up_y=up_y,
+                    **stab)
 
 
 def upwind_shift(disc: Discretization, grad_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -305,12 +333,19 @@ def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields:
     dev = (ev - data.ev_n[:, None]) / dt
     c_mu = 12.0 * params.gamma / params.l_S
     c_grad = c_mu * params.l_S**2 / 8.0
+    fx, fy = -c.wx, -c.wy
+    f1x, f1y = -c.w1x + c.M * g(MU, 1), -c.w1y + c.M * g(MU, 2)
+    if data.tau is not None:  # pressure stabilization τ ∇(p − p_n)/Δt (see pressure_stabilization_tau)
+        sx = data.tau[:, None] * (g(P, 1) - data.px_n[:, None]) / dt
+        sy = data.tau[:, None] * (g(P, 2) - data.py_n[:, None]) / dt
+        frac = c.lam1 / (c.lam1 + c.lam2 + 1e-300)
+        fx, fy = fx + sx, fy + sy
+        f1x, f1y = f1x + frac * sx, f1y + frac * sy
     return [
         [None, c.sxx, c.sxy],
         [None, c.sxy, c.syy],
-        [(phi - data.phi_n) / dt + cv * phi * dev, -c.wx, -c.wy],
-        [(phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev,
-         -c.w1x + c.M * g(MU, 1), -c.w1y + c.M * g(MU, 2)],
+        [(phi - data.phi_n) / dt + cv * phi * dev, fx, fy],
+        [(phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev, f1x, f1y],
         [mu - c_mu * physics.double_well_prime(Sat), -c_grad * Sx, -c_grad * Sy],
     ]
 

@@ -11,10 +11,10 @@ import numpy as np
 from .tomlio import read_toml, write_flat_toml
 
 _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
-_TRANSPORTS = ("galerkin", "upwind")
+TRANSPORTS = ("galerkin", "upwind")  # the transport discretizations solver.model implements
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format")
+_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format", "pressure_stabilization")
 # written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
 DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
 
@@ -63,6 +63,14 @@ class RunOptions:
     transport : discretization of the convective transport of S: "galerkin" (the plain P1 Galerkin
         form, the paper's Sec. 3.1) or "upwind" (phase mobilities at the saturation shifted upstream by
         half the element size, ``solver.model.upwind_saturation``: first-order streamline upwinding).
+    pressure_stabilization : factor s >= 0 on the pressure stabilization of the equal-order P1 / P1 pair
+        (``solver.model.pressure_stabilization``): the total mass balance gains
+        τ_e ∫ ∇q·∇(p − p_n)/Δt with τ_e = s b (1 − φ0) h_e² / (4 (λ + 2μ)) (mm²/kPa), the term of
+        Aguilar et al. (2008) and Rodrigo et al. (2016) that removes the spurious pressure oscillations of the
+        undrained limit (low permeability k, small Δt: k Δt / η ≪ h² / (λ + 2μ), where the pores close at the
+        compacted outer wall, k = 0, or at start-up for small k̄).  Consistent: O(h²) times ∂p/∂t.  s = 1 is the
+        published value; None (default) or 0: the plain Galerkin form of the paper (Sec. 3.1).  Omitted from
+        :meth:`to_dict` when None, as h_inner.
     xdmf_format : "hdf5" (arrays in fields.h5 beside fields.xdmf; needs h5py), "xml" (inline) or None / "auto"
         (hdf5 when h5py is installed). Omitted from :meth:`to_dict` when None, as h_inner.
     """
@@ -92,6 +100,7 @@ class RunOptions:
     transport: str = "galerkin"
     frames: int | None = None
     xdmf_format: str | None = None
+    pressure_stabilization: float | None = None
 
     def __post_init__(self):
         _check(self)
@@ -166,6 +175,7 @@ _NUMBERS = (
     ("damage_max_its", int, 1, None, False, False),
     ("jacobian_reuse", float, 0.0, 1.0, False, False),
     ("max_wall_time", float, 0.0, None, True, True),
+    ("pressure_stabilization", float, 0.0, 100.0, False, True),
 )
 
 
@@ -176,7 +186,7 @@ OPTION_UNITS = {
     "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "stop_front_radius": "mm", "snapshot_times": "s",
     "newton_rtol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
     "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
-    "xdmf_format": "", "transport": "",
+    "xdmf_format": "", "transport": "", "pressure_stabilization": "-",
 }
 
 
@@ -238,7 +248,7 @@ def _check(o: RunOptions) -> None:
             _fail(name, getattr(o, name), f"(0, h = {o.h}]")
     if not (o.dt_min <= o.dt0 <= o.dt_max):
         _fail("dt0", o.dt0, f"[dt_min={o.dt_min}, dt_max={o.dt_max}]")
-    for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", _TRANSPORTS),
+    for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", TRANSPORTS),
                           ("xdmf_format", (None, "auto", "hdf5", "xml"))):
         if getattr(o, name) not in allowed:
             _fail(name, getattr(o, name), f"one of {allowed}")

@@ -35,7 +35,12 @@ _PREDICTED_FIELDS = [UX, UY, P]
 
 
 class StepFailure(Exception):
-    """A time step could not be solved at the current dt."""
+    """A time step could not be solved at the current dt; ``node``: the node where the Newton iterate went
+    furthest (out of the saturation bounds, or the largest scaled update), or None."""
+
+    def __init__(self, message: str, node: int | None = None):
+        super().__init__(message)
+        self.node = node
 
 
 
@@ -60,7 +65,8 @@ class Simulation:
 
     def __init__(self, params, options: RunOptions, mesh, phi0: np.ndarray):
         self.params, self.options, self.mesh = params, options, mesh
-        self.disc = build_discretization(mesh, params, phi0, transport=options.transport)
+        self.disc = build_discretization(mesh, params, phi0, transport=options.transport,
+                                         pressure_stabilization=options.pressure_stabilization)
         self.dmg = damage.damage_operators(self.disc.points, self.disc.triangles)
         self.edges = metrics.mesh_edges(self.disc.triangles)
         self.solver_kind = linsolve.resolve(options.linear_solver, self.disc.asm.ndof)
@@ -122,7 +128,8 @@ class Simulation:
                     x, x_back, self.lu, prev = x_back, None, None, None
                     continue
                 self.lu = None
-                raise StepFailure(f"Newton diverged (relative update {upd:.2e}, S in [{X[:, S].min():.3g}, {X[:, S].max():.3g}])")
+                raise StepFailure(f"Newton diverged (relative update {upd:.2e}, S in [{X[:, S].min():.3g}, {X[:, S].max():.3g}])",
+                                  node=int(np.argmax(np.abs(X[:, S] - 0.5))))
             # with a reused Jacobian convergence is linear: the error left is about upd * ratio / (1 - ratio)
             if upd <= o.newton_rtol * (1.0 if fresh or ratio < 0.5 else 0.1):
                 return X.copy(), it
@@ -134,7 +141,8 @@ class Simulation:
             fresh = False if reuse else fresh
             prev = upd
         self.lu = None
-        raise StepFailure(f"Newton did not converge in {o.newton_max_its} iterations (last relative update {upd:.2e})")
+        raise StepFailure(f"Newton did not converge in {o.newton_max_its} iterations (last relative update {upd:.2e})",
+                          node=int(np.argmax((np.abs(dx.reshape(-1, nf)) / scale).max(axis=1))))
 
     def active_energy(self, U: np.ndarray) -> np.ndarray:
         """Nodal (lumped-projected) active strain energy ψ_A (kPa) of displacement U."""
@@ -315,7 +323,9 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
                 writer.log(f"rejected step at t={sim.t:.6g} dt={dt_try:.3g}: {exc}")
             dt = dt_try * o.dt_cut
             if dt < o.dt_min:
-                return "failed", f"time step below dt_min={o.dt_min} at t = {sim.t:.6g} s (last: {exc})"
+                limit = physical_limit(sim, getattr(exc, "node", None))
+                return "failed", (f"time step below dt_min={o.dt_min} at t = {sim.t:.6g} s (last: {exc})"
+                                  + (f"; physical limit: {limit}" if limit else ""))
             continue
         with phase("metrics"):
             _accumulate_balances(sim, U, info["data"], dt_try, cum)
@@ -343,6 +353,33 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
         with phase("output"):
             _snapshot(sim, snaps, writer)
     return "ok", None
+
+
+def physical_limit(sim: Simulation, node: int | None) -> str | None:
+    """The physical limit of the model reached at ``node`` in the last accepted state, or None.
+
+    The linear porosity law φ = φ0 + (1 − φ0)(ε_v + p/K_s) (Eq. summary_equations_3) has no bound: under
+    compaction it reaches φ <= 0, where k = 0; once the node's capacity ∫ φ N_a dx (the lumped diagonal of
+    the invading-fluid balance ∂(φS)/∂t) is <= 0, S at that node is undetermined.  Under dilation it
+    reaches φ >= 1, a skeleton with no solid.  A step that fails at such a node fails because the model
+    left its range, not because of the numerics.
+    """
+    if node is None:
+        return None
+    disc = sim.disc
+    phi = element_fields(disc, sim.params, sim.U, sim.d)["phi"]
+    around = np.any(disc.triangles == node, axis=1)
+    if not around.any():
+        return None
+    mean_phi = float(np.average(phi[around], weights=disc.geom.areas[around]))  # capacity / lumped area
+    r = float(np.hypot(*disc.points[node]))
+    if mean_phi <= 0.0:
+        return (f"pores closed at r = {r:.2f} mm (mean porosity {mean_phi:.3g} <= 0 around the failing node: the "
+                "linear porosity law leaves [0, 1] under compaction and S there has no capacity)")
+    if mean_phi >= 1.0:
+        return (f"skeleton dissolved at r = {r:.2f} mm (mean porosity {mean_phi:.3g} >= 1 around the failing "
+                "node: the linear porosity law leaves [0, 1] under dilation)")
+    return None
 
 
 def _next_dt(o: RunOptions, dt: float, info: dict) -> float:
