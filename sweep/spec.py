@@ -191,15 +191,26 @@ _MODES = ("cross", "zip")
 
 
 def _axis_values(where: str, spec, limit: int) -> tuple:
-    """One axis spec (list or {values|linear|log|range}) as a tuple of distinct values (at most ``limit``)."""
+    """One axis spec (list or {values|linear|log|range}) as a tuple of values (at most ``limit``); their
+    distinctness is checked with the axis's zip group (:func:`_check_distinct`)."""
     vals = _expand_axis(where, spec, limit)
     if len(vals) > limit:
         _too_many(where, len(vals), limit)
-    keys = [_value_key(v) for v in vals]
-    if len(set(keys)) != len(keys):
-        dup = next(v for v, k in zip(vals, keys) if keys.count(k) > 1)
-        _fail(where, f"value {dup!r} given twice (allowed: distinct values; a repeated value is one run)")
     return vals
+
+
+def _check_distinct(where: str, group: list) -> None:
+    """The points of a group of axes swept together (one crossed axis, or the axes of a zip group) are
+    distinct: a repeated point would silently be one run.  A zipped axis may repeat a value when the
+    zipped tuples differ."""
+    keys = [tuple(_value_key(a.values[i]) for a in group) for i in range(len(group[0].values))]
+    if len(set(keys)) != len(keys):
+        i = next(i for i, k in enumerate(keys) if keys.count(k) > 1)
+        if len(group) == 1:
+            _fail(f"{where}axes.{group[0].name}", f"value {group[0].values[i]!r} given twice (allowed: distinct "
+                                                    "values; a repeated value is one run)")
+        point = {a.name: a.values[i] for a in group}
+        _fail(f"{where}zip", f"zipped point {point} given twice (allowed: distinct points; a repeated point is one run)")
 
 
 def _value_key(v):
@@ -348,6 +359,9 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int
     for a in axes:
         if len(a.values) == 0:
             _fail(f"{w}axes.{a.name}", "the grid is empty: this axis has no values")
+    in_groups = {n for g in groups for n in g}
+    for g in groups + [(a.name,) for a in axes if a.name not in in_groups]:
+        _check_distinct(w, [names[n] for n in g])
     for a in axes:
         if a.target == "params" and a.name in params:
             _fail(f"{w}axes.{a.name}", f"{a.name!r} is both swept and set in base")

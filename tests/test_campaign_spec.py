@@ -62,6 +62,14 @@ def test_mode_zip_zips_every_axis():
     assert _swept(s) == [{"cement": 1.0, "eta_o": 0.1}, {"cement": 2.0, "eta_o": 0.2}]
 
 
+def test_zipped_axis_may_repeat_a_value_when_the_points_differ():
+    s = spec_from_dict({"name": "z", "mode": "zip", "axes": {"eta_o": [0.01, 1.0, 1.0], "kbar": [1e-4, 0.1, 1e-4]}})
+    assert _swept(s) == [{"eta_o": 0.01, "kbar": 1e-4}, {"eta_o": 1.0, "kbar": 0.1}, {"eta_o": 1.0, "kbar": 1e-4}]
+    s = spec_from_dict({"name": "z", "axes": {"cement": [1.0, 2.0], "eta_o": [0.1, 0.1], "w_i": [10.0, 20.0]},
+                        "zip": [["eta_o", "w_i"]]})
+    assert len(_swept(s)) == 4
+
+
 def test_axis_over_run_option_and_explicit_namespace():
     s = spec_from_dict({"name": "h", "axes": {"h": [4.0, 2.0], "options": {"t_end": [1.0, 2.0]}}})
     pts = grid_points(s)
