@@ -82,7 +82,7 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
 
     ``transport``: "galerkin" (mobilities at the point's saturation) or "upwind" (mobilities at the
     saturation shifted upstream by half the element size, see :func:`upwind_saturation`).
-    ``pressure_stabilization``: factor s of :func:`pressure_stabilization` (None or 0: none).
+    ``pressure_stabilization``: factor s of :func:`pressure_stabilization_tau` (None or 0: none).
     """
     if transport not in TRANSPORTS:
         raise ValueError(f"transport={transport!r}: allowed one of {TRANSPORTS}")
