@@ -64,7 +64,7 @@ class RunOptions:
         form, the paper's Sec. 3.1) or "upwind" (phase mobilities at the saturation shifted upstream by
         half the element size, ``solver.model.upwind_saturation``: first-order streamline upwinding).
     pressure_stabilization : factor s >= 0 on the pressure stabilization of the equal-order P1 / P1 pair
-        (``solver.model.pressure_stabilization``): the total mass balance gains
+        (``solver.model.pressure_stabilization_tau``): the total mass balance gains
         τ_e ∫ ∇q·∇(p − p_n)/Δt with τ_e = s b (1 − φ0) h_e² / (4 (λ + 2μ)) (mm²/kPa), the term of
         Aguilar et al. (2008) and Rodrigo et al. (2016) that removes the spurious pressure oscillations of the
         undrained limit (low permeability k, small Δt: k Δt / η ≪ h² / (λ + 2μ), where the pores close at the

@@ -78,6 +78,8 @@ _FIELD_DOCS = {
     "korteweg_factor": "factor on κ in the Korteweg terms of Eq. summary_equations_secondary (1 paper, 0 off)",
     "outer_compliance": "compliance of a spring on the outer boundary, mm/kPa (0 = rigid u = 0, the paper)",
     "crack_permeability": "blend s: k = k(φ0) + s (min(k(φ), k_max) - k(φ0)) (1 paper, 0 frozen at k(φ0))",
+    "porosity_floor": "smooth lower bound φ_f of the porosity law, - (None: the paper's unbounded linear law; "
+                      "below φ_f, φ = φ_f²/(2φ_f − φ_lin), solver.physics.porosity_floor)",
 }
 
 
@@ -89,6 +91,7 @@ _UNITS = {
     "psi_c": "kPa", "beta": "kPa·s", "cell_height": "mm", "r_inner": "mm", "r_outer": "mm", "bead_diameter": "mm",
     "phi_mean": "-", "phi_range": "-", "seed": "", "porosity_field": "", "mu_outer_bc": "", "ch_mobility": "", "outer_saturation_bc": "",
     "volumetric_coupling": "-", "korteweg_factor": "-", "outer_compliance": "mm/kPa", "crack_permeability": "-",
+    "porosity_floor": "-",
 }
 
 # allowed values of every parameter, as `_coerce_and_check` enforces them (tests/test_params.py holds the
@@ -113,6 +116,7 @@ _ALLOWED = {
     "mu_outer_bc": f"one of {MU_OUTER_BCS}",
     "ch_mobility": f"one of {CH_MOBILITIES}",
     "outer_saturation_bc": f"one of {OUTER_SATURATION_BCS}",
+    "porosity_floor": "None or in (0, phi_mean - phi_range) (below every initial porosity)",
 }
 
 @dataclass(frozen=True)
@@ -151,6 +155,9 @@ class Parameters:
     korteweg_factor : factor on κ in the Korteweg terms (1; off 0).
     outer_compliance : outer spring compliance, mm/kPa (0 = rigid, the paper).
     crack_permeability : permeability blend s (1 = paper; 0 = k frozen at k(φ0)).
+    porosity_floor : smooth lower bound φ_f of the porosity, - (None = the paper's linear law, which reaches
+        φ <= 0 under compaction; see :func:`solver.physics.porosity_floor`).  Omitted from :meth:`to_dict`
+        when None, so the run keys of runs made before it existed do not change.
     """
 
     eta_o: float = 0.29
@@ -184,6 +191,7 @@ class Parameters:
     korteweg_factor: float = 1.0
     outer_compliance: float = 0.0
     crack_permeability: float = 1.0
+    porosity_floor: float | None = None
 
     def __post_init__(self):
         _coerce_and_check(self)
@@ -280,8 +288,10 @@ class Parameters:
 
     # ------------------------------------------------------- serialization
     def to_dict(self) -> dict:
-        """All fields as a plain dict (None kept as None: parameter following its law of C)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """All fields as a plain dict (None kept as None: parameter following its law of C), except the
+        fields added after runs were stored (``_OMIT_WHEN_NONE``), left out at their default None."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if not (f.name in _OMIT_WHEN_NONE and getattr(self, f.name) is None)}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Parameters":
@@ -336,7 +346,10 @@ _FLOAT_FIELDS = (
     "mu_i", "mu_o", "cell_height", "r_inner", "r_outer", "bead_diameter", "phi_mean",
     "phi_range", "volumetric_coupling", "korteweg_factor", "outer_compliance", "crack_permeability",
 )
-_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta")
+_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta", "porosity_floor")
+# fields added after runs were stored: left out of to_dict() at None, so the parameter dicts (and the run keys
+# made from them) of older runs do not change
+_OMIT_WHEN_NONE = ("porosity_floor",)
 _CHOICES = (("porosity_field", POROSITY_FIELDS), ("mu_outer_bc", MU_OUTER_BCS), ("ch_mobility", CH_MOBILITIES),
             ("outer_saturation_bc", OUTER_SATURATION_BCS))
 CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
@@ -412,6 +425,9 @@ def _coerce_and_check(p: Parameters) -> None:
             gt(name, 0.0)
     if p.beta is not None:
         ge("beta", 0.0)
+    if p.porosity_floor is not None and not 0.0 < p.porosity_floor < p.phi_mean - p.phi_range:
+        _fail("porosity_floor", p.porosity_floor, f"None or in (0, phi_mean - phi_range = {p.phi_mean - p.phi_range:.6g}) "
+                                                  "(below every initial porosity)")
     bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
     if not p.l_d <= bound * (1.0 + 1e-12):
         _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")

@@ -13,12 +13,31 @@ from .ad import Dual
 
 
 # ---------------------------------------------------------------- porosity
-def porosity(phi0, eps_v, p, K_s: float):
-    """φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p / K_s  (Eq. summary_equations_3).
+def porosity(phi0, eps_v, p, K_s: float, floor: float | None = None):
+    """φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p / K_s  (Eq. summary_equations_3), bounded below by
+    :func:`porosity_floor` when ``floor`` is given (the ``porosity_floor`` parameter; None: the paper's law).
 
     ``phi0`` per element (dimensionless), ``eps_v`` volumetric strain, ``p`` kPa, ``K_s`` kPa.
     """
-    return phi0 + (1.0 - phi0) * eps_v + (1.0 - phi0) * p / K_s
+    phi = phi0 + (1.0 - phi0) * eps_v + (1.0 - phi0) * p / K_s
+    return phi if floor is None else porosity_floor(phi, floor)
+
+
+def porosity_floor(phi, floor: float):
+    """Smooth lower bound φ_f > 0 of the porosity: φ for φ >= φ_f, φ_f² / (2 φ_f − φ) below.
+
+    The linear law of Eq. summary_equations_3 has no lower bound: under compaction it reaches φ <= 0, where
+    the pores are closed (k = 0) and the invading-fluid balance ∂(φS)/∂t has no capacity.  Below φ_f this
+    branch keeps φ positive and decreasing to 0 as the linear value goes to −∞: the grains come into contact
+    and the pore space stiffens.  Value and slope match at φ_f (C¹), so Newton keeps its convergence.
+    """
+    v = ad.value(phi)
+    below = v < floor
+    if isinstance(phi, Dual):
+        safe = ad.where(below, phi, floor)
+        return ad.where(below, floor * floor / (2.0 * floor - safe), phi)
+    safe = np.where(below, phi, floor)  # the unused branch stays finite where φ >= 2 φ_f
+    return np.where(below, floor * floor / (2.0 * floor - safe), phi)
 
 
 def kozeny_carman(phi, kbar: float, k_max: float):

@@ -359,10 +359,11 @@ def physical_limit(sim: Simulation, node: int | None) -> str | None:
     """The physical limit of the model reached at ``node`` in the last accepted state, or None.
 
     The linear porosity law φ = φ0 + (1 − φ0)(ε_v + p/K_s) (Eq. summary_equations_3) has no bound: under
-    compaction it reaches φ <= 0, where k = 0; once the node's capacity ∫ φ N_a dx (the lumped diagonal of
-    the invading-fluid balance ∂(φS)/∂t) is <= 0, S at that node is undetermined.  Under dilation it
-    reaches φ >= 1, a skeleton with no solid.  A step that fails at such a node fails because the model
-    left its range, not because of the numerics.
+    compaction it reaches φ <= 0, where the pores are closed (k = 0, no flux across the element) and the
+    element's share of the invading-fluid capacity ∫ φ N_a dx is gone or negative, so S at a node next to it
+    is no longer determined by the balance.  Under dilation it reaches φ >= 1, a skeleton with no solid.  A
+    step that fails at a node touching such an element fails because the model left its range, not because
+    of the numerics.
     """
     if node is None:
         return None
@@ -371,14 +372,16 @@ def physical_limit(sim: Simulation, node: int | None) -> str | None:
     around = np.any(disc.triangles == node, axis=1)
     if not around.any():
         return None
-    mean_phi = float(np.average(phi[around], weights=disc.geom.areas[around]))  # capacity / lumped area
+    ph = phi[around]
+    mean_phi = float(np.average(ph, weights=disc.geom.areas[around]))
     r = float(np.hypot(*disc.points[node]))
-    if mean_phi <= 0.0:
-        return (f"pores closed at r = {r:.2f} mm (mean porosity {mean_phi:.3g} <= 0 around the failing node: the "
-                "linear porosity law leaves [0, 1] under compaction and S there has no capacity)")
-    if mean_phi >= 1.0:
-        return (f"skeleton dissolved at r = {r:.2f} mm (mean porosity {mean_phi:.3g} >= 1 around the failing "
-                "node: the linear porosity law leaves [0, 1] under dilation)")
+    n = f"{{}} of the {ph.size} elements around the failing node, mean porosity {mean_phi:.3g}"
+    if ph.min() <= 0.0:
+        return (f"pores closed at r = {r:.2f} mm (porosity <= 0 in {n.format(int((ph <= 0).sum()))}: the linear "
+                "porosity law leaves [0, 1] under compaction, k = 0 and S loses its capacity there)")
+    if ph.max() >= 1.0:
+        return (f"skeleton dissolved at r = {r:.2f} mm (porosity >= 1 in {n.format(int((ph >= 1).sum()))}: the "
+                "linear porosity law leaves [0, 1] under dilation)")
     return None
 
 

@@ -10,8 +10,8 @@ physical-limit diagnosis of failed runs (``solver.simulate.physical_limit``).
    the same times the water fractional flow λ1/(λ1 + λ2) on the invading-fluid rows (1 in water, 0 in oil).
 3. Start-up at the low-permeability edge of the paper's grid (k̄ = 1e-4 mm², η_w = 1e-3 kPa·s): the first
    step keeps p >= 0 (injection into a layer drained at p = 0) and the volume balance.
-4. A failed step at a node whose pores are closed (mean porosity <= 0) or whose skeleton is gone
-   (mean porosity >= 1) is reported as that physical limit, and only then.
+4. A failed step at a node touching an element whose pores are closed (porosity <= 0) or whose skeleton is
+   gone (porosity >= 1) is reported as that physical limit, and only then.
 """
 import dataclasses
 
@@ -131,6 +131,13 @@ def test_physical_limit_names_closed_pores_and_dissolved_skeleton_only_there():
     # φ = φ0 + (1 − φ0) p/K_s with ε_v = 0: p = −K_s closes every pore, p = +2 K_s/(1 − φ0_min) opens them all
     sim.U[:, P] = -K_s
     assert "pores closed at r = 30" in physical_limit(sim, node)
+    # one closed element around the node is enough: its flux and its share of the node's capacity are gone
+    sim.U[:, P] = 0.0
+    first = np.flatnonzero(np.any(sim.disc.triangles == node, axis=1))[0]
+    sim.U[sim.disc.triangles[first], P] = -2.0 * K_s
+    assert "pores closed at r = 30" in physical_limit(sim, node)
+    far = int(np.argmin(np.abs(r - 15.0)))
+    assert physical_limit(sim, far) is None  # the closed element is not around this node
     sim.U[:, P] = 2.0 * K_s / (1.0 - sim.disc.phi0.max())
     assert "skeleton dissolved" in physical_limit(sim, node)
 
