@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
 from sweep.logs import LogStream, end_logging, setup_logging
 from sweep.scheduler import BACKENDS
@@ -47,7 +48,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns}")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -83,6 +84,15 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         if name == "report":
             q.add_argument("--html", action="store_true",
                            help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
+    q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
+    q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
+    q.add_argument("other", help="second campaign: spec TOML or campaign folder")
+    q.add_argument("--results", default="results", metavar="DIR", help="results root (default: results)")
+    q.add_argument("--label", default="regime", help="categorical column compared (default: regime)")
+    q.add_argument("--columns", default="", metavar="A,B",
+                   help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
+    q.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown summary to FILE")
+    q.set_defaults(func=cmd_compare)
     return camp
 
 
@@ -307,6 +317,29 @@ def cmd_columns(args) -> int:
     uw = max(len(u) for u in cols["unit"])
     for name, unit, meaning in zip(cols["name"], cols["unit"], cols["meaning"]):
         print(f"{name:<{width}}  {unit:<{uw}}  {meaning}")
+    return 0
+
+
+@_guarded
+def cmd_compare(args) -> int:
+    from solver.output import check_writable_dir
+    from sweep.compare import compare_campaigns
+    from sweep.store import write_text_atomic
+
+    if args.out is not None:
+        try:
+            check_writable_dir(str(Path(args.out).resolve().parent), "--out folder")
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+    columns = tuple(c.strip() for c in args.columns.split(",") if c.strip())
+    try:
+        c = compare_campaigns(args.spec, args.other, args.results, label=args.label, columns=columns)
+    except (ValueError, FileNotFoundError) as e:
+        raise UsageError(str(e)) from None
+    text = c.markdown()
+    print(text)
+    if args.out is not None:
+        write_text_atomic(args.out, text + "\n")
     return 0
 
 
