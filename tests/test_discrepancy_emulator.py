@@ -137,7 +137,8 @@ def test_workflow_with_the_emulator_names_the_effect_with_the_exact_interval_for
     data = _twin(tmp_path)
     reps = {}
     for emu in ("none", "gp"):
-        reps[emu] = run_workflow(data, _spec({"emulator": emu}), ToyForward({}, h=8.0), figures=False)
+        reps[emu] = run_workflow(data, _spec({"emulator": emu}), ToyForward({}, h=8.0), out_dir=tmp_path / emu,
+                                 figures=False)
     off, on = reps["none"], reps["gp"]
     assert off["verdict"] == on["verdict"] == "named" and off["named_effect"] == on["named_effect"] == "damage_viscosity"
     runs = {k: r["forward_runs_by_stage"]["profile_likelihood"]["coarse"] for k, r in reps.items()}
@@ -150,6 +151,8 @@ def test_workflow_with_the_emulator_names_the_effect_with_the_exact_interval_for
     tol = (2 * 0.15 * pr["threshold"] + 2 * chi * 0.1) / (4 * pr["threshold"]) * width
     assert abs(lo1 - lo0) <= tol and abs(hi1 - hi0) <= tol
     assert lo1 < 40.0 < hi1
+    md = (tmp_path / "gp" / "report.md").read_text()
+    assert "Emulated profile" in md and "| lower |" in md and "Emulated profile" not in (tmp_path / "none" / "report.md").read_text()
 
 
 # ----------------------------------------------------------------------------- options

@@ -220,8 +220,33 @@ def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEm
     lo, hi = np.array(lo), np.array(hi)
     em = CurveEmulator(problem, fit.params, ids, (lo, hi))
     n = max(po.emulator_design, len(fit.params) + 4)
-    em.add([x] + list(space_filling(n - 1, lo, hi, problem.spec.fit.seed)))
+    em.add(design_points(x, problem.evaluated(fit.params, ids), lo, hi, n, problem.spec.fit.seed))
     return em
+
+
+def design_points(x: np.ndarray, done: list, lo: np.ndarray, hi: np.ndarray, n: int, seed: int) -> list:
+    """The emulator's first design: the fit ``x``, then the points already run (``done``: the refits' and
+    the refresh's, free) and space-filling points of the box [lo, hi], each kept only at least 0.5 n^(−1/d)
+    of the box (unit coordinates) from those chosen, the farthest first, until there are ``n`` points; the
+    runs already made count toward ``n`` only inside the box, and at most 2 n of them are taken."""
+    d = len(x)
+    gap = 0.5 * n ** (-1.0 / d)
+    unit = lambda v: (np.asarray(v, float) - lo) / (hi - lo)
+    chosen = [np.asarray(x, float)]
+
+    def take(cands: list, limit: int) -> None:
+        cands = list(cands)
+        while cands and len(chosen) < limit:
+            dist = [min(np.linalg.norm(unit(c) - unit(q)) for q in chosen) for c in cands]
+            i = int(np.argmax(dist))
+            if dist[i] < gap:
+                return
+            chosen.append(np.asarray(cands.pop(i), float))
+
+    inside = [c for c in done if np.all(unit(c) >= -0.25) and np.all(unit(c) <= 1.25)]
+    take(inside, 2 * n)
+    take(list(space_filling(4 * n, lo, hi, seed)), max(n, len(chosen)))
+    return chosen
 
 
 def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841, fine_forward=None,
