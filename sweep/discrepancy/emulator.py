@@ -212,10 +212,12 @@ class CurveEmulator:
             self._w, self._wkey = self.problem.noise.with_scaled(self.mask, self.out_cov()), key
         return self._w
 
-    def sd_norm(self, x) -> float:
+    def sd_norm(self, x, run: bool = False) -> float:
         """√tr(Σ⁻¹ V) at ``x`` (Σ the noise model's covariance on the rows, V the emulator's): its predictive
-        sd as the expected norm of whitened(run − emulator)."""
-        return self.whitener().sd_norm(self.predict(x)[1])
+        sd as the expected norm of the whitened error, of the smooth part (what more runs nearby reduce) or,
+        with ``run``, of a real run there (the nugget's jitter included)."""
+        s = self.predict(x)[1]
+        return self.whitener().sd_norm(s if run else max(s - self.gp.nugget, 0.0))
 
     def deviation(self, x, m_real: np.ndarray) -> float:
         """|whitened(m_real − emulated mean)| at ``x`` (whitened with the noise model alone)."""

@@ -98,7 +98,8 @@ class _Profile:
 
     def refit(self, xj: float, x0: np.ndarray) -> Fit:
         """The others refitted with the parameter at ``xj``: real runs, or the emulator, refined with a real
-        run where its predictive sd at the refit exceeds ``emulator_tol`` (at most 3 times a point)."""
+        run where the predictive sd of its smooth part at the refit exceeds ``emulator_tol`` (at most 3 times
+        a point; the nugget's jitter, which more runs do not reduce, stays in the likelihood's covariance)."""
         if self.em is None:
             return self.problem.fit(self.free, [x0], self.ids)
         for _ in range(3):
@@ -120,7 +121,7 @@ class _Profile:
         for _ in range(self.po.emulator_checks):
             d_em = self.dchi2(xb)
             x = self.last.x_full
-            u, m = em.sd_norm(x), em.model_vectors([x])[0]
+            u, m = em.sd_norm(x, run=True), em.model_vectors([x])[0]
             dev = em.deviation(x, m)
             r = problem.standardize(problem.y[self.mask] - m, self.mask, problem.spec.fit.nan_residual)
             agree = bool(dev <= max(self.po.emulator_tol, AGREE_SD * u))
@@ -225,14 +226,19 @@ def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEm
 
 
 def design_points(x: np.ndarray, done: list, lo: np.ndarray, hi: np.ndarray, n: int, seed: int) -> list:
-    """The emulator's first design: the fit ``x``, then the points already run (``done``: the refits' and
-    the refresh's, free) and space-filling points of the box [lo, hi], each kept only at least 0.5 n^(−1/d)
-    of the box (unit coordinates) from those chosen, the farthest first, until there are ``n`` points; the
-    runs already made count toward ``n`` only inside the box, and at most 2 n of them are taken."""
+    """The emulator's first design: the fit ``x`` and its d nearest neighbours among the points already run
+    (``done``: the refits' and the refresh's, free) between 0.1 and 1 times the gap below (the fit's
+    finite-difference steps among them: runs close together show the model's jitter, which the process's
+    lengths and nugget must account for; closer ones, a converging optimizer's, show nothing), then the
+    other points already run and space-filling points of the box [lo, hi], each kept only at least
+    0.5 n^(−1/d) of the box (unit coordinates) from those chosen, the farthest first, until there are ``n``
+    points; the runs already made count toward ``n`` only inside the box, and at most 2 n are taken."""
     d = len(x)
     gap = 0.5 * n ** (-1.0 / d)
     unit = lambda v: (np.asarray(v, float) - lo) / (hi - lo)
-    chosen = [np.asarray(x, float)]
+    near = sorted((c for c in done if 0.1 * gap <= np.linalg.norm(unit(c) - unit(x)) < gap),
+                  key=lambda c: np.linalg.norm(unit(c) - unit(x)))
+    chosen = [np.asarray(x, float)] + [np.asarray(c, float) for c in near[:d]]
 
     def take(cands: list, limit: int) -> None:
         cands = list(cands)
