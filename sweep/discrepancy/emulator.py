@@ -21,8 +21,11 @@ The prediction at u is the kriging mean and the covariance
     V(u) = (c(u) + g) Σ,    c(u) = 1 − kᵀK⁻¹k + (h − HᵀK⁻¹k)ᵀ (HᵀK⁻¹H)⁻¹ (h − HᵀK⁻¹k),
 
 the error of the emulator against a real run there (c: the smooth part's posterior variance, g: the run's
-jitter about it).  V enters the likelihood: residuals are whitened with Σ_noise + V (:class:`~.noise.ScaledCovariance`), and the profile's χ² carries the log-determinant it adds.  Units: each output's own
-(kPa, mm) in and out; the design in the parameters' fit coordinates.
+jitter about it, with the outputs' covariance Σ too: conservative along the parameters' directions, where Σ
+is largest).  V enters the likelihood: residuals are whitened with Σ_noise + V
+(:class:`~.noise.ScaledCovariance`), so the emulator's error only widens the profile's interval (profile.py
+leaves the log-determinant out).  Units: each output's own (kPa, mm) in and out; the design in the
+parameters' fit coordinates.
 """
 from __future__ import annotations
 
@@ -40,8 +43,8 @@ log = logging.getLogger("dchfrac.discrepancy")
 __all__ = ["GaussianProcess", "CurveEmulator", "space_filling", "AGREE_SD"]
 
 AGREE_SD = 2.0            # a real run agrees with the emulator when within this many of its predicted sd
-_LOG_LEN = (math.log(0.02), math.log(5.0))     # correlation lengths in the design box's unit coordinates
-_LOG_NUGGET = (math.log(1e-9), math.log(0.1))  # the nugget, relative to the outputs' variance
+_LOG_LEN = (math.log(0.1), math.log(5.0))      # correlation lengths in the design box's unit coordinates
+_LOG_NUGGET = (math.log(1e-9), math.log(1.0))  # the nugget, relative to the outputs' variance
 
 
 def _matern52(a: np.ndarray, b: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -219,6 +222,11 @@ class CurveEmulator:
         s = self.predict(x)[1]
         return self.whitener().sd_norm(s if run else max(s - self.gp.nugget, 0.0))
 
+    def jitter_norm(self) -> float:
+        """The nugget's part of :meth:`sd_norm` (a run's jitter about the smooth part, the same everywhere):
+        the floor below which more runs do not bring the smooth part's sd in practice."""
+        return self.whitener().sd_norm(self.gp.nugget)
+
     def deviation(self, x, m_real: np.ndarray) -> float:
         """|whitened(m_real − emulated mean)| at ``x`` (whitened with the noise model alone)."""
         mean, _ = self.predict(x)
@@ -237,7 +245,8 @@ def fit_on_emulator(em: CurveEmulator, j: int, xj: float, x0_free: np.ndarray, m
     """The refit of the parameters other than ``j`` with parameter ``j`` held at ``xj`` (fit coordinates),
     on the emulator: robust least squares (the spec's [fit] loss) on the residuals whitened with the noise
     model's covariance plus the emulator's (:class:`~.noise.ScaledCovariance`).  The returned Fit's ``cost``
-    is ½ r·r and its attribute ``logdet`` the log-determinant the emulator's covariance adds (for the χ²)."""
+    is ½ r·r, ``x_full`` the point in all the emulator's parameters and ``logdet`` the log-determinant the
+    emulator's covariance adds there."""
     problem, fo = em.problem, em.problem.spec.fit
     free = [i for i in range(len(em.params)) if i != j]
     lb = np.array([em.params[i].x_bounds[0] for i in free])

@@ -53,6 +53,8 @@ class _Profile:
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
         self.fines = realizations(fine_forward)
         self.checks: list = []
+        if emulator is not None:     # Δχ² within one likelihood: the emulator's (its covariance) at the fit too
+            self.chi2_hat = self.fit_deviance(self.held(float(self.x_hat[j])))
 
     def deviance(self, r: np.ndarray) -> float:
         """The profile's χ² of residuals ``r``: Σ w r² ("weighted", "gaussian": w = 1) or −2 ln of the
@@ -64,7 +66,7 @@ class _Profile:
 
     def dchi2(self, xj: float) -> float:
         """Δχ² with the parameter held at ``xj`` (internal coordinates), the others refitted (on the emulator
-        when there is one, its log-determinant included); with fine models the correction is re-estimated at
+        when there is one: :meth:`refit`); with fine models the correction is re-estimated at
         that point and the others refitted again (σ and the covariance stay the fit's, so every Δχ² is on one
         scale)."""
         problem, p = self.problem, self.p
@@ -91,20 +93,31 @@ class _Profile:
                  self.thr, len(self.points) - 1)
         return d
 
+    def held(self, xj: float) -> Fit:
+        """The others refitted with the parameter held at ``xj`` (from the fit's values)."""
+        self.problem.fixed = {self.p.name: self.p.from_x(xj)}
+        try:
+            return self.refit(xj, np.delete(self.x_hat, self.j))
+        finally:
+            self.problem.fixed = {}
+
     def fit_deviance(self, f: Fit) -> float:
-        """The profile's χ² of a refit: :meth:`deviance` of its residuals, plus the log-determinant the
-        emulator's covariance adds (an emulated refit)."""
-        return self.deviance(f.r) + getattr(f, "logdet", 0.0)
+        """The profile's χ² of a refit: :meth:`deviance` of its residuals (an emulated refit's whitened with
+        the emulator's covariance added, so its error only lowers Δχ² and widens the interval; the Gaussian
+        likelihood's log-determinant of that covariance is left out: it grows where the emulator knows less,
+        along the profile away from its design, and would narrow the interval by the emulator's ignorance)."""
+        return self.deviance(f.r)
 
     def refit(self, xj: float, x0: np.ndarray) -> Fit:
         """The others refitted with the parameter at ``xj``: real runs, or the emulator, refined with a real
-        run where the predictive sd of its smooth part at the refit exceeds ``emulator_tol`` (at most 3 times
-        a point; the nugget's jitter, which more runs do not reduce, stays in the likelihood's covariance)."""
+        run where the predictive sd of its smooth part at the refit exceeds ``emulator_tol`` and the run's own
+        jitter (the nugget's sd: below it more runs do not help, and it stays in the likelihood's covariance);
+        at most 3 runs a point."""
         if self.em is None:
             return self.problem.fit(self.free, [x0], self.ids)
         for _ in range(3):
             f = fit_on_emulator(self.em, self.j, xj, x0)
-            if self.em.sd_norm(f.x_full) <= self.po.emulator_tol:
+            if self.em.sd_norm(f.x_full) <= max(self.po.emulator_tol, self.em.jitter_norm()):
                 break
             self.em.add([f.x_full])
             self.em.refinements += 1
