@@ -208,3 +208,38 @@ def test_spec_refuses_bad_emulator_settings(key, value, allowed):
 def test_spec_refuses_the_emulator_with_the_marginal_likelihood():
     with pytest.raises(ValueError, match=r'profile\.emulator=\'gp\' is not allowed with profile\.likelihood="marginal"'):
         _spec({"emulator": "gp", "likelihood": "marginal"})
+
+
+# ----------------------------------------------------------------------------- the cost comparison
+def _study(variant, rows):
+    return {"variant": variant, "rows": rows}
+
+
+def _row(draw, lower, upper, profile_runs, covered=True, verdict="named"):
+    return {"setup": "s", "draw": draw, "verdict": verdict, "lower": lower, "upper": upper, "covered": covered,
+            "runs_by_stage": {"refits": {"coarse": 10, "fine": 0}, "profile_likelihood": {"coarse": profile_runs, "fine": 2}}}
+
+
+def test_cost_comparison_pairs_draws_and_books_runs_by_stage(tmp_path):
+    import json
+
+    from sweep.discrepancy.cost import compare_studies, main, markdown
+
+    ref = _study("off", [_row(0, 1.0, 3.0, 100), _row(1, 2.0, 4.0, 80), _row(2, 0.0, 1.0, 50)])
+    cand = _study("on", [_row(0, 1.2, 3.0, 10), _row(1, 2.0, 3.9, 20, covered=False), _row(3, 0.0, 1.0, 5)])
+    c = compare_studies(ref, cand)
+    assert c["draws"] == 2 and c["both_named"] == 2 and c["verdicts_differ"] == []
+    assert c["stages"]["reference"]["profile_likelihood"] == (90.0, 2.0)
+    assert c["stages"]["candidate"]["profile_likelihood"] == (15.0, 2.0)
+    assert c["total_runs"] == {"reference": 102.0, "candidate": 27.0}
+    assert c["end_difference_over_width"]["lower"]["max"] == pytest.approx(0.1)
+    assert c["end_difference_over_width"]["upper"]["max"] == pytest.approx(0.05)
+    assert c["coverage"] == {"reference": 2, "candidate": 1}
+    assert "| profile_likelihood | 90.0 + 2.0 | 15.0 + 2.0 |" in markdown(c)
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text(json.dumps(ref))
+    b.write_text(json.dumps(_study("on", [_row(7, 0.0, 1.0, 1)])))
+    assert main([str(a), str(b)]) == 2                 # no shared draw: refused, exit code 2
+    b.write_text(json.dumps(cand))
+    assert main([str(a), str(b), "--out", str(tmp_path / "t.md")]) == 0
+    assert (tmp_path / "t.md").read_text() == markdown(c)
