@@ -81,6 +81,29 @@ def test_added_covariance_whitens_to_the_generalized_least_squares_residual(tmp_
     assert sc.sd_norm(0.5) == pytest.approx(math.sqrt(0.5 * np.trace(np.linalg.solve(S, X))), rel=1e-9)
 
 
+def test_emulator_leaves_failed_runs_out_and_waits_for_enough_points(tmp_path):
+    """A design run that failed (NaN anywhere) is counted and left out; the process is fitted only once the
+    design has parameters + 4 finite points, and then reproduces the runs it was given."""
+    from sweep.discrepancy.emulator import CurveEmulator
+    from sweep.discrepancy.problem import Problem
+
+    spec = _spec()
+    prob = Problem(_twin(tmp_path), spec, ToyForward({}, h=8.0))
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    lo, hi = np.array([p.x_bounds[0] for p in params]), np.array([p.x_bounds[1] for p in params])
+    em = CurveEmulator(prob, params, ["a", "b"], (lo, hi))
+    xs = space_filling(7, lo, hi, seed=1)
+    ms = em.model_vectors(list(xs))
+    assert em.runs == 7 * 2                                       # one run per condition and point
+    ms[1, 3] = np.nan
+    em.add(list(xs[:5]), ms[:5])
+    assert em.failed == 1 and len(em.X) == 4 and em.gp is None   # 4 < 2 + 4: no process yet
+    em.add(list(xs[5:]), ms[5:])
+    assert len(em.X) == 6 and em.gp is not None
+    mean, s = em.predict(xs[6])
+    assert np.allclose(mean, ms[6], atol=1e-3 * np.abs(ms[6]).max()) and s < 1e-3
+
+
 # ----------------------------------------------------------------------------- the toy workflow
 def _twin(tmp_path, hidden=None):
     fwd = ToyForward(DATA_BASE, h=2.0)

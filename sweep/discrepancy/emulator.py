@@ -153,7 +153,8 @@ class CurveEmulator:
     CalibParam tuple) in their fit coordinates: a :class:`GaussianProcess` on real runs.
 
     box : (lo, hi) of the design in fit coordinates; the emulator is refitted after every added run (a
-    design point whose run failed, non-finite anywhere, is kept out of the fit and counted in ``failed``).
+    design point whose run failed, non-finite anywhere, is kept out of the fit and counted in ``failed``; the
+    process is fitted once there are parameters + 4 points).
     ``runs``: forward runs the emulator asked for."""
 
     def __init__(self, problem, params: tuple, ids, box: tuple):
@@ -194,8 +195,9 @@ class CurveEmulator:
         self.failed += int((~ok).sum())
         self.X = np.vstack([self.X, np.atleast_2d(np.asarray(xs, float))[ok]])
         self.M = np.vstack([self.M, ms[ok]])
-        self.gp = GaussianProcess(self._unit(self.X), self.M / self.scale,
-                                  start=self.gp.theta if self.gp is not None else None)
+        if len(self.X) >= len(self.params) + 4:     # enough points for the process (failed runs left out)
+            self.gp = GaussianProcess(self._unit(self.X), self.M / self.scale,
+                                      start=self.gp.theta if self.gp is not None else None)
 
     def predict(self, x) -> tuple[np.ndarray, float]:
         """The emulated model vector (rows,) at ``x`` (fit coordinates) and the scale s of the covariance

@@ -235,6 +235,13 @@ def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEm
     em = CurveEmulator(problem, fit.params, ids, (lo, hi))
     n = max(po.emulator_design, len(fit.params) + 4)
     em.add(design_points(x, problem.evaluated(fit.params, ids), lo, hi, n, problem.spec.fit.seed))
+    for k in range(1, 3):                      # runs that failed left too few points: more of the box
+        if em.gp is not None:
+            break
+        em.add(list(space_filling(n, lo, hi, problem.spec.fit.seed + k)))
+    if em.gp is None:
+        raise RuntimeError(f"profile emulator: {em.failed} of its design runs failed, too few points left for "
+                           f"{len(fit.params)} parameters; set [profile] emulator = \"none\"")
     return em
 
 
