@@ -168,6 +168,7 @@ class CurveEmulator:
         self.runs = 0
         self.refinements = 0
         self.gp: GaussianProcess | None = None
+        self._w, self._wkey = None, None
 
     def _unit(self, x) -> np.ndarray:
         return (np.atleast_2d(np.asarray(x, float)) - self.lo) / (self.hi - self.lo)
@@ -213,7 +214,7 @@ class CurveEmulator:
         """The noise model's whitening with the emulator's covariance added (:class:`~.noise.ScaledCovariance`),
         rebuilt when the process or the noise model's covariance changed."""
         key = (id(self.gp), self.problem.noise.cov_version)
-        if getattr(self, "_wkey", None) != key:
+        if self._wkey != key:
             self._w, self._wkey = self.problem.noise.with_scaled(self.mask, self.out_cov()), key
         return self._w
 

@@ -255,7 +255,10 @@ def design_points(x: np.ndarray, done: list, lo: np.ndarray, hi: np.ndarray, n: 
     points; the runs already made count toward ``n`` only inside the box, and at most 2 n are taken."""
     d = len(x)
     gap = 0.5 * n ** (-1.0 / d)
-    unit = lambda v: (np.asarray(v, float) - lo) / (hi - lo)
+
+    def unit(v):
+        return (np.asarray(v, float) - lo) / (hi - lo)
+
     near = sorted((c for c in done if 0.1 * gap <= np.linalg.norm(unit(c) - unit(x)) < gap),
                   key=lambda c: np.linalg.norm(unit(c) - unit(x)))
     chosen = [np.asarray(x, float)] + [np.asarray(c, float) for c in near[:d]]
