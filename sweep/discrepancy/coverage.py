@@ -110,6 +110,8 @@ VARIANTS = {v.name: v for v in (
     Variant("strong_bias", bias=4.0),
     Variant("strong_bias_fit_correction", bias=4.0, tables={"profile": {"fine": False}}),
     Variant("strong_bias_remedy", bias=4.0, tables=_REMEDY),
+    Variant("emulator", tables={"profile": {"emulator": "gp"}}),
+    Variant("emulator_fit_correction", tables={"profile": {"fine": False, "emulator": "gp"}}),
 )}
 
 
@@ -146,8 +148,9 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
     search(run)
     row = {"setup": su.name, "draw": draw, "truth": truth, "cal_truth": cal, "named": bool(run.accepted)}
     if not run.accepted:
-        return {**row, "verdict": run.verdict}
+        return {**row, "verdict": run.verdict, "runs_by_stage": run.ledger.stages}
     finalize(run)
+    row["runs_by_stage"] = run.ledger.stages
     a = run.accepted[0]
     fit = run.current
     names = [p.name for p in fit.params]
@@ -156,6 +159,9 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
                 "upper": a["strength_interval"][1], "cal_fit": fit.values()[su.calibrate],
                 "corr": _correlation(fit.J, j)})
     row["covered"] = bool(row["lower"] <= truth <= row["upper"])
+    em = run.profiles[su.effect].get("emulator")
+    if em:
+        row["profile_emulator"] = {k: em[k] for k in ("design_points", "forward_runs", "refinements", "confirmed")}
     pf = _Profile(run.problem, fit, j, run.train, 3.841, run.fine if run.spec.profile.fine else None)
     row.update({"dchi2_truth": pf.dchi2(fit.params[j].to_x(truth)), "threshold": pf.thr,
                 "dchi2_truth_others_fixed": _dchi2_others_fixed(pf, truth)})

@@ -14,14 +14,17 @@ keyed on.  The functions below compute its pieces from forward runs.  Units: kPa
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from . import stats
 from .jitter import ModelJitter, estimate_model_jitter
 from .layout import CurveLayout
 from .observables import CURVES
 from .realizations import RealizationCovariance, realization_mean_spread, realizations
 
-__all__ = ["NoiseModel", "add_discretization_error", "correction_at", "add_model_jitter", "model_jitter_at",
+__all__ = ["NoiseModel", "ScaledCovariance", "add_discretization_error", "correction_at", "add_model_jitter", "model_jitter_at",
            "rms_per_observable"]
 
 
@@ -41,11 +44,13 @@ class NoiseModel:
         self.jitter: ModelJitter | None = None
         self.realization_spread = np.zeros(self.y.size)
         self.version = 0
+        self.cov_version = 0
         self._whiteners: dict = {}
 
     def _changed(self, covariance: bool) -> None:
         self.version += 1
         if covariance:
+            self.cov_version += 1
             self._whiteners.clear()
 
     def set_discretization(self, err: np.ndarray, fines: np.ndarray, fraction: float) -> None:
@@ -114,6 +119,22 @@ class NoiseModel:
             out[pos] = W @ e[pos]
         return out
 
+    def correlation(self, mask: np.ndarray) -> np.ndarray:
+        """R = I + D^(−1/2) C D^(−1/2) on ``mask``'s rows (dense; D = σ_diag², C the realization and jitter
+        covariance, none: R = I): the covariance of e = diff/σ_diag."""
+        key = ("dense", mask.tobytes())
+        if key not in self._whiteners:
+            sel = np.flatnonzero(mask)
+            d = self.sig_diag[sel]
+            C = self.real_cov.dense(sel) if self.real_cov is not None else np.zeros((sel.size, sel.size))
+            self._whiteners[key] = np.eye(sel.size) + C / np.outer(d, d)
+        return self._whiteners[key]
+
+    def with_scaled(self, mask: np.ndarray, extra: np.ndarray) -> "ScaledCovariance":
+        """Whitening on ``mask``'s rows with the modelled covariance plus s × ``extra`` (kPa², mm²), any s >= 0
+        (:class:`ScaledCovariance`; valid until the covariance changes: ``cov_version``)."""
+        return ScaledCovariance(self.sig_diag[mask], self.correlation(mask), extra)
+
     def marginal_deviance(self, r: np.ndarray, mask: np.ndarray) -> float:
         """−2 ln of the likelihood of standardized residuals ``r`` (:meth:`standardize` on ``mask``'s rows)
         with the realization covariance's scale integrated over its sampling distribution
@@ -141,6 +162,32 @@ class NoiseModel:
         if self.real_cov is None:
             return None
         return self.real_cov.null_calibration(mask, self.sig_diag, seed=seed)
+
+
+class ScaledCovariance:
+    """Residuals whitened with Σ + s·X for a fixed added covariance X (an emulator's, kPa², mm²) and any
+    scalar s >= 0, each in O(n²): with W₀ = R^(−1/2) (the modelled covariance over σ_diag², R) and
+    W₀ X_e W₀ = Q Γ Qᵀ (X_e = D^(−1/2) X D^(−1/2)), the whitener W_s = Q (I + sΓ)^(−1/2) Qᵀ W₀ has
+    W_sᵀ W_s = (R + s X_e)⁻¹ and is W₀ (:meth:`NoiseModel.standardize`) at s = 0, so r·r = diffᵀ(Σ + sX)⁻¹diff
+    and the rows keep their meaning for small s."""
+
+    def __init__(self, d: np.ndarray, R: np.ndarray, extra: np.ndarray):
+        self.d = np.asarray(d, float)
+        self.W0 = stats.symmetric_whitener(R)
+        B = self.W0 @ (np.asarray(extra, float) / np.outer(self.d, self.d)) @ self.W0
+        g, self.Q = np.linalg.eigh(0.5 * (B + B.T))
+        self.gamma = np.maximum(g, 0.0)
+        self.QtW0 = self.Q.T @ self.W0
+
+    def standardize(self, diff: np.ndarray, s: float) -> tuple[np.ndarray, float]:
+        """Whitened residuals of ``diff`` (data − model, finite; kPa, mm) with Σ + s·X, and the
+        log-determinant the added term adds, ln det(Σ + sX) − ln det Σ (its part of −2 ln L)."""
+        z = self.QtW0 @ (np.asarray(diff, float) / self.d)
+        return self.Q @ (z / np.sqrt(1.0 + s * self.gamma)), float(np.sum(np.log1p(s * self.gamma)))
+
+    def sd_norm(self, s: float) -> float:
+        """√tr(Σ⁻¹ s X): the expected norm of a deviation of covariance s·X whitened with Σ alone."""
+        return float(math.sqrt(max(s * float(np.sum(self.gamma)), 0.0)))
 
 
 def rms_per_observable(layout: CurveLayout, v: np.ndarray) -> dict:

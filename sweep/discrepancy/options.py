@@ -120,6 +120,25 @@ class ProfileOptions(_Checked):
                             doc="delta chi2 of the profile: weighted (series weights n_eff/n from the fit's "
                                 "lag-1 autocorrelation), gaussian (the whitened chi2), marginal (the realization "
                                 "covariance's scale integrated over its sampling distribution from k realizations)")
+    emulator: str = _rule("none", "choice", choices=("none", "gp"),
+                          doc="gp: the profile points' refits on a Gaussian-process emulator of the coarse model "
+                              "(emulator.py), its predictive covariance added to the likelihood's, refined with "
+                              "real runs where the profile goes and at the interval's ends (none: real runs only)")
+    emulator_design: int = _rule(8, "int", 3, 200,
+                                 doc="with the emulator: space-filling design points around the fit (the fit's own "
+                                     "included; at least parameters + 4 are used), one run per training condition each")
+    emulator_tol: float = _rule(0.1, "float", 0.0, 10.0, lo_open=True,
+                                doc="with the emulator: its predictive sd allowed at a profile point, as the norm of "
+                                    "the whitened residuals; beyond it a real run is added there")
+    emulator_checks: int = _rule(3, "int", 1, 20,
+                                 doc="with the emulator: real runs confirming each interval end at most (the emulator "
+                                     "refined and the end recomputed while they disagree beyond its sd)")
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.emulator != "none" and self.likelihood == "marginal":
+            raise ValueError(f"discrepancy spec: profile.emulator={self.emulator!r} is not allowed with "
+                             "profile.likelihood=\"marginal\": use \"weighted\" or \"gaussian\", or emulator = \"none\"")
 
 
 @dataclass(frozen=True)

@@ -113,6 +113,7 @@ class Problem:
         self.noise = NoiseModel(y, c.uncertainty.to_numpy(float), self.layout)
         self._cache: dict = {}
         self._cache_version = self.noise.version
+        self._preds: dict = {}          # predictions by the same key: the model's, whatever the noise model
         self.fixed: dict = {}
 
     # the noise model's current state, read-only here
@@ -181,12 +182,21 @@ class Problem:
             self._cache_version = self.noise.version
         keys = [self._key(params, x, ids) for x in xs]
         need = [i for i, k in enumerate(keys) if k not in self._cache]
+        run = [i for i in dict.fromkeys(need) if keys[i] not in self._preds]
+        if run:
+            for i, pr in zip(run, self.predict([self._values(params, xs[i]) for i in run], ids)):
+                self._preds[keys[i]] = pr
         if need:
-            preds = self.predict([self._values(params, xs[i]) for i in need], ids)
-            rs = self.residuals_for(preds, self.mask(ids))
-            for i, r, pr in zip(need, rs, preds):
+            preds = [self._preds[keys[i]] for i in need]
+            for i, r, pr in zip(need, self.residuals_for(preds, self.mask(ids)), preds):
                 self._cache[keys[i]] = (r, pr)
         return [self._cache[k][0] for k in keys]
+
+    def evaluated(self, params, ids) -> list:
+        """The points x (internal coordinates of ``params``) where the model has run on the conditions
+        ``ids`` with nothing held fixed: runs an emulator of these parameters can reuse."""
+        names, want = tuple(p.name for p in params), tuple(ids)
+        return [np.array(k[1], float) for k in self._preds if k[0] == names and k[2] == want and not k[3]]
 
     def prediction(self, params, x, ids) -> dict:
         """The forward model's predictions {cid: {obs: values}} at x."""

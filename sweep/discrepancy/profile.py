@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from . import stats
+from .emulator import AGREE_SD, CurveEmulator, fit_on_emulator, space_filling
 from .evidence import wald_bounds
 from .noise import correction_at
 from .problem import Fit, Problem
@@ -27,15 +28,16 @@ from .report import jsonable
 
 log = logging.getLogger("dchfrac.discrepancy")
 
-__all__ = ["profile_interval", "recentre_target", "profile_recentred"]
+__all__ = ["profile_interval", "recentre_target", "profile_recentred", "emulator_for"]
 
 
 class _Profile:
     """The profile of parameter ``j`` of ``fit`` on the conditions ``ids``: its evaluated points and the
     bracketing of each bound (see :func:`profile_interval`)."""
 
-    def __init__(self, problem, fit: Fit, j: int, ids, level: float, fine_forward):
+    def __init__(self, problem, fit: Fit, j: int, ids, level: float, fine_forward, emulator=None):
         self.problem, self.fit, self.j, self.ids, self.level = problem, fit, j, ids, level
+        self.em, self.last = emulator, None
         self.po = problem.spec.profile
         self.x_hat = np.asarray(fit.x, float)
         self.p = fit.params[j]
@@ -50,6 +52,9 @@ class _Profile:
         self.wald = wald_bounds(fit, j, self.w)[:2]
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
         self.fines = realizations(fine_forward)
+        self.checks: list = []
+        if emulator is not None:     # Δχ² within one likelihood: the emulator's (its covariance) at the fit too
+            self.chi2_hat = self.fit_deviance(self.held(float(self.x_hat[j])))
 
     def deviance(self, r: np.ndarray) -> float:
         """The profile's χ² of residuals ``r``: Σ w r² ("weighted", "gaussian": w = 1) or −2 ln of the
@@ -60,30 +65,87 @@ class _Profile:
         return stats.effective_chi2(r, self.w)[0]
 
     def dchi2(self, xj: float) -> float:
-        """Δχ² with the parameter held at ``xj`` (internal coordinates), the others refitted; with fine models
-        the correction is re-estimated at that point and the others refitted again (σ and the covariance stay
-        the fit's, so every Δχ² is on one scale)."""
+        """Δχ² with the parameter held at ``xj`` (internal coordinates), the others refitted (on the emulator
+        when there is one: :meth:`refit`); with fine models the correction is re-estimated at
+        that point and the others refitted again (σ and the covariance stay the fit's, so every Δχ² is on one
+        scale)."""
         problem, p = self.problem, self.p
         problem.fixed = {p.name: p.from_x(xj)}
         row = {"value": p.from_x(xj)}
         try:
-            f = problem.fit(self.free, [np.delete(self.x_hat, self.j)], self.ids)
+            f = self.refit(xj, np.delete(self.x_hat, self.j))
             if self.fines:
-                row["delta_chi2_fit_correction"] = float(self.deviance(f.r) - self.chi2_hat)
+                row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_hat)
                 old = problem.noise.shift_correction(
                     correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)}))
                 try:
-                    f = problem.fit(self.free, [np.array(f.x, float)], self.ids)
+                    f = self.refit(xj, np.array(f.x, float))
                 finally:
                     problem.noise.shift_correction(old)
         finally:
             problem.fixed = {}
-        d = float(self.deviance(f.r) - self.chi2_hat)
+        d = float(self.fit_deviance(f) - self.chi2_hat)
         row.update({"delta_chi2": d, "others": jsonable(f.values())})
+        if self.em is not None:
+            row["emulated"] = True
         self.points.append(row)
         log.info("profile %s = %.5g: delta chi2 %.2f (threshold %.2f), point %d", p.name, row["value"], d,
                  self.thr, len(self.points) - 1)
         return d
+
+    def held(self, xj: float) -> Fit:
+        """The others refitted with the parameter held at ``xj`` (from the fit's values)."""
+        self.problem.fixed = {self.p.name: self.p.from_x(xj)}
+        try:
+            return self.refit(xj, np.delete(self.x_hat, self.j))
+        finally:
+            self.problem.fixed = {}
+
+    def fit_deviance(self, f: Fit) -> float:
+        """The profile's χ² of a refit: :meth:`deviance` of its residuals (an emulated refit's whitened with
+        the emulator's covariance added, so its error only lowers Δχ² and widens the interval; the Gaussian
+        likelihood's log-determinant of that covariance is left out: it grows where the emulator knows less,
+        along the profile away from its design, and would narrow the interval by the emulator's ignorance)."""
+        return self.deviance(f.r)
+
+    def refit(self, xj: float, x0: np.ndarray) -> Fit:
+        """The others refitted with the parameter at ``xj``: real runs, or the emulator, refined with a real
+        run where the predictive sd of its smooth part at the refit exceeds ``emulator_tol`` and the run's own
+        jitter (the nugget's sd: below it more runs do not help, and it stays in the likelihood's covariance);
+        at most 3 runs a point."""
+        if self.em is None:
+            return self.problem.fit(self.free, [x0], self.ids)
+        for _ in range(3):
+            f = fit_on_emulator(self.em, self.j, xj, x0)
+            if self.em.sd_norm(f.x_full) <= max(self.po.emulator_tol, self.em.jitter_norm()):
+                break
+            self.em.add([f.x_full])
+            self.em.refinements += 1
+        self.last = f
+        return f
+
+    def confirm(self, sign: int, xb: float) -> float:
+        """An emulated interval end ``xb`` checked with a real run at its profile point: the run joins the
+        design, and while it disagrees with the emulator beyond max(``emulator_tol``, AGREE_SD × the
+        emulator's sd) the side is recomputed on the refined emulator (at most ``emulator_checks`` runs).
+        Each check is kept in ``self.checks`` with the real Δχ² there (an upper bound of the real profile's:
+        the others are the emulated refit's)."""
+        em, problem = self.em, self.problem
+        for _ in range(self.po.emulator_checks):
+            d_em = self.dchi2(xb)
+            x = self.last.x_full
+            u, m = em.sd_norm(x, run=True), em.model_vectors([x])[0]
+            dev = em.deviation(x, m)
+            r = problem.standardize(problem.y[self.mask] - m, self.mask, problem.spec.fit.nan_residual)
+            agree = bool(dev <= max(self.po.emulator_tol, AGREE_SD * u))
+            self.checks.append({"side": "lower" if sign < 0 else "upper", "value": float(self.p.from_x(xb)),
+                                "delta_chi2_emulated": d_em, "delta_chi2_real": float(self.deviance(r) - self.chi2_hat),
+                                "deviation": dev, "emulator_sd": u, "agrees": agree})
+            em.add([x], m[None, :])
+            if agree:
+                break
+            xb = self.side(sign)
+        return xb
 
     def cross(self, x_in: float, d_in: float, x_out: float, d_out: float) -> float:
         """The threshold's crossing, √Δχ² interpolated linearly between an inside and an outside point (exact
@@ -152,18 +214,87 @@ def _smoothed(out: dict, pts: list, thr: float, level: float, p) -> None:
         out["upper"] = float(min(q["upper"], p.upper))
 
 
-def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841, fine_forward=None) -> dict:
+def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEmulator:
+    """The profile's emulator of the coarse model over ``fit``'s parameters on the conditions ``ids``: the
+    fit's own point (a cached run) and ``[profile] emulator_design`` − 1 space-filling points (at least
+    parameters + 4 in all) in the box of ``reach`` Wald sd about the fit in each parameter (its whole range
+    where the sd is undetermined), clipped to the bounds.  Beyond the box the emulator's sd grows and the
+    profile's refits add runs where they go."""
+    po, x = problem.spec.profile, np.asarray(fit.x, float)
+    w = (stats.series_weights(fit.r, problem.series[problem.mask(ids)]) if po.likelihood == "weighted"
+         else np.ones(fit.r.size))
+    lo, hi = [], []
+    for i, p in enumerate(fit.params):
+        a, b = p.x_bounds
+        sd = stats.wald_interval(fit.J, fit.r, w, i, float(x[i]))[2]
+        half = reach * sd if math.isfinite(sd) else (b - a)
+        half = max(half, 1e-3 * (b - a))
+        lo.append(max(a, x[i] - half))
+        hi.append(min(b, x[i] + half))
+    lo, hi = np.array(lo), np.array(hi)
+    em = CurveEmulator(problem, fit.params, ids, (lo, hi))
+    n = max(po.emulator_design, len(fit.params) + 4)
+    em.add(design_points(x, problem.evaluated(fit.params, ids), lo, hi, n, problem.spec.fit.seed))
+    for k in range(1, 3):                      # runs that failed left too few points: more of the box
+        if em.gp is not None:
+            break
+        em.add(list(space_filling(n, lo, hi, problem.spec.fit.seed + k)))
+    if em.gp is None:
+        raise RuntimeError(f"profile emulator: {em.failed} of its design runs failed, too few points left for "
+                           f"{len(fit.params)} parameters; set [profile] emulator = \"none\"")
+    return em
+
+
+def design_points(x: np.ndarray, done: list, lo: np.ndarray, hi: np.ndarray, n: int, seed: int) -> list:
+    """The emulator's first design: the fit ``x`` and its d nearest neighbours among the points already run
+    (``done``: the refits' and the refresh's, free) between 0.1 and 1 times the gap below (the fit's
+    finite-difference steps among them: runs close together show the model's jitter, which the process's
+    lengths and nugget must account for; closer ones, a converging optimizer's, show nothing), then the
+    other points already run and space-filling points of the box [lo, hi], each kept only at least
+    0.5 n^(−1/d) of the box (unit coordinates) from those chosen, the farthest first, until there are ``n``
+    points; the runs already made count toward ``n`` only inside the box, and at most 2 n are taken."""
+    d = len(x)
+    gap = 0.5 * n ** (-1.0 / d)
+
+    def unit(v):
+        return (np.asarray(v, float) - lo) / (hi - lo)
+
+    near = sorted((c for c in done if 0.1 * gap <= np.linalg.norm(unit(c) - unit(x)) < gap),
+                  key=lambda c: np.linalg.norm(unit(c) - unit(x)))
+    chosen = [np.asarray(x, float)] + [np.asarray(c, float) for c in near[:d]]
+
+    def take(cands: list, limit: int) -> None:
+        cands = list(cands)
+        while cands and len(chosen) < limit:
+            dist = [min(np.linalg.norm(unit(c) - unit(q)) for q in chosen) for c in cands]
+            i = int(np.argmax(dist))
+            if dist[i] < gap:
+                return
+            chosen.append(np.asarray(cands.pop(i), float))
+
+    inside = [c for c in done if np.all(unit(c) >= -0.25) and np.all(unit(c) <= 1.25)]
+    take(inside, 2 * n)
+    take(list(space_filling(4 * n, lo, hi, seed)), max(n, len(chosen)))
+    return chosen
+
+
+def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841, fine_forward=None,
+                     emulator: CurveEmulator | None = None) -> dict:
     """Profile-likelihood interval of parameter ``j`` of ``fit`` (see the module docstring).
 
     Each side starts at the Wald bound and doubles its distance from the fit until the threshold is crossed,
     then the crossing is interpolated and refined (:class:`_Profile`); a side that never crosses ends at the
     parameter's bound.  ``fine_forward`` (the fine check models): the discretization correction is a constant
     vector estimated at the fit, so without them the profile has the coarse model's shape away from the fit;
-    with them each point is corrected where it is.  Returns lower/upper (parameter units), the threshold, the
-    Wald bounds, the roughness (a profile falling away from the fit: its crossings set by the model's jitter)
-    and the points (value, Δχ², the others' values)."""
-    pf = _Profile(problem, fit, j, ids, level, fine_forward)
+    with them each point is corrected where it is.  ``emulator`` (:func:`emulator_for`): the refits run on it
+    and each end is confirmed with real runs (:meth:`_Profile.confirm`).  Returns lower/upper (parameter
+    units), the threshold, the Wald bounds, the roughness (a profile falling away from the fit: its crossings
+    set by the model's jitter) and the points (value, Δχ², the others' values); with the emulator also its
+    summary and checks."""
+    pf = _Profile(problem, fit, j, ids, level, fine_forward, emulator)
     lo, hi = pf.side(-1), pf.side(+1)
+    if emulator is not None:
+        lo, hi = (pf.confirm(s, b) if b not in pf.p.x_bounds else b for s, b in ((-1, lo), (+1, hi)))
     po = pf.po
     if po.smoothing == "quadratic":
         pf.widen(lo, hi)
@@ -173,9 +304,17 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     out = {"lower": float(pf.p.from_x(lo)), "upper": float(pf.p.from_x(hi)), "threshold": float(pf.thr),
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing}
+    if emulator is not None:
+        out["emulator"] = {**emulator.summary(), "checks": pf.checks,
+                           "confirmed": all(c["agrees"] for c in _last_per_side(pf.checks))}
     if po.smoothing == "quadratic":
         _smoothed(out, points, pf.thr, level, pf.p)
     return out
+
+
+def _last_per_side(checks: list) -> list:
+    """The last check of each side (the one the reported end rests on)."""
+    return list({c["side"]: c for c in checks}.values())
 
 
 def recentre_target(pr: dict, tol: float = 1e-2) -> dict | None:
@@ -204,7 +343,8 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     ``fine_forward`` a re-centring also re-estimates the correction at the new fit.
     Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima)."""
     history = []
-    pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward)
+    em = emulator_for(problem, fit, ids) if problem.spec.profile.emulator == "gp" else None
+    pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward, emulator=em)
     for _ in range(max_passes):
         best = recentre_target(pr)
         if best is None:
@@ -217,6 +357,8 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
             problem.noise.shift_correction(correction_at(problem, fine_forward, {**problem.fixed, **{
                 q.name: q.from_x(v) for q, v in zip(fit.params, x0)}}))
         fit = problem.fit(fit.params, [x0], ids)
-        pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward)
+        if em is not None:
+            em.add([fit.x])                  # the re-centred fit's own run (cached): the design grows by it
+        pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward, emulator=em)
     pr["recentred"] = history
     return fit, pr

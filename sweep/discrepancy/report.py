@@ -304,9 +304,26 @@ def _profile_lines(report: dict) -> list[str]:
                       "monotonically; this one jitters with the strength (the coarse model's outputs, typically the "
                       "front radius, are not smooth in it), so the bounds are set by that jitter: read the interval "
                       "as a lower bound on the uncertainty."]
+        L += _emulator_lines(pr.get("emulator"))
         for h in pr.get("recentred", []):
             L += ["", f"Re-centred: the profile found Δχ² = {h['min_delta_chi2']:.3g} at {h['at']:.4g} below the fit at "
                       f"{h['strength']:.4g} (the joint fit had stopped short of the minimum); refitted from there."]
+    return L
+
+
+def _emulator_lines(em: dict | None) -> list[str]:
+    """How the profile's refits used the emulator (``[profile] emulator = "gp"``) and its real-run checks."""
+    if not em:
+        return []
+    L = ["", f"Emulated profile (`[profile] emulator = \"gp\"`): the refits ran on a Gaussian-process emulator of "
+             f"the coarse model from {em['design_points']} design points ({em['forward_runs']} forward runs, "
+             f"{em['refinements']} added where a refit's emulator sd exceeded `emulator_tol`), its predictive "
+             "covariance in the likelihood.  Interval ends checked with real runs"
+             + ("" if em["confirmed"] else " (**not confirmed**: the last check still disagrees beyond the emulator's sd)")
+             + ":", "", "| side | strength | Δχ² emulated | Δχ² real | deviation | emulator sd | agrees |",
+         "|---|---|---|---|---|---|---|"]
+    L += [f"| {c['side']} | {c['value']:.4g} | {c['delta_chi2_emulated']:.3g} | {c['delta_chi2_real']:.3g} | "
+          f"{c['deviation']:.3g} | {c['emulator_sd']:.3g} | {'yes' if c['agrees'] else 'no'} |" for c in em["checks"]]
     return L
 
 

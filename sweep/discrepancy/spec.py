@@ -51,6 +51,12 @@ Example (units mm, s, kPa)::
     grid = 4                         # with "quadratic": extra profile points per side
     likelihood = "weighted"          # delta chi2: "weighted" (lag-1 series weights), "gaussian" (whitened chi2),
                                      # "marginal" (realization-covariance scale integrated over its k-run estimate)
+    emulator = "none"                # "gp": the profile points' refits on a Gaussian-process emulator of the
+                                     # coarse model over the fitted parameters (emulator.py), its predictive
+                                     # covariance added to the likelihood's; a design of emulator_design runs
+    emulator_design = 8              # per training condition around the fit, refined with a real run where a
+    emulator_tol = 0.1               # refit's emulator sd (whitened norm) exceeds emulator_tol, each interval
+    emulator_checks = 3              # end confirmed by real runs (at most emulator_checks); not with "marginal"
 
 The former ``[workflow]`` table is refused with each of its keys named and where it went
 (:data:`.options.REMOVED_WORKFLOW_KEYS`).

@@ -1,0 +1,268 @@
+"""The Gaussian-process emulator of the profile likelihood ([profile] emulator = "gp", emulator.py): the
+process against known functions, its covariance in the likelihood, and the toy workflow's interval with the
+emulator against the one from real runs (sweep.discrepancy.toy; never the solver)."""
+import math
+
+import numpy as np
+import pytest
+
+from sweep.discrepancy import ToyForward, load_measured, make_twin, run_workflow, spec_from_dict
+from sweep.discrepancy.emulator import GaussianProcess, space_filling
+
+OFF = ["damage_viscosity", "compliant_boundary", "crack_permeability", "volumetric_coupling"]
+TIMES = np.linspace(0.02, 1.0, 15)
+CONDS = {"a": {"w_i": 30.0}, "b": {"w_i": 50.0}, "c": {"w_i": 70.0}, "d": {"w_i": 40.0}}
+DATA_BASE = {"beta": 0.0, "outer_compliance": 0.0, "crack_permeability": 0.0, "volumetric_coupling": 0.0}
+
+
+def _smooth(u):
+    """Three smooth outputs of two inputs on [0, 1]², on scales 1000 apart (kPa beside mm)."""
+    return np.column_stack([1e3 * (np.sin(3 * u[:, 0]) + u[:, 1] ** 2), np.exp(-u[:, 0]) * np.cos(2 * u[:, 1]),
+                            0.3 * u[:, 0] * u[:, 1]])
+
+
+# ----------------------------------------------------------------------------- the process
+def test_gp_interpolates_its_design_and_its_sd_grows_away_from_it():
+    u = np.linspace(0.0, 1.0, 7)[:, None]
+    z = np.column_stack([np.sin(4 * u[:, 0]) + u[:, 0], 10 * np.cos(3 * u[:, 0])])
+    gp = GaussianProcess(u, z)
+    mean, c = gp.predict(u)
+    scale = np.sqrt(np.diag(gp.out_cov))
+    # at its design: the data to its nugget (the smooth part's variance there is O(nugget))
+    assert np.all(np.abs(mean - z) <= 3 * math.sqrt(gp.nugget) * scale + 1e-9 * np.abs(z).max())
+    assert np.all(c <= 3 * gp.nugget + 1e-10)
+    # between design points and beyond them its sd is larger, growing with the distance outside
+    mid = (u[:-1] + u[1:]) / 2
+    assert np.all(gp.sd(mid) > 2 * gp.sd(u).max(axis=0))
+    out = gp.sd(np.array([[1.0], [1.1], [1.3], [1.6], [2.0]]))[:, 0]
+    assert np.all(np.diff(out) > 0)
+
+
+@pytest.mark.parametrize("n", [10, 16])
+def test_gp_error_is_within_its_predictive_sd_at_held_out_points(n):
+    """On a known smooth function the standardized errors z = (f − mean)/sd at held-out points have
+    E z² <= 1 if the sd is right (or conservative): by Chebyshev at least 3/4 of them lie within 2 sd, and
+    their mean square is near 1 or below (not above 4: the error twice the stated sd)."""
+    U = space_filling(n, np.zeros(2), np.ones(2), seed=3)
+    gp = GaussianProcess(U, _smooth(U))
+    V = np.random.default_rng(9).random((400, 2))
+    z = (_smooth(V) - gp.predict(V)[0]) / gp.sd(V)
+    assert np.mean(np.abs(z) <= 2.0) >= 0.75
+    assert np.mean(z**2) <= 4.0
+
+
+def test_gp_needs_enough_design_points():
+    with pytest.raises(ValueError, match=r"4 design points for 2 parameters; needs >= 6"):
+        GaussianProcess(np.random.default_rng(0).random((4, 2)), np.zeros((4, 1)))
+
+
+# ----------------------------------------------------------------------------- the covariance in the likelihood
+def test_added_covariance_whitens_to_the_generalized_least_squares_residual(tmp_path):
+    """With a realization covariance C and an added X: r·r = diffᵀ (D + C + sX)⁻¹ diff, the log-determinant
+    term is ln det(D + C + sX) − ln det(D + C), and at s = 0 the residuals are the noise model's own."""
+    from sweep.discrepancy.problem import Problem
+
+    prob = Problem(_twin(tmp_path), _spec(), ToyForward({}, h=8.0))
+    rng = np.random.default_rng(2)
+    n = prob.y.size
+    prob.noise.set_discretization(np.zeros(n), prob.y + rng.normal(0, 2.0, (3, n)), 0.5)
+    mask = prob.mask(["a", "b"])
+    sel = np.flatnonzero(mask)
+    A = rng.normal(size=(sel.size, 4)) * prob.sig_diag[sel][:, None]
+    X = A @ A.T                                         # rank 4, like an emulator's from few points
+    diff = rng.normal(size=sel.size) * prob.sig_diag[sel]
+    sc = prob.noise.with_scaled(mask, X)
+    S = np.diag(prob.sig_diag[sel] ** 2) + prob.noise.real_cov.dense(sel)
+    for s in (0.0, 0.3, 2.0):
+        r, logdet = sc.standardize(diff, s)
+        assert r @ r == pytest.approx(diff @ np.linalg.solve(S + s * X, diff), rel=1e-9)
+        assert logdet == pytest.approx(np.linalg.slogdet(S + s * X)[1] - np.linalg.slogdet(S)[1], abs=1e-9)
+    np.testing.assert_allclose(sc.standardize(diff, 0.0)[0], prob.noise.standardize(diff, mask, 0.0), atol=1e-9)
+    assert sc.sd_norm(0.5) == pytest.approx(math.sqrt(0.5 * np.trace(np.linalg.solve(S, X))), rel=1e-9)
+
+
+def test_emulator_leaves_failed_runs_out_and_waits_for_enough_points(tmp_path):
+    """A design run that failed (NaN anywhere) is counted and left out; the process is fitted only once the
+    design has parameters + 4 finite points, and then reproduces the runs it was given."""
+    from sweep.discrepancy.emulator import CurveEmulator
+    from sweep.discrepancy.problem import Problem
+
+    spec = _spec()
+    prob = Problem(_twin(tmp_path), spec, ToyForward({}, h=8.0))
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    lo, hi = np.array([p.x_bounds[0] for p in params]), np.array([p.x_bounds[1] for p in params])
+    em = CurveEmulator(prob, params, ["a", "b"], (lo, hi))
+    xs = space_filling(7, lo, hi, seed=1)
+    ms = em.model_vectors(list(xs))
+    assert em.runs == 7 * 2                                       # one run per condition and point
+    ms[1, 3] = np.nan
+    em.add(list(xs[:5]), ms[:5])
+    assert em.failed == 1 and len(em.X) == 4 and em.gp is None   # 4 < 2 + 4: no process yet
+    em.add(list(xs[5:]), ms[5:])
+    assert len(em.X) == 6 and em.gp is not None
+    mean, s = em.predict(xs[6])
+    assert np.allclose(mean, ms[6], atol=1e-3 * np.abs(ms[6]).max()) and s < 1e-3
+
+
+# ----------------------------------------------------------------------------- the toy workflow
+def _twin(tmp_path, hidden=None):
+    fwd = ToyForward(DATA_BASE, h=2.0)
+    return load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, hidden or {"beta": 40.0}, seed=1,
+                                   observables=("p_inj", "front_radius_mean")))
+
+
+def _spec(profile=None, calibrate=("E",)):
+    bounds = {"kbar": (5e-4, 5e-3), "E": (150.0, 700.0)}
+    return spec_from_dict({"baseline": {"effects_off": OFF},
+                           "calibrate": [{"name": n, "lower": bounds[n][0], "upper": bounds[n][1]} for n in calibrate],
+                           "candidates": {"effects": ["damage_viscosity", "compliant_boundary"]},
+                           "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
+                           "fit": {"max_nfev": 50}, "profile": profile or {}})
+
+
+def test_emulated_profile_ends_are_crossings_of_the_real_profile(tmp_path):
+    """The emulated interval's ends, each confirmed by a real run, lie where the real profile (the others
+    refitted with real runs) crosses the threshold: within the refinement's stopping tolerance plus the
+    emulator's error in χ², bounded by Cauchy–Schwarz as 2 |r| |d| + |d|² (|d| the whitened deviation of the
+    real run from the emulator at the end, |r| the residuals' norm there)."""
+    from sweep.discrepancy.problem import Problem
+    from sweep.discrepancy.profile import _Profile, emulator_for, profile_interval
+
+    spec = _spec({"emulator": "gp", "refine": 10, "refine_tol": 0.01}, calibrate=("kbar", "E"))
+    fwd = ToyForward({}, h=8.0)
+    prob = Problem(_twin(tmp_path), spec, fwd)
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    train = ["a", "b", "c"]
+    fit = prob.fit(params, [np.array([p.to_x(p.initial) for p in spec.calibrate] + [30.0])], train)
+    before = fwd.n_runs
+    pr = profile_interval(prob, fit, 2, train, emulator=emulator_for(prob, fit, train))
+    emulated_runs = fwd.n_runs - before
+    assert pr["emulator"]["confirmed"] and pr["lower"] < 40.0 < pr["upper"]
+    real = _Profile(prob, fit, 2, train, 3.841, None)               # the same profile on real runs
+    for c in [c for c in pr["emulator"]["checks"] if c["agrees"]]:
+        d = c["deviation"]
+        norm_r = math.sqrt(real.chi2_hat + c["delta_chi2_real"] + 1.0)
+        tol = 0.01 * pr["threshold"] + 2 * norm_r * d + d * d
+        assert abs(real.dchi2(params[2].to_x(c["value"])) - pr["threshold"]) <= tol
+    # the same profile on real runs costs more
+    before = fwd.n_runs
+    exact = profile_interval(prob, fit, 2, train)
+    assert emulated_runs < fwd.n_runs - before
+    assert exact["lower"] == pytest.approx(pr["lower"], rel=1e-2) and exact["upper"] == pytest.approx(pr["upper"], rel=1e-2)
+
+
+def test_workflow_with_the_emulator_names_the_effect_with_the_exact_interval_for_fewer_runs(tmp_path):
+    """The toy workflow with and without the emulator: the same verdict and named effect, fewer forward runs
+    in the profile stage, and the interval's ends apart by at most what each end's stopping rule allows:
+    both stop within refine_tol·threshold of it in Δχ², which for a quadratic profile (slope 4·thr/width at
+    an end) is refine_tol/4 of the width per end, twice that between two ends, plus the emulator's own
+    error (confirmed below emulator_tol in the whitened norm, so below 2·|r|·tol in Δχ²)."""
+    data = _twin(tmp_path)
+    reps = {}
+    for emu in ("none", "gp"):
+        reps[emu] = run_workflow(data, _spec({"emulator": emu}), ToyForward({}, h=8.0), out_dir=tmp_path / emu,
+                                 figures=False)
+    off, on = reps["none"], reps["gp"]
+    assert off["verdict"] == on["verdict"] == "named" and off["named_effect"] == on["named_effect"] == "damage_viscosity"
+    runs = {k: r["forward_runs_by_stage"]["profile_likelihood"]["coarse"] for k, r in reps.items()}
+    assert 0 < runs["gp"] < runs["none"]
+    pr = on["profiles"]["damage_viscosity"]
+    assert pr["emulator"]["confirmed"] and pr["emulator"]["forward_runs"] <= runs["gp"]
+    (lo0, hi0), (lo1, hi1) = off["strength_interval"], on["strength_interval"]
+    width = hi0 - lo0
+    chi = math.sqrt(len(TIMES) * 2 * 3 + pr["threshold"])       # |r| at an end: ~ √(rows + threshold)
+    tol = (2 * 0.15 * pr["threshold"] + 2 * chi * 0.1) / (4 * pr["threshold"]) * width
+    assert abs(lo1 - lo0) <= tol and abs(hi1 - hi0) <= tol
+    assert lo1 < 40.0 < hi1
+    md = (tmp_path / "gp" / "report.md").read_text()
+    assert "Emulated profile" in md and "| lower |" in md and "Emulated profile" not in (tmp_path / "none" / "report.md").read_text()
+
+
+class _JitteryToy(ToyForward):
+    """The toy with outputs that jitter in the parameters as a coarse mesh's do: a pseudo-random offset,
+    fixed for each parameter set (a hash of E, β and the rate), of sd 0.2 kPa in p_inj and 0.02 mm in the
+    front, smooth in time (a fraction 1 − e^(−t/0.1) of it)."""
+
+    def predict_one(self, overrides, times):
+        from solver import Parameters
+
+        out = super().predict_one(overrides, times)
+        p = Parameters.from_dict({**self.base, **overrides})
+        rng = np.random.default_rng([int(abs(hash((round(p.E, 9), round(p.damage_viscosity, 9), p.w_i)))) % 2**32])
+        a, b = rng.standard_normal(2)
+        for obs, amp in (("p_inj", 0.2 * a), ("front_radius_mean", 0.02 * b)):
+            out[obs] = out[obs] + amp * (1 - np.exp(-np.asarray(times[obs], float) / 0.1))
+        return out
+
+
+def test_emulator_of_a_jittery_model_carries_the_jitter_and_confirms_its_ends(tmp_path):
+    """A coarse model that jitters in its parameters: the emulator cannot follow the jitter, so its
+    predictive sd for a real run must cover it.  Each interval end's last real-run check agrees with the
+    emulator within AGREE_SD of that sd (or emulator_tol), the interval holds the truth, and the profile
+    costs fewer runs than on the real model."""
+    data = _twin(tmp_path)
+    reps = {emu: run_workflow(data, _spec({"emulator": emu}), _JitteryToy({}, h=8.0), figures=False)
+            for emu in ("none", "gp")}
+    on = reps["gp"]
+    assert on["verdict"] == "named" and on["named_effect"] == "damage_viscosity"
+    em = on["profiles"]["damage_viscosity"]["emulator"]
+    assert em["confirmed"]
+    lo, hi = on["strength_interval"]
+    assert lo < 40.0 < hi
+    runs = {k: r["forward_runs_by_stage"]["profile_likelihood"]["coarse"] for k, r in reps.items()}
+    assert runs["gp"] < runs["none"]
+
+
+# ----------------------------------------------------------------------------- options
+@pytest.mark.parametrize("key,value,allowed", [
+    ("emulator", "kriging", r'"none" or "gp"'),
+    ("emulator", True, r'"none" or "gp"'),
+    ("emulator_design", 2, r"an integer in \[3, 200\]"),
+    ("emulator_design", 8.0, r"an integer in \[3, 200\]"),
+    ("emulator_tol", 0.0, r"a number in \(0, 10\]"),
+    ("emulator_tol", float("nan"), r"a number in \(0, 10\]"),
+    ("emulator_checks", 0, r"an integer in \[1, 20\]"),
+])
+def test_spec_refuses_bad_emulator_settings(key, value, allowed):
+    with pytest.raises(ValueError, match=rf"profile\.{key}=.* is not allowed: {allowed}"):
+        _spec({key: value})
+
+
+def test_spec_refuses_the_emulator_with_the_marginal_likelihood():
+    with pytest.raises(ValueError, match=r'profile\.emulator=\'gp\' is not allowed with profile\.likelihood="marginal"'):
+        _spec({"emulator": "gp", "likelihood": "marginal"})
+
+
+# ----------------------------------------------------------------------------- the cost comparison
+def _study(variant, rows):
+    return {"variant": variant, "rows": rows}
+
+
+def _row(draw, lower, upper, profile_runs, covered=True, verdict="named"):
+    return {"setup": "s", "draw": draw, "verdict": verdict, "lower": lower, "upper": upper, "covered": covered,
+            "runs_by_stage": {"refits": {"coarse": 10, "fine": 0}, "profile_likelihood": {"coarse": profile_runs, "fine": 2}}}
+
+
+def test_cost_comparison_pairs_draws_and_books_runs_by_stage(tmp_path):
+    import json
+
+    from sweep.discrepancy.cost import compare_studies, main, markdown
+
+    ref = _study("off", [_row(0, 1.0, 3.0, 100), _row(1, 2.0, 4.0, 80), _row(2, 0.0, 1.0, 50)])
+    cand = _study("on", [_row(0, 1.2, 3.0, 10), _row(1, 2.0, 3.9, 20, covered=False), _row(3, 0.0, 1.0, 5)])
+    c = compare_studies(ref, cand)
+    assert c["draws"] == 2 and c["both_named"] == 2 and c["verdicts_differ"] == []
+    assert c["stages"]["reference"]["profile_likelihood"] == (90.0, 2.0)
+    assert c["stages"]["candidate"]["profile_likelihood"] == (15.0, 2.0)
+    assert c["total_runs"] == {"reference": 102.0, "candidate": 27.0}
+    assert c["end_difference_over_width"]["lower"]["max"] == pytest.approx(0.1)
+    assert c["end_difference_over_width"]["upper"]["max"] == pytest.approx(0.05)
+    assert c["coverage"] == {"reference": 2, "candidate": 1}
+    assert "| profile_likelihood | 90.0 + 2.0 | 15.0 + 2.0 |" in markdown(c)
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text(json.dumps(ref))
+    b.write_text(json.dumps(_study("on", [_row(7, 0.0, 1.0, 1)])))
+    assert main([str(a), str(b)]) == 2                 # no shared draw: refused, exit code 2
+    b.write_text(json.dumps(cand))
+    assert main([str(a), str(b), "--out", str(tmp_path / "t.md")]) == 0
+    assert (tmp_path / "t.md").read_text() == markdown(c)
