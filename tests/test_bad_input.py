@@ -350,6 +350,23 @@ def test_discrepancy_run_refuses(tmp_path, capsys, no_workflow, change, fragment
     _refused(capsys, _discrepancy(tmp_path, **change), fragment)
 
 
+@pytest.mark.parametrize("old,new,accepted,fragment", [
+    ("c2,crack_length,0.2,1.5,0.3", "c2,crack_length,0.2,-1.4,0.3", True, ""),     # 4.7 sd below 0
+    ("c2,crack_length,0.2,1.5,0.3", "c2,crack_length,0.2,-1.6,0.3", False, "negative crack_length -1.6 mm"),
+    ("c1,front_radius_mean,0.2,9.5,0.2", "c1,front_radius_mean,0.2,4.1,0.2", True, ""),   # 4.5 sd inside r_inner = 5
+    ("c1,front_radius_mean,0.2,9.5,0.2", "c1,front_radius_mean,0.2,3.9,0.2", False, "is outside the annulus"),
+])
+def test_a_length_within_its_noise_of_the_bounds_is_data(tmp_path, capsys, no_workflow, old, new, accepted, fragment):
+    """A measured length near a bound (0 for a crack, r_inner for a front) is data up to 5 uncertainties beyond it
+    (data.LENGTH_SIGMAS: every value is tested, so the false alarm per value must be tiny); beyond, a clear error."""
+    obs = _OBS.replace(old, new)
+    if accepted:
+        with pytest.raises(no_workflow):
+            _discrepancy(tmp_path, obs=obs)
+    else:
+        _refused(capsys, _discrepancy(tmp_path, obs=obs), fragment)
+
+
 def test_discrepancy_missing_measured_folder(tmp_path, capsys):
     from sweep.discrepancy.cli import main
 

@@ -9,19 +9,19 @@ combination shows is checked here (units mm, s, kPa):
 * no observation time is after a solver forward model's ``t_end`` (times in ms instead of s);
 * measured ``p_inj`` is within ``PRESSURE_SCALE_FACTOR`` times the condition's Young's modulus E
   (kPa): the model's pressures stay within a few E, so values 1000x larger are pressures in Pa;
-* a measured front radius is not clearly (by 3 uncertainties) inside r_inner or beyond r_outer;
+* a measured front radius is not clearly (by ``data.LENGTH_SIGMAS`` uncertainties) inside r_inner or beyond r_outer;
 * regime labels are labels the forward model gives (its ``regime_labels``, when it declares them).
 
 Each problem is a ValueError naming the input, its value and what is allowed.
 """
 from __future__ import annotations
 
+from .data import LENGTH_SIGMAS
+
 __all__ = ["check_data_against_model", "PRESSURE_SCALE_FACTOR"]
 
 # measured p_inj above this many E (kPa) is refused as a unit error (the model's p_inj: below ~4 E)
 PRESSURE_SCALE_FACTOR = 100.0
-# a front radius this many uncertainties inside r_inner (or beyond r_outer) cannot be a front
-_FRONT_SIGMAS = 3.0
 
 
 def check_data_against_model(data, spec, forwards=()) -> None:
@@ -109,12 +109,12 @@ def _check_front_radii(data, params: dict) -> None:
     c = data.curves
     for cid, p in params.items():
         f = c[(c.condition == cid) & (c.observable == "front_radius_mean")]
-        bad = f[(f.value + _FRONT_SIGMAS * f.uncertainty < p.r_inner) | (f.value - _FRONT_SIGMAS * f.uncertainty > p.r_outer)]
+        bad = f[(f.value + LENGTH_SIGMAS * f.uncertainty < p.r_inner) | (f.value - LENGTH_SIGMAS * f.uncertainty > p.r_outer)]
         if len(bad):
             r = bad.iloc[0]
             raise ValueError(f"observations.csv: condition {cid!r} front_radius_mean value={r.value:g} mm at "
                              f"t = {r.time:g} s is outside the annulus (allowed: [r_inner = {p.r_inner:g}, r_outer = "
-                             f"{p.r_outer:g}] mm within {_FRONT_SIGMAS:g} uncertainties)")
+                             f"{p.r_outer:g}] mm within {LENGTH_SIGMAS:g} uncertainties)")
 
 
 def _check_regime_labels(data, labels) -> None:

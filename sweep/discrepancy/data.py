@@ -17,7 +17,7 @@ Format (a folder, units mm, s, kPa)::
                                  and may be 0 for regime)
 
 Every problem (missing file or column, unknown observable or condition, NaN,
-negative or zero uncertainty, a length negative by more than 3 uncertainties, a non-integer value of an integer
+negative or zero uncertainty, a length negative by more than 5 uncertainties, a non-integer value of an integer
 parameter such as ``seed``, a condition without observations, duplicated ids, a pressure that looks like Pa
 instead of kPa)
 is a ValueError naming the file, the row (line number in the file, header = line 1)
@@ -40,7 +40,12 @@ __all__ = ["OBSERVABLES", "CURVE_OBSERVABLES", "UNITS", "MeasuredData", "load_me
 CURVE_OBSERVABLES = CURVES                 # from the observable registry (observables.py)
 OBSERVABLES = CURVES + LABELS
 LENGTH_OBSERVABLES = tuple(n for n in CURVES if UNITS[n] == "mm")
-LENGTH_SIGMAS = 3.0  # a measured length below -3 uncertainties cannot be a noisy 0: it is refused
+# A measured length below -5 uncertainties cannot be a noisy 0, nor a front radius 5 uncertainties inside r_inner or
+# beyond r_outer a front (checks.py): they are refused.  The test is applied to every value,
+# so its false alarm per value must be tiny: P(N(0, 1) < -5) = 2.9e-7 (10^4 noisy zeros refused by mistake with
+# probability 0.3 %), where 3 uncertainties would refuse 1.3e-3 of them (a twin with 50 times x 4 conditions of
+# zero crack length: up to one in four).
+LENGTH_SIGMAS = 5.0
 OBS_COLUMNS = ("condition", "observable", "time", "value", "uncertainty")
 
 
