@@ -306,10 +306,9 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
             no_fit = str(exc)   # said on the figure: a missing line must not look like an omission
     elif fit:
         no_fit = "both regimes are needed to fit a separatrix"
-    if sep is not None and _outside_sampled_range(sep, C, cs):
-        no_fit = (f"the fitted line (A = {sep.A:.3g}, B = {sep.B:.3g} /%) lies outside the sampled Ca* range "
-                  f"[{cs.min():.3g}, {cs.max():.3g}] over C: the labels do not locate it")
-        sep = None
+    if sep is not None:
+        no_fit = _unlocated_reason(sep, C, cs, fr)
+        sep = None if no_fit else sep
     if no_fit:
         ax.text(0.5, -0.27, "no exponential separatrix: " + no_fit, transform=ax.transAxes, fontsize=6.5,
                 va="top", ha="center", wrap=True)
@@ -330,11 +329,24 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     return {"paths": paths, "fit": sep, "no_fit_reason": no_fit, "n_dropped": n_drop}
 
 
-def _outside_sampled_range(sep, C, cs) -> bool:
-    """True when the separatrix Ca*_c(C) stays above or below every sampled Ca* over the sampled C: an
-    extrapolated line the runs do not locate (it is then not drawn, and the figure says why)."""
+def _unlocated_reason(sep, C, cs, fr) -> str | None:
+    """Why the labels do not locate the separatrix Ca*_c(C) (None when they do); the line is then not drawn.
+
+    Two cases: the line stays above or below every sampled Ca* over the sampled C (an extrapolation), or it
+    separates no better than the base rate, i.e. the runs it puts on the wrong side (fracturing below it,
+    porous invasion above) are at least as many as the minority regime's runs, so calling every run the
+    majority regime would do as well and the line carries no information about where the regimes meet."""
     line = sep(np.linspace(C.min(), C.max(), 50))
-    return bool(np.all(line < cs.min()) or np.all(line > cs.max()))
+    head = f"the fitted line (A = {sep.A:.3g}, B = {sep.B:.3g} /%)"
+    if np.all(line < cs.min()) or np.all(line > cs.max()):
+        return f"{head} lies outside the sampled Ca* range [{cs.min():.3g}, {cs.max():.3g}] over C: the labels do not locate it"
+    wrong = int(np.sum((cs >= sep(C)) != fr))
+    minority = int(min(fr.sum(), (~fr).sum()))
+    if wrong >= minority:
+        major = "fracturing" if fr.sum() > (~fr).sum() else "porous invasion"
+        return (f"{head} puts {wrong} of {fr.size} runs on the wrong side, no fewer than calling every run "
+                f"{major} ({minority}): the labels do not locate it")
+    return None
 
 
 # --------------------------------------------------------------------------- N_f vs N_b

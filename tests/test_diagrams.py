@@ -189,3 +189,21 @@ def test_paper_symbols():
         "non_invasive_fracturing": ("s", "#ff7f0e"),
         "fracturing_fingering": ("x", "#ff7f0e"),
     }
+
+
+def test_plot_ca_star_does_not_draw_a_separatrix_no_better_than_the_base_rate(tmp_path):
+    """The mixed grid with the porosity floor (results/ca_star_vs_cement_h2_wall_floor, L_min = 2 mm): the fitted
+    line crosses the sampled range at the largest C but every porous run lies above it and one fracturing run below,
+    4 runs on the wrong side against 3 porous runs: the line says nothing calling every run fracturing does not, so
+    it is not drawn.  Moving the three porous runs to the lowest row makes the labels locate a line again."""
+    rows = {0.5: "FFFFF", 1.0: "FFFFF", 1.5: "FFFFF", 2.0: "FpFFF", 2.5: "FpFFF", 3.0: "FpFFF"}  # Ca* up
+    ca = [5.2e6, 1.65e7, 5.2e7, 1.65e8, 5.2e8]
+    pts = [(c, ca[i], ch == "F") for c, lab in rows.items() for i, ch in enumerate(lab)]
+    C, cs, fr = (np.array(v) for v in zip(*pts))
+    out = plot_ca_star_vs_cement(pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": fr}), tmp_path / "m.png")
+    assert out["fit"] is None and "on the wrong side" in out["no_fit_reason"]
+    moved = fr | (cs == ca[1])
+    moved[(C >= 2.0) & (cs == ca[0])] = False            # porous invasion at the lowest Ca*, high C
+    located = plot_ca_star_vs_cement(pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": moved}),
+                                     tmp_path / "ok.png")
+    assert located["fit"] is not None and located["no_fit_reason"] is None
