@@ -252,6 +252,30 @@ def test_emulated_refit_reaches_the_real_optimum_within_its_stated_error(tmp_pat
     assert _robust(r_at_em) <= _robust(real.r) + eps**2 + 1e-9 * _robust(real.r)
 
 
+class _FailingToy(ToyForward):
+    """The toy whose every run with the effect on fails (NaN curves)."""
+
+    def predict_one(self, overrides, times):
+        from solver import Parameters
+
+        out = super().predict_one(overrides, times)
+        if Parameters.from_dict({**self.base, **overrides}).damage_viscosity > 0.0:
+            out = {k: (np.full(np.shape(v), np.nan) if k in times else v) for k, v in out.items()}
+        return out
+
+
+def test_refit_emulator_whose_design_runs_fail_says_how_to_do_without_it(tmp_path):
+    from sweep.discrepancy.emulated import EmulatedRefits
+    from sweep.discrepancy.problem import Problem
+
+    spec = _spec({"emulator": "gp", "emulate_refits": True})
+    prob = Problem(_twin(tmp_path), spec, _FailingToy({}, h=8.0))
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    base = prob.fit(tuple(spec.calibrate), [np.array([spec.calibrate[0].to_x(331.0)])], ["a", "b", "c"])
+    with pytest.raises(RuntimeError, match=r"refit emulator: \d+ of its design runs failed.*emulate_refits = false"):
+        EmulatedRefits(prob, ["a", "b", "c"]).fit(params, [np.append(base.x, 30.0)], base, "refits")
+
+
 def _runs(report, stage):
     return report["forward_runs_by_stage"].get(stage, {}).get("coarse", 0)
 

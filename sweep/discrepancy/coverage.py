@@ -115,6 +115,8 @@ VARIANTS = {v.name: v for v in (
     Variant("emulator_refits", tables={"profile": {"emulator": "gp", "emulate_refits": True}}),
     Variant("emulator_refits_fit_correction",
             tables={"profile": {"fine": False, "emulator": "gp", "emulate_refits": True}}),
+    Variant("emulator_refits_polish1_fit_correction",
+            tables={"profile": {"fine": False, "emulator": "gp", "emulate_refits": True, "emulator_polish": 1}}),
 )}
 
 

@@ -157,7 +157,7 @@ class EmulatedRefits:
         near = x0 + 0.3 * 0.5 * n ** (-1.0 / d) * (hi - lo) / math.sqrt(d) * np.where(x0 + 1e-9 < hi, 1.0, -1.0)
         done = self.problem.evaluated(params, self.ids) + [near]
         em.add(design_points(x0, done, lo, hi, n, self.problem.spec.fit.seed))
-        fill_design(em, n, "refit emulator")
+        fill_design(em, n, "refit emulator", "[profile] emulate_refits = false")
         return em
 
     def _box(self, params: tuple, starts: list, ref: Fit) -> tuple[np.ndarray, np.ndarray]:

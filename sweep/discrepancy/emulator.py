@@ -1,5 +1,6 @@
 """A Gaussian-process emulator of the coarse model's curves over the fitted parameters, for the profile
-likelihood (``[profile] emulator = "gp"``).
+likelihood (``[profile] emulator = "gp"``) and the refits of whole models (``[profile] emulate_refits``,
+emulated.py).
 
 Each profile point refits the calibrated parameters at a held strength; with the real model every residual
 evaluation of those refits is one forward run per training condition.  The emulator replaces them: it is
@@ -301,16 +302,17 @@ def wald_box(problem, fit: Fit, ids, reach: float = 2.5) -> tuple[np.ndarray, np
     return np.array(lo), np.array(hi)
 
 
-def fill_design(em: CurveEmulator, n: int, what: str) -> None:
+def fill_design(em: CurveEmulator, n: int, what: str, remedy: str = '[profile] emulator = "none"') -> None:
     """More space-filling points of the emulator's box while runs that failed left too few for the process
-    (twice at most); a clear error when it still has too few."""
+    (twice at most); a clear error naming ``what`` and the setting that does without it (``remedy``) when it
+    still has too few."""
     for k in range(1, 3):
         if em.gp is not None:
             return
         em.add(list(space_filling(n, em.lo, em.hi, em.problem.spec.fit.seed + k)))
     if em.gp is None:
         raise RuntimeError(f"{what}: {em.failed} of its design runs failed, too few points left for "
-                           f"{len(em.params)} parameters; set [profile] emulator = \"none\"")
+                           f"{len(em.params)} parameters; set {remedy}")
 
 
 def design_points(x: np.ndarray, done: list, lo: np.ndarray, hi: np.ndarray, n: int, seed: int) -> list:
