@@ -213,6 +213,112 @@ def test_emulator_of_a_jittery_model_carries_the_jitter_and_confirms_its_ends(tm
     assert runs["gp"] < runs["none"]
 
 
+# ----------------------------------------------------------------------------- emulated refits
+def _robust(r, f_scale=3.0):
+    """Σρ(r²) of the soft_l1 loss the spec's [fit] uses (twice scipy's cost)."""
+    return float(np.sum(2 * f_scale**2 * (np.sqrt(1 + (np.asarray(r) / f_scale) ** 2) - 1)))
+
+
+def test_emulated_refit_reaches_the_real_optimum_within_its_stated_error(tmp_path):
+    """A candidate's joint refit on its emulator against the same refit on real runs (smooth toy): each
+    parameter of the emulated optimum (before the real polish) within its stated error of the real optimum,
+    the real robust cost there above the real optimum's by at most ε² (ε = AGREE_SD × the emulator's sd for
+    a run at the checked optimum: an error δ moves the optimum by J⁺δ, raising Σρ by at most |δ|²), the
+    optimum confirmed by a real run, and fewer runs."""
+    from sweep.discrepancy.emulated import EmulatedRefits
+    from sweep.discrepancy.emulator import AGREE_SD
+    from sweep.discrepancy.problem import Problem
+
+    spec = _spec({"emulator": "gp", "emulate_refits": True}, calibrate=("kbar", "E"))
+    fwd = ToyForward({}, h=8.0)
+    prob = Problem(_twin(tmp_path), spec, fwd)
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    train = ["a", "b", "c"]
+    base = prob.fit(tuple(spec.calibrate), [np.array([p.to_x(p.initial) for p in spec.calibrate])], train)
+    starts = [np.append(base.x, 30.0)]
+    before = fwd.n_runs
+    refits = EmulatedRefits(prob, train)
+    refits.fit(params, starts, base, "refits")
+    emulated_runs, before = fwd.n_runs - before, fwd.n_runs
+    real = prob.fit(params, starts, train)
+    assert emulated_runs < fwd.n_runs - before
+    rec = refits.records[0]
+    assert rec["confirmed"] and rec["checks"][-1]["agrees"] and rec["stage"] == "refits"
+    x_em = np.array([p.to_x(rec["emulated"][p.name]) for p in params])
+    assert np.all(np.abs(x_em - real.x) <= np.array(rec["emulated_error_x"]))
+    assert np.all(np.array(rec["emulated_error_x"]) > 0)
+    eps = AGREE_SD * rec["checks"][-1]["emulator_sd"]
+    r_at_em = prob.residual_batch(params, [x_em], train)[0]
+    assert _robust(r_at_em) <= _robust(real.r) + eps**2 + 1e-9 * _robust(real.r)
+
+
+class _FailingToy(ToyForward):
+    """The toy whose every run with the effect on fails (NaN curves)."""
+
+    def predict_one(self, overrides, times):
+        from solver import Parameters
+
+        out = super().predict_one(overrides, times)
+        if Parameters.from_dict({**self.base, **overrides}).damage_viscosity > 0.0:
+            out = {k: (np.full(np.shape(v), np.nan) if k in times else v) for k, v in out.items()}
+        return out
+
+
+def test_refit_emulator_whose_design_runs_fail_says_how_to_do_without_it(tmp_path):
+    from sweep.discrepancy.emulated import EmulatedRefits
+    from sweep.discrepancy.problem import Problem
+
+    spec = _spec({"emulator": "gp", "emulate_refits": True})
+    prob = Problem(_twin(tmp_path), spec, _FailingToy({}, h=8.0))
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    base = prob.fit(tuple(spec.calibrate), [np.array([spec.calibrate[0].to_x(331.0)])], ["a", "b", "c"])
+    with pytest.raises(RuntimeError, match=r"refit emulator: \d+ of its design runs failed.*emulate_refits = false"):
+        EmulatedRefits(prob, ["a", "b", "c"]).fit(params, [np.append(base.x, 30.0)], base, "refits")
+
+
+def _runs(report, stage):
+    return report["forward_runs_by_stage"].get(stage, {}).get("coarse", 0)
+
+
+@pytest.mark.parametrize("hidden,verdict", [({"beta": 40.0}, "named"), ({"beta": 0.0}, "no_missing_effect")])
+def test_workflow_with_emulated_refits_keeps_verdict_and_truth_for_fewer_runs(tmp_path, hidden, verdict):
+    """The toy workflow with real refits and with emulated ones: the same verdict (an effect named, or none
+    when none is hidden), the truth inside the interval, every emulated refit confirmed by a real run and
+    recorded in the report, and fewer refit runs and fewer runs in all (booked under the stage asking)."""
+    data = _twin(tmp_path, hidden)
+    reps = {k: run_workflow(data, _spec(prof), ToyForward({}, h=8.0), out_dir=tmp_path / k, figures=False)
+            for k, prof in (("real", {"emulator": "gp"}), ("emu", {"emulator": "gp", "emulate_refits": True}))}
+    real, emu = reps["real"], reps["emu"]
+    assert real["verdict"] == emu["verdict"] == verdict
+    assert real.get("named_effect") == emu.get("named_effect")
+    assert sum(map(lambda s: _runs(emu, s), emu["forward_runs_by_stage"])) < sum(
+        map(lambda s: _runs(real, s), real["forward_runs_by_stage"]))
+    if verdict != "named":
+        return
+    assert 0 < _runs(emu, "refits") < _runs(real, "refits")
+    lo, hi = emu["strength_interval"]
+    assert lo < 40.0 < hi
+    recs = emu["emulated_refits"]["refits"]
+    assert {r["stage"] for r in recs} >= {"refits"} and all(r["confirmed"] for r in recs)
+    assert "emulated_refits" not in real
+    assert "## Emulated refits" in (tmp_path / "emu" / "report.md").read_text()
+
+
+def test_workflow_with_emulated_refits_on_a_jittery_model_confirms_and_covers(tmp_path):
+    """A coarse model that jitters in its parameters: the emulated refits' optima are confirmed by real runs
+    (the jitter within the emulator's sd for a run), the effect is named with the truth inside its
+    interval, and the refits cost fewer runs than on the real model."""
+    data = _twin(tmp_path)
+    reps = {k: run_workflow(data, _spec(prof), _JitteryToy({}, h=8.0), figures=False)
+            for k, prof in (("real", {"emulator": "gp"}), ("emu", {"emulator": "gp", "emulate_refits": True}))}
+    emu = reps["emu"]
+    assert emu["verdict"] == reps["real"]["verdict"] == "named" and emu["named_effect"] == "damage_viscosity"
+    lo, hi = emu["strength_interval"]
+    assert lo < 40.0 < hi
+    assert all(r["confirmed"] for r in emu["emulated_refits"]["refits"])
+    assert _runs(emu, "refits") < _runs(reps["real"], "refits")
+
+
 # ----------------------------------------------------------------------------- options
 @pytest.mark.parametrize("key,value,allowed", [
     ("emulator", "kriging", r'"none" or "gp"'),
@@ -222,10 +328,17 @@ def test_emulator_of_a_jittery_model_carries_the_jitter_and_confirms_its_ends(tm
     ("emulator_tol", 0.0, r"a number in \(0, 10\]"),
     ("emulator_tol", float("nan"), r"a number in \(0, 10\]"),
     ("emulator_checks", 0, r"an integer in \[1, 20\]"),
+    ("emulate_refits", 1, "true or false"),
+    ("emulator_polish", 0, r"an integer in \[1, 50\]"),
 ])
 def test_spec_refuses_bad_emulator_settings(key, value, allowed):
     with pytest.raises(ValueError, match=rf"profile\.{key}=.* is not allowed: {allowed}"):
         _spec({key: value})
+
+
+def test_spec_refuses_emulated_refits_without_the_emulator():
+    with pytest.raises(ValueError, match=r'profile\.emulate_refits=true is not allowed with profile\.emulator="none"'):
+        _spec({"emulate_refits": True})
 
 
 def test_spec_refuses_the_emulator_with_the_marginal_likelihood():

@@ -770,8 +770,8 @@ def test_a_profile_reaching_off_reports_the_effect_not_identifiable(tmp_path, mo
 
     real = workflow.profile_recentred
 
-    def flat_profile(problem, fit, j, ids, max_passes=2, fine_forward=None):
-        fit, pr = real(problem, fit, j, ids, max_passes, fine_forward=fine_forward)
+    def flat_profile(problem, fit, j, ids, max_passes=2, fine_forward=None, emulator=None):
+        fit, pr = real(problem, fit, j, ids, max_passes, fine_forward=fine_forward, emulator=emulator)
         pr["points"].append({"value": 0.0, "delta_chi2": 1.5, "others": {"kbar": 0.0012, "E": 420.0}})
         pr["points"].sort(key=lambda q: q["value"])
         return fit, {**pr, "lower": 0.0}

@@ -112,6 +112,11 @@ VARIANTS = {v.name: v for v in (
     Variant("strong_bias_remedy", bias=4.0, tables=_REMEDY),
     Variant("emulator", tables={"profile": {"emulator": "gp"}}),
     Variant("emulator_fit_correction", tables={"profile": {"fine": False, "emulator": "gp"}}),
+    Variant("emulator_refits", tables={"profile": {"emulator": "gp", "emulate_refits": True}}),
+    Variant("emulator_refits_fit_correction",
+            tables={"profile": {"fine": False, "emulator": "gp", "emulate_refits": True}}),
+    Variant("emulator_refits_polish1_fit_correction",
+            tables={"profile": {"fine": False, "emulator": "gp", "emulate_refits": True, "emulator_polish": 1}}),
 )}
 
 
@@ -151,6 +156,12 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
         return {**row, "verdict": run.verdict, "runs_by_stage": run.ledger.stages}
     finalize(run)
     row["runs_by_stage"] = run.ledger.stages
+    if run.emulated is not None:
+        recs = run.emulated.records
+        row["emulated_refits"] = {"refits": len(recs), "confirmed": sum(r["confirmed"] for r in recs),
+                                  "checks": sum(len(r["checks"]) for r in recs),
+                                  "max_polish_move_over_error": max((r["polish_move_over_error"] for r in recs),
+                                                                    default=0.0)}
     a = run.accepted[0]
     fit = run.current
     names = [p.name for p in fit.params]

@@ -1,5 +1,6 @@
 """A Gaussian-process emulator of the coarse model's curves over the fitted parameters, for the profile
-likelihood (``[profile] emulator = "gp"``).
+likelihood (``[profile] emulator = "gp"``) and the refits of whole models (``[profile] emulate_refits``,
+emulated.py).
 
 Each profile point refits the calibrated parameters at a held strength; with the real model every residual
 evaluation of those refits is one forward run per training condition.  The emulator replaces them: it is
@@ -36,11 +37,13 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares, minimize
 
+from . import stats
 from .problem import Fit
 
 log = logging.getLogger("dchfrac.discrepancy")
 
-__all__ = ["GaussianProcess", "CurveEmulator", "space_filling", "AGREE_SD"]
+__all__ = ["GaussianProcess", "CurveEmulator", "space_filling", "AGREE_SD", "wald_box", "design_points", "fill_design",
+           "fit_on_emulator"]
 
 AGREE_SD = 2.0            # a real run agrees with the emulator when within this many of its predicted sd
 _LOG_LEN = (math.log(0.1), math.log(5.0))      # correlation lengths in the design box's unit coordinates
@@ -200,6 +203,10 @@ class CurveEmulator:
             self.gp = GaussianProcess(self._unit(self.X), self.M / self.scale,
                                       start=self.gp.theta if self.gp is not None else None)
 
+    def has(self, x) -> bool:
+        """Whether ``x`` (fit coordinates) is a design point already (within 1e-9 of the box)."""
+        return bool(np.any(np.all(np.abs(self.X - np.asarray(x, float)) <= 1e-9 * (self.hi - self.lo), axis=1)))
+
     def predict(self, x) -> tuple[np.ndarray, float]:
         """The emulated model vector (rows,) at ``x`` (fit coordinates) and the scale s of the covariance
         s·``out_cov()`` of a real run about it (s = c(u) + nugget)."""
@@ -275,3 +282,67 @@ def fit_on_emulator(em: CurveEmulator, j: int, xj: float, x0_free: np.ndarray, m
     f.logdet = logdet
     f.x_full = full(xf)
     return f
+
+
+def wald_box(problem, fit: Fit, ids, reach: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
+    """The box (lo, hi) of ``reach`` Wald sd about ``fit`` in each of its parameters (fit coordinates; its
+    whole range where the sd is undetermined, at least 1e-3 of it), clipped to the bounds; the sd under the
+    profile's likelihood weights ("weighted": the series weights n_eff/n of the fit's residuals)."""
+    x = np.asarray(fit.x, float)
+    w = (stats.series_weights(fit.r, problem.series[problem.mask(ids)]) if problem.spec.profile.likelihood == "weighted"
+         else np.ones(fit.r.size))
+    lo, hi = [], []
+    for i, p in enumerate(fit.params):
+        a, b = p.x_bounds
+        sd = stats.wald_interval(fit.J, fit.r, w, i, float(x[i]))[2]
+        half = reach * sd if math.isfinite(sd) else (b - a)
+        half = max(half, 1e-3 * (b - a))
+        lo.append(max(a, x[i] - half))
+        hi.append(min(b, x[i] + half))
+    return np.array(lo), np.array(hi)
+
+
+def fill_design(em: CurveEmulator, n: int, what: str, remedy: str = '[profile] emulator = "none"') -> None:
+    """More space-filling points of the emulator's box while runs that failed left too few for the process
+    (twice at most); a clear error naming ``what`` and the setting that does without it (``remedy``) when it
+    still has too few."""
+    for k in range(1, 3):
+        if em.gp is not None:
+            return
+        em.add(list(space_filling(n, em.lo, em.hi, em.problem.spec.fit.seed + k)))
+    if em.gp is None:
+        raise RuntimeError(f"{what}: {em.failed} of its design runs failed, too few points left for "
+                           f"{len(em.params)} parameters; set {remedy}")
+
+
+def design_points(x: np.ndarray, done: list, lo: np.ndarray, hi: np.ndarray, n: int, seed: int) -> list:
+    """The emulator's first design: the fit ``x`` and its d nearest neighbours among the points already run
+    (``done``: the refits' and the refresh's, free) between 0.1 and 1 times the gap below (the fit's
+    finite-difference steps among them: runs close together show the model's jitter, which the process's
+    lengths and nugget must account for; closer ones, a converging optimizer's, show nothing), then the
+    other points already run and space-filling points of the box [lo, hi], each kept only at least
+    0.5 n^(−1/d) of the box (unit coordinates) from those chosen, the farthest first, until there are ``n``
+    points; the runs already made count toward ``n`` only inside the box, and at most 2 n are taken."""
+    d = len(x)
+    gap = 0.5 * n ** (-1.0 / d)
+
+    def unit(v):
+        return (np.asarray(v, float) - lo) / (hi - lo)
+
+    near = sorted((c for c in done if 0.1 * gap <= np.linalg.norm(unit(c) - unit(x)) < gap),
+                  key=lambda c: np.linalg.norm(unit(c) - unit(x)))
+    chosen = [np.asarray(x, float)] + [np.asarray(c, float) for c in near[:d]]
+
+    def take(cands: list, limit: int) -> None:
+        cands = list(cands)
+        while cands and len(chosen) < limit:
+            dist = [min(np.linalg.norm(unit(c) - unit(q)) for q in chosen) for c in cands]
+            i = int(np.argmax(dist))
+            if dist[i] < gap:
+                return
+            chosen.append(np.asarray(cands.pop(i), float))
+
+    inside = [c for c in done if np.all(unit(c) >= -0.25) and np.all(unit(c) <= 1.25)]
+    take(inside, 2 * n)
+    take(list(space_filling(4 * n, lo, hi, seed)), max(n, len(chosen)))
+    return chosen

@@ -121,8 +121,11 @@ def wald_bounds(fit: Fit, j: int, w) -> tuple[float, float, float]:
     return float(p.from_x(max(lo, x_lo))), float(p.from_x(min(hi, x_hi))), sd
 
 
-def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, holdout, gap_base: dict) -> dict:
-    """Joint fit of the baseline parameters and the candidate's strength; acceptance evidence."""
+def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, holdout, gap_base: dict,
+          fitter=None) -> dict:
+    """Joint fit of the baseline parameters and the candidate's strength; acceptance evidence.  ``fitter``
+    (params, starts, base_fit) -> Fit on ``train``: how the joint fit is made (default real runs,
+    :meth:`Problem.fit`; the workflow's emulated refits, emulated.py)."""
     spec = problem.spec
     cp = spec.candidate_param(cand)
     params = base_fit.params + (cp,)
@@ -137,7 +140,7 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
     if not any(np.allclose(x_init, s_) for s_ in starts):
         starts.append(x_init)
     starts += random_starts(params, spec.fit.starts - len(starts), spec.fit.seed)
-    f = problem.fit(params, starts, train)
+    f = problem.fit(params, starts, train) if fitter is None else fitter(params, starts, base_fit)
     ser = problem.series[problem.mask(train)]
     w = stats.series_weights(f.r, ser)        # weights from the richer model, applied to both
     k0 = len(base_fit.params)

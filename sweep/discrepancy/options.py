@@ -134,8 +134,19 @@ class ProfileOptions(_Checked):
                                  doc="with the emulator: real runs confirming each interval end at most (the emulator "
                                      "refined and the end recomputed while they disagree beyond its sd)")
 
+    emulate_refits: bool = _rule(False, "bool",
+                                 doc="with the emulator: also the candidates' joint refits, the discretization "
+                                     "refresh passes and the profile's re-centring refit on emulators, each "
+                                     "emulated optimum checked with a real run and polished by real least squares")
+    emulator_polish: int = _rule(2, "int", 1, 50,
+                                 doc="with emulate_refits: real least-squares evaluations from an emulated optimum, "
+                                     "each with its Jacobian (1: the residuals and Jacobian there only)")
+
     def __post_init__(self):
         super().__post_init__()
+        if self.emulate_refits and self.emulator == "none":
+            raise ValueError("discrepancy spec: profile.emulate_refits=true is not allowed with "
+                             "profile.emulator=\"none\": set emulator = \"gp\" or emulate_refits = false")
         if self.emulator != "none" and self.likelihood == "marginal":
             raise ValueError(f"discrepancy spec: profile.emulator={self.emulator!r} is not allowed with "
                              "profile.likelihood=\"marginal\": use \"weighted\" or \"gaussian\", or emulator = \"none\"")

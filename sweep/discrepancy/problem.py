@@ -219,8 +219,10 @@ class Problem:
         r0 = rs[0]
         return np.column_stack([(ri - r0) / h for ri, h in zip(rs[1:], steps)]) if params else np.zeros((r0.size, 0))
 
-    def fit(self, params: tuple, x0s: list, ids) -> Fit:
-        """Robust bounded least squares (scipy TRF) from each start in ``x0s``; the lowest cost wins."""
+    def fit(self, params: tuple, x0s: list, ids, max_nfev: int | None = None) -> Fit:
+        """Robust bounded least squares (scipy TRF) from each start in ``x0s``; the lowest cost wins.
+        ``max_nfev``: evaluations per start (default: ``[fit] max_nfev``; 1: the residuals and Jacobian at
+        the start only)."""
         best = None
         nf = 0
         if not params:
@@ -233,7 +235,7 @@ class Problem:
             x0 = np.clip(np.asarray(x0, float), lb, ub)
             res = least_squares(lambda x: self.residual_batch(params, [x], ids)[0], x0,
                                 jac=lambda x: self.jacobian(params, x, ids), bounds=(lb, ub),
-                                loss=fo.loss, f_scale=fo.f_scale, max_nfev=fo.max_nfev, x_scale=ub - lb,
+                                loss=fo.loss, f_scale=fo.f_scale, max_nfev=max_nfev or fo.max_nfev, x_scale=ub - lb,
                                 method="trf")
             nf += res.nfev
             r = self.residual_batch(params, [res.x], ids)[0]

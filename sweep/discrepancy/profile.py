@@ -19,7 +19,8 @@ import math
 import numpy as np
 
 from . import stats
-from .emulator import AGREE_SD, CurveEmulator, fit_on_emulator, space_filling
+from .emulated import emulated_fit
+from .emulator import AGREE_SD, CurveEmulator, design_points, fill_design, fit_on_emulator, wald_box
 from .evidence import wald_bounds
 from .noise import correction_at
 from .problem import Fit, Problem
@@ -218,64 +219,15 @@ def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEm
     """The profile's emulator of the coarse model over ``fit``'s parameters on the conditions ``ids``: the
     fit's own point (a cached run) and ``[profile] emulator_design`` − 1 space-filling points (at least
     parameters + 4 in all) in the box of ``reach`` Wald sd about the fit in each parameter (its whole range
-    where the sd is undetermined), clipped to the bounds.  Beyond the box the emulator's sd grows and the
-    profile's refits add runs where they go."""
+    where the sd is undetermined), clipped to the bounds (:func:`~.emulator.wald_box`).  Beyond the box the
+    emulator's sd grows and the profile's refits add runs where they go."""
     po, x = problem.spec.profile, np.asarray(fit.x, float)
-    w = (stats.series_weights(fit.r, problem.series[problem.mask(ids)]) if po.likelihood == "weighted"
-         else np.ones(fit.r.size))
-    lo, hi = [], []
-    for i, p in enumerate(fit.params):
-        a, b = p.x_bounds
-        sd = stats.wald_interval(fit.J, fit.r, w, i, float(x[i]))[2]
-        half = reach * sd if math.isfinite(sd) else (b - a)
-        half = max(half, 1e-3 * (b - a))
-        lo.append(max(a, x[i] - half))
-        hi.append(min(b, x[i] + half))
-    lo, hi = np.array(lo), np.array(hi)
+    lo, hi = wald_box(problem, fit, ids, reach)
     em = CurveEmulator(problem, fit.params, ids, (lo, hi))
     n = max(po.emulator_design, len(fit.params) + 4)
     em.add(design_points(x, problem.evaluated(fit.params, ids), lo, hi, n, problem.spec.fit.seed))
-    for k in range(1, 3):                      # runs that failed left too few points: more of the box
-        if em.gp is not None:
-            break
-        em.add(list(space_filling(n, lo, hi, problem.spec.fit.seed + k)))
-    if em.gp is None:
-        raise RuntimeError(f"profile emulator: {em.failed} of its design runs failed, too few points left for "
-                           f"{len(fit.params)} parameters; set [profile] emulator = \"none\"")
+    fill_design(em, n, "profile emulator")
     return em
-
-
-def design_points(x: np.ndarray, done: list, lo: np.ndarray, hi: np.ndarray, n: int, seed: int) -> list:
-    """The emulator's first design: the fit ``x`` and its d nearest neighbours among the points already run
-    (``done``: the refits' and the refresh's, free) between 0.1 and 1 times the gap below (the fit's
-    finite-difference steps among them: runs close together show the model's jitter, which the process's
-    lengths and nugget must account for; closer ones, a converging optimizer's, show nothing), then the
-    other points already run and space-filling points of the box [lo, hi], each kept only at least
-    0.5 n^(−1/d) of the box (unit coordinates) from those chosen, the farthest first, until there are ``n``
-    points; the runs already made count toward ``n`` only inside the box, and at most 2 n are taken."""
-    d = len(x)
-    gap = 0.5 * n ** (-1.0 / d)
-
-    def unit(v):
-        return (np.asarray(v, float) - lo) / (hi - lo)
-
-    near = sorted((c for c in done if 0.1 * gap <= np.linalg.norm(unit(c) - unit(x)) < gap),
-                  key=lambda c: np.linalg.norm(unit(c) - unit(x)))
-    chosen = [np.asarray(x, float)] + [np.asarray(c, float) for c in near[:d]]
-
-    def take(cands: list, limit: int) -> None:
-        cands = list(cands)
-        while cands and len(chosen) < limit:
-            dist = [min(np.linalg.norm(unit(c) - unit(q)) for q in chosen) for c in cands]
-            i = int(np.argmax(dist))
-            if dist[i] < gap:
-                return
-            chosen.append(np.asarray(cands.pop(i), float))
-
-    inside = [c for c in done if np.all(unit(c) >= -0.25) and np.all(unit(c) <= 1.25)]
-    take(inside, 2 * n)
-    take(list(space_filling(4 * n, lo, hi, seed)), max(n, len(chosen)))
-    return chosen
 
 
 def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841, fine_forward=None,
@@ -333,17 +285,25 @@ def recentre_target(pr: dict, tol: float = 1e-2) -> dict | None:
     return best if best["delta_chi2"] < -floor else None
 
 
-def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int = 2, fine_forward=None) -> tuple:
+def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int = 2, fine_forward=None,
+                      emulator: CurveEmulator | None = None) -> tuple:
     """Profile interval of parameter ``j``, re-centred when the profile finds a better fit than ``fit``.
 
     A point with Δχ² < 0 means the joint fit stopped short of the minimum (a budget-limited least squares,
     ``max_nfev``, in a curved valley).  Then the fit is redone from the best profile point
     (:func:`recentre_target`) and the profile recomputed about it, so the strength reported is the profile's
     minimum and the interval is measured from it.  At most ``max_passes`` re-centrings; with
-    ``fine_forward`` a re-centring also re-estimates the correction at the new fit.
+    ``fine_forward`` a re-centring also re-estimates the correction at the new fit; with ``[profile]
+    emulate_refits`` the re-centring refit runs on the profile's emulator, checked and polished with real
+    runs (:func:`~.emulated.emulated_fit`, its record in the pass's "emulated_refit").
+    ``emulator``: with ``[profile] emulator = "gp"``, an emulator of ``fit``'s parameters on ``ids`` to use
+    (the named model's from its emulated refits, its design shared); default one built about the fit
+    (:func:`emulator_for`).
     Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima)."""
     history = []
-    em = emulator_for(problem, fit, ids) if problem.spec.profile.emulator == "gp" else None
+    em = None
+    if problem.spec.profile.emulator == "gp":
+        em = emulator if emulator is not None else emulator_for(problem, fit, ids)
     pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward, emulator=em)
     for _ in range(max_passes):
         best = recentre_target(pr)
@@ -356,8 +316,11 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
         if fine_forward is not None:
             problem.noise.shift_correction(correction_at(problem, fine_forward, {**problem.fixed, **{
                 q.name: q.from_x(v) for q, v in zip(fit.params, x0)}}))
-        fit = problem.fit(fit.params, [x0], ids)
-        if em is not None:
+        if em is not None and problem.spec.profile.emulate_refits:
+            fit, history[-1]["emulated_refit"] = emulated_fit(em, [x0])
+        else:
+            fit = problem.fit(fit.params, [x0], ids)
+        if em is not None and not em.has(fit.x):
             em.add([fit.x])                  # the re-centred fit's own run (cached): the design grows by it
         pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward, emulator=em)
     pr["recentred"] = history

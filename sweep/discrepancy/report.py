@@ -78,6 +78,8 @@ def build_report(run, forward) -> dict:
               "rounds": run.rounds, "forward_runs": int(getattr(forward, "n_runs", 0)),
               "forward_runs_by_stage": run.ledger.stages, **_noise_fields(run),
               "profiles": run.profiles, "partial_explanation": run.partial}
+    if run.emulated is not None:
+        report["emulated_refits"] = run.emulated.summary()
     return jsonable(report)
 
 # what a rough profile means for the named strength's interval (report.md verdict line, CLI)
@@ -327,6 +329,20 @@ def _emulator_lines(em: dict | None) -> list[str]:
     return L
 
 
+def _emulated_refit_lines(em: dict | None) -> list[str]:
+    """The refits made on emulators (``[profile] emulate_refits``): each emulated optimum's checks with real
+    runs and how far the real polish moved it (in the emulated optimum's stated error)."""
+    if not em:
+        return []
+    L = ["", "## Emulated refits", "", "Each refit ran on a Gaussian-process emulator of the model (its predictive "
+         "covariance in the likelihood), its optimum checked with a real run and polished with real least squares; "
+         "the values reported are the polished ones.", "",
+         "| stage | model | checks | confirmed | χ² emulated | χ² real | polish move / stated error |", "|---|---|---|---|---|---|---|"]
+    L += [f"| {r['stage']} | {' + '.join(r['model'])} | {len(r['checks'])} | {'yes' if r['confirmed'] else 'no'} | "
+          f"{r['chi2_emulated']:.4g} | {r['chi2_real']:.4g} | {r['polish_move_over_error']:.3g} |" for r in em["refits"]]
+    return L
+
+
 def _gap_and_localization_lines(report: dict) -> list[str]:
     """The held-out gap before/after and where the calibrated baseline misses."""
     L = []
@@ -378,7 +394,8 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
         except Exception as exc:  # figures are optional; the verdict is not
             figs.append((f"figures failed: {type(exc).__name__}: {exc}", None))
     L = (_verdict_lines(report) + _caveat_lines(report) + _noise_lines(report) + _candidate_lines(report)
-         + _profile_lines(report) + _gap_and_localization_lines(report))
+         + _profile_lines(report) + _emulated_refit_lines(report.get("emulated_refits"))
+         + _gap_and_localization_lines(report))
     for cap, f in figs:
         L += [f"![{cap}]({f})" if f else cap, ""]
     L += _METHOD

@@ -20,6 +20,7 @@ from solver.effects import get_effect
 from . import stats
 from .checks import check_data_against_model
 from .data import MeasuredData
+from .emulated import EmulatedRefits
 from .evidence import compare_passing, free_columns, gap, localize, refit, screen, wald_bounds
 from .ledger import RunLedger
 from .noise import add_discretization_error, add_model_jitter, rms_per_observable
@@ -64,6 +65,7 @@ class WorkflowRun:
     profiles: dict = field(default_factory=dict)
     profile_unidentified: list = field(default_factory=list)
     partial: dict | None = None
+    emulated: EmulatedRefits | None = None
 
     @property
     def spec(self) -> DiscrepancySpec:
@@ -76,6 +78,18 @@ class WorkflowRun:
         self.gap_before = gap(self.problem, self.fit0.params, self.fit0.x, self.holdout)
         self.gap_cur = gap(self.problem, fit.params, fit.x, self.holdout)
         self.loc = localize(self.problem, fit, self.train)
+
+    def refit(self, params: tuple, starts: list, ref: Fit, stage: str) -> Fit:
+        """A model's refit on the training conditions from ``starts``: real runs, or with ``[profile]
+        emulate_refits`` on the model's emulator (built about ``ref``), checked and polished with real runs
+        and recorded under ``stage`` (emulated.py)."""
+        if self.emulated is None:
+            return self.problem.fit(params, starts, self.train)
+        return self.emulated.fit(params, starts, ref, stage)
+
+    def emulator_of(self, params: tuple):
+        """The emulator the refits of ``params`` built (None without emulated refits or before one)."""
+        return None if self.emulated is None else self.emulated.emulators.get(tuple(p.name for p in params))
 
 
 def prepare(data: MeasuredData, spec: DiscrepancySpec, forward, fine_forward) -> WorkflowRun:
@@ -91,6 +105,8 @@ def prepare(data: MeasuredData, spec: DiscrepancySpec, forward, fine_forward) ->
     if not holdout:
         raise ValueError("no held-out condition: the gap on unseen conditions cannot be measured")
     run = WorkflowRun(problem, RunLedger(forward, fine or []), fine, train, holdout)
+    if spec.profile.emulate_refits:
+        run.emulated = EmulatedRefits(problem, train)
     if fine is not None:
         run.disc_err = add_discretization_error(problem, fine)
     run.ledger.mark("discretization_correction")
@@ -141,7 +157,9 @@ def screen_and_refit(run: WorkflowRun, remaining: list, rnd: int) -> list:
     for c in order[: acc.max_refits]:
         chosen += [cc for cc in [c] + scr[c]["tied_with"] if cc not in chosen and cc in order]
     run.ledger.mark("screening")
-    refits = {c: refit(problem, run.current, c, scr[c], run.train, run.holdout, run.gap_cur) for c in chosen}
+    fitter = None if run.emulated is None else (lambda params, starts, ref: run.refit(params, starts, ref, "refits"))
+    refits = {c: refit(problem, run.current, c, scr[c], run.train, run.holdout, run.gap_cur, fitter)
+              for c in chosen}
     run.ledger.mark("refits")
     passing = compare_passing([r for r in refits.values() if r["passed"]], problem, run.train)
     rows = [_candidate_row(c, scr[c], refits.get(c)) for c in remaining]
@@ -201,7 +219,7 @@ def refresh_correction(run: WorkflowRun) -> None:
     converged = False
     for _ in range(opts.disc_refresh):
         err = add_discretization_error(problem, run.fine, fit.values())
-        fit = problem.fit(fit.params, [fit.x], run.train)
+        fit = run.refit(fit.params, [fit.x], fit, "discretization_refresh")
         cur = {k: float(fit.values()[k]) for k in keys}
         change = {k: abs(cur[k] - prev[k]) / max(abs(cur[k]), abs(prev[k]), 1e-300) for k in keys}
         converged = all(c <= opts.disc_refresh_tol for c in change.values())
@@ -232,7 +250,7 @@ def noise_at_named_fit(run: WorkflowRun) -> None:
         run.jitter["named"] = add_model_jitter(run.problem, run.current.values(), run.current.params)
         run.ledger.mark("model_jitter")
         if not refreshes:
-            fit = run.problem.fit(run.current.params, [run.current.x], run.train)
+            fit = run.refit(run.current.params, [run.current.x], run.current, "model_jitter")
             for a in run.accepted:      # the strengths reported are the refitted model's
                 a["strength"] = float(fit.values()["effect:" + a["effect"]])
             run.move_to(fit)
@@ -247,7 +265,8 @@ def profile_named(run: WorkflowRun) -> None:
     fine = run.fine if run.spec.profile.fine else None
     for a in run.accepted:
         j = names.index("effect:" + a["effect"])
-        run.current, pr = profile_recentred(run.problem, run.current, j, run.train, fine_forward=fine)
+        run.current, pr = profile_recentred(run.problem, run.current, j, run.train, fine_forward=fine,
+                                            emulator=run.emulator_of(run.current.params))
         run.profiles[a["effect"]] = pr
         a["strength_interval_wald"] = a["strength_interval"]
         a["strength_interval"] = [pr["lower"], pr["upper"]]
