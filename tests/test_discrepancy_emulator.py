@@ -379,3 +379,29 @@ def test_cost_comparison_pairs_draws_and_books_runs_by_stage(tmp_path):
     b.write_text(json.dumps(cand))
     assert main([str(a), str(b), "--out", str(tmp_path / "t.md")]) == 0
     assert (tmp_path / "t.md").read_text() == markdown(c)
+
+
+def test_only_multi_start_refits_go_to_the_emulator():
+    """``WorkflowRun.refit`` sends a refit with several starts to the emulated refits and a single-start one
+    (a refresh pass, the jitter refit) to real least squares, whatever the stage asking."""
+    from sweep.discrepancy.workflow import WorkflowRun
+
+    calls = []
+
+    class _Problem:
+        def fit(self, params, starts, ids):
+            calls.append(("real", len(starts), tuple(ids)))
+            return "real"
+
+    class _Emulated:
+        def fit(self, params, starts, ref, stage):
+            calls.append(("emulated", len(starts), stage))
+            return "emulated"
+
+    run = WorkflowRun.__new__(WorkflowRun)
+    run.problem, run.emulated, run.train = _Problem(), _Emulated(), ["a", "b"]
+    assert run.refit((), [np.zeros(2)], None, "discretization_refresh") == "real"
+    assert run.refit((), [np.zeros(2), np.ones(2)], None, "refits") == "emulated"
+    run.emulated = None
+    assert run.refit((), [np.zeros(2), np.ones(2)], None, "refits") == "real"
+    assert calls == [("real", 1, ("a", "b")), ("emulated", 2, "refits"), ("real", 2, ("a", "b"))]

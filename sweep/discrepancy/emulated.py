@@ -1,5 +1,6 @@
 """Refits on Gaussian-process emulators (``[profile] emulate_refits = true`` with ``emulator = "gp"``): the
-candidates' joint refits, the discretization refresh passes and the profile's re-centring refit.
+candidates' multi-start joint refits and the profile's re-centring refit (a single-start refit, such as a
+discretization refresh pass, runs on real runs: ``WorkflowRun.refit``).
 
 A refit on real runs costs one forward run per training condition for every residual evaluation and d more
 for every Jacobian.  On an emulator (:class:`~.emulator.CurveEmulator`) the least squares costs no run; real
@@ -126,7 +127,7 @@ def emulated_fit(em: CurveEmulator, starts: list) -> tuple[Fit, dict]:
 class EmulatedRefits:
     """The workflow's refits of whole models on emulators: one :class:`CurveEmulator` per parameter set (a
     candidate's: calibrated + its strength) on the training conditions, built at its first refit and kept
-    for the later refits of the same model (the refresh passes).  ``records``: every refit's record with its
+    for the later refits of the same model and for the profile of its strength.  ``records``: every refit's record with its
     stage."""
 
     def __init__(self, problem, ids):

@@ -135,9 +135,9 @@ class ProfileOptions(_Checked):
                                      "refined and the end recomputed while they disagree beyond its sd)")
 
     emulate_refits: bool = _rule(False, "bool",
-                                 doc="with the emulator: also the candidates' joint refits, the discretization "
-                                     "refresh passes and the profile's re-centring refit on emulators, each "
-                                     "emulated optimum checked with a real run and polished by real least squares")
+                                 doc="with the emulator: also the candidates' multi-start joint refits and the "
+                                     "profile's re-centring refit on emulators, each emulated optimum checked with "
+                                     "a real run and polished by real least squares (single-start refits stay real)")
     emulator_polish: int = _rule(2, "int", 1, 50,
                                  doc="with emulate_refits: real least-squares evaluations from an emulated optimum, "
                                      "each with its Jacobian (1: the residuals and Jacobian there only)")

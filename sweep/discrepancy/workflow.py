@@ -81,9 +81,12 @@ class WorkflowRun:
 
     def refit(self, params: tuple, starts: list, ref: Fit, stage: str) -> Fit:
         """A model's refit on the training conditions from ``starts``: real runs, or with ``[profile]
-        emulate_refits`` on the model's emulator (built about ``ref``), checked and polished with real runs
-        and recorded under ``stage`` (emulated.py)."""
-        if self.emulated is None:
+        emulate_refits`` and several starts on the model's emulator (built about ``ref``), checked and
+        polished with real runs and recorded under ``stage`` (emulated.py).  A single-start refit (a refresh
+        pass, the refit under the named model's jitter) runs on real runs: it starts near its optimum, where
+        real least squares needs few runs and the emulator's checks and polish would cost as many, and an
+        emulated optimum's scatter would keep the refresh's fixed point from settling."""
+        if self.emulated is None or len(starts) < 2:
             return self.problem.fit(params, starts, self.train)
         return self.emulated.fit(params, starts, ref, stage)
 
