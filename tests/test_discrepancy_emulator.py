@@ -425,7 +425,10 @@ def test_marginal_deviance_with_the_emulator_is_the_dense_two_member_mixture():
 def test_toy_twin_with_the_marginal_likelihood_and_the_emulator_keeps_verdict_and_truth_for_fewer_runs():
     """A toy coverage twin (MeshToy, wander deviations, three check realizations) with [profile] likelihood =
     "marginal" with and without the emulator (the spec accepts both together): the same verdict, the truth
-    inside both intervals, every emulated end confirmed and fewer profile runs with the emulator."""
+    inside both intervals, every emulated end confirmed and fewer profile runs with the emulator.  Both
+    profiles start from the same fit and brackets, so their ends differ by the emulator's error in Δχ², within
+    one end's stopping tolerance (refine_tol · threshold in Δχ², refine_tol/4 of the width for a quadratic
+    profile); each point's deviance is taken under the correction re-estimated there, as the real one's."""
     from sweep.discrepancy.coverage import SETUPS, VARIANTS, one_draw
 
     su = SETUPS[1]                                       # kbar calibrated, cement axis, hidden β
@@ -436,6 +439,8 @@ def test_toy_twin_with_the_marginal_likelihood_and_the_emulator_keeps_verdict_an
     assert on["profile_emulator"]["confirmed"]
     runs = {k: r["runs_by_stage"]["profile_likelihood"]["coarse"] for k, r in rows.items()}
     assert 0 < runs["wander_remedy_marginal_emulator"] < runs["wander_remedy_marginal"]
+    tol = 0.15 / 4 * (off["upper"] - off["lower"])
+    assert on["lower"] == pytest.approx(off["lower"], abs=tol) and on["upper"] == pytest.approx(off["upper"], abs=tol)
 
 
 # ----------------------------------------------------------------------------- the cost comparison
