@@ -341,9 +341,106 @@ def test_spec_refuses_emulated_refits_without_the_emulator():
         _spec({"emulate_refits": True})
 
 
-def test_spec_refuses_the_emulator_with_the_marginal_likelihood():
-    with pytest.raises(ValueError, match=r'profile\.emulator=\'gp\' is not allowed with profile\.likelihood="marginal"'):
-        _spec({"emulator": "gp", "likelihood": "marginal"})
+# ----------------------------------------------------------------------------- the marginal likelihood with it
+def _noise_with_series(k, n_series=1, n=12, jitter=False, seed=0):
+    """A NoiseModel of ``n_series`` series of ``n`` points (σ_diag 1.5 kPa) with an exponentially correlated
+    realization covariance from ``k`` realizations (none for k < 2) and, with ``jitter``, a known jitter term."""
+    from sweep.discrepancy.layout import CurveLayout
+    from sweep.discrepancy.noise import NoiseModel
+    from sweep.discrepancy.realizations import RealizationCovariance
+
+    rng = np.random.default_rng(seed)
+    t = np.tile(np.linspace(0.02, 0.3, n), n_series)
+    lay = CurveLayout(np.repeat(np.arange(n_series), n), np.array(["p_inj"] * (n * n_series)), t)
+    nm = NoiseModel(np.zeros(t.size), np.full(t.size, 1.5), lay)
+    if k >= 2:
+        blocks, jit = {}, {}
+        for s, rows in lay.series_rows().items():
+            v = rng.uniform(1.0, 4.0, rows.size)
+            blocks[s] = (rows, np.sqrt(np.outer(v, v)) * np.exp(-np.abs(np.subtract.outer(t[rows], t[rows])) / 0.1))
+            jit[s] = (rows, 0.3 * np.exp(-np.abs(np.subtract.outer(t[rows], t[rows])) / 0.05))
+        nm.real_cov = RealizationCovariance(blocks, {"p_inj": 0.1}, {"p_inj": 0.8}, k, lay)
+        nm.jitter = None
+        if jitter:
+            nm.real_cov = nm.real_cov.with_jitter(jit)
+        nm._changed(covariance=True)
+    return nm, rng
+
+
+def _emulator_cov(rng, n):
+    """A rank-3 added covariance over all rows (cross-series terms included), kPa², like an emulator's."""
+    A = rng.normal(size=(n, 3))
+    return A @ A.T
+
+
+def test_marginal_deviance_with_the_emulator_is_the_marginal_one_without_its_covariance():
+    """V = 0 (s = 0, or X = 0): the marginal deviance with the emulator's covariance is
+    NoiseModel.marginal_deviance of the same residuals (two series, jitter term included)."""
+    nm, rng = _noise_with_series(3, n_series=2, jitter=True)
+    n = nm.y.size
+    mask = np.ones(n, bool)
+    X = _emulator_cov(rng, n)
+    for _ in range(3):
+        diff = rng.normal(size=n) * 3.0
+        ref = nm.marginal_deviance(nm.standardize(diff, mask, 0.0), mask)
+        assert nm.with_scaled_mixture(mask, X).deviance(diff, 0.0) == pytest.approx(ref, rel=1e-10)
+        assert nm.with_scaled_mixture(mask, 0.0 * X).deviance(diff, 2.0) == pytest.approx(ref, rel=1e-10)
+
+
+def test_marginal_deviance_with_the_emulator_is_gaussian_without_an_estimated_scale():
+    """k < 2 (no realization covariance): the deviance is diffᵀ (D + sX)⁻¹ diff, the Gaussian χ² with Σ + V."""
+    nm, rng = _noise_with_series(1, n_series=2)
+    n = nm.y.size
+    mask = np.ones(n, bool)
+    X = _emulator_cov(rng, n)
+    diff = rng.normal(size=n) * 3.0
+    for s in (0.0, 0.4, 3.0):
+        exact = diff @ np.linalg.solve(np.diag(nm.sig_diag**2) + s * X, diff)
+        assert nm.with_scaled_mixture(mask, X).deviance(diff, s) == pytest.approx(exact, rel=1e-10)
+
+
+def test_marginal_deviance_with_the_emulator_is_the_dense_two_member_mixture():
+    """One series, a two-member mixture (λ at the mid quantiles 1/4 and 3/4 of ν/χ²_ν): the deviance is
+    −2 ln(½ Σ_m N(diff; 0, Σ_m + sX)) − ln det(2π(Σ + sX)), Σ_m = D + λ_m C + C_jitter, computed densely."""
+    from scipy.stats import chi2, multivariate_normal
+
+    from sweep.discrepancy.noise import ScaledMixture
+
+    nm, rng = _noise_with_series(3, jitter=True)
+    n = nm.y.size
+    mask = np.ones(n, bool)
+    X = _emulator_cov(rng, n)
+    rows, C = nm.real_cov.blocks[0]
+    nu = nm.real_cov.scale_dof(rows)
+    lam = nu / chi2.ppf([0.75, 0.25], nu)
+    D, Cj = np.diag(nm.sig_diag**2), nm.real_cov.jitter[0][1]
+    mix = ScaledMixture(nm.with_scaled(mask, X), nm.real_cov.mixture_members(mask, nm.sig_diag, n_nodes=2), X)
+    for s in (0.0, 0.7, 3.0):
+        diff = rng.normal(size=n) * 4.0
+        dens = [multivariate_normal(np.zeros(n), D + lm * C + Cj + s * X).logpdf(diff) for lm in lam]
+        brute = -2.0 * (np.logaddexp(*dens) - np.log(2.0)) - np.linalg.slogdet(2 * np.pi * (D + C + Cj + s * X))[1]
+        assert mix.deviance(diff, s) == pytest.approx(brute, rel=1e-9)
+
+
+def test_toy_twin_with_the_marginal_likelihood_and_the_emulator_keeps_verdict_and_truth_for_fewer_runs():
+    """A toy coverage twin (MeshToy, wander deviations, three check realizations) with [profile] likelihood =
+    "marginal" with and without the emulator (the spec accepts both together): the same verdict, the truth
+    inside both intervals, every emulated end confirmed and fewer profile runs with the emulator.  Both
+    profiles start from the same fit and brackets, so their ends differ by the emulator's error in Δχ², within
+    one end's stopping tolerance (refine_tol · threshold in Δχ², refine_tol/4 of the width for a quadratic
+    profile); each point's deviance is taken under the correction re-estimated there, as the real one's."""
+    from sweep.discrepancy.coverage import SETUPS, VARIANTS, one_draw
+
+    su = SETUPS[1]                                       # kbar calibrated, cement axis, hidden β
+    rows = {v: one_draw(su, 0, VARIANTS[v]) for v in ("wander_remedy_marginal", "wander_remedy_marginal_emulator")}
+    off, on = rows["wander_remedy_marginal"], rows["wander_remedy_marginal_emulator"]
+    assert off["verdict"] == on["verdict"] == "named"
+    assert off["covered"] and on["covered"]
+    assert on["profile_emulator"]["confirmed"]
+    runs = {k: r["runs_by_stage"]["profile_likelihood"]["coarse"] for k, r in rows.items()}
+    assert 0 < runs["wander_remedy_marginal_emulator"] < runs["wander_remedy_marginal"]
+    tol = 0.15 / 4 * (off["upper"] - off["lower"])
+    assert on["lower"] == pytest.approx(off["lower"], abs=tol) and on["upper"] == pytest.approx(off["upper"], abs=tol)
 
 
 # ----------------------------------------------------------------------------- the cost comparison

@@ -24,8 +24,9 @@ The prediction at u is the kriging mean and the covariance
 the error of the emulator against a real run there (c: the smooth part's posterior variance, g: the run's
 jitter about it, with the outputs' covariance Σ too: conservative along the parameters' directions, where Σ
 is largest).  V enters the likelihood: residuals are whitened with Σ_noise + V
-(:class:`~.noise.ScaledCovariance`), so the emulator's error only widens the profile's interval (profile.py
-leaves the log-determinant out).  Units: each output's own (kPa, mm) in and out; the design in the
+(:class:`~.noise.ScaledCovariance`), or, with ``[profile] likelihood = "marginal"``, V is added to every
+member of the realization scale's mixture (:class:`~.noise.ScaledMixture`), so the emulator's error only
+widens the profile's interval (profile.py leaves the log-determinant of Σ_noise + V out).  Units: each output's own (kPa, mm) in and out; the design in the
 parameters' fit coordinates.
 """
 from __future__ import annotations
@@ -172,6 +173,7 @@ class CurveEmulator:
         self.refinements = 0
         self.gp: GaussianProcess | None = None
         self._w, self._wkey = None, None
+        self._m, self._mkey = None, None
 
     def _unit(self, x) -> np.ndarray:
         return (np.atleast_2d(np.asarray(x, float)) - self.lo) / (self.hi - self.lo)
@@ -224,6 +226,22 @@ class CurveEmulator:
         if self._wkey != key:
             self._w, self._wkey = self.problem.noise.with_scaled(self.mask, self.out_cov()), key
         return self._w
+
+    def mixture(self):
+        """The noise model's marginal deviance with the emulator's covariance added to every member of its
+        scale mixture (:class:`~.noise.ScaledMixture`), rebuilt when the process or the noise model's
+        covariance changed."""
+        key = (id(self.gp), self.problem.noise.cov_version)
+        if self._mkey != key:
+            self._m, self._mkey = self.problem.noise.with_scaled_mixture(self.mask, self.out_cov()), key
+        return self._m
+
+    def marginal_deviance(self, x) -> float:
+        """The marginal deviance (dimensionless) of the data against the emulated model at ``x`` (fit
+        coordinates), with the covariance s·Σ_out of a real run about it in every Gaussian term
+        (:meth:`mixture`)."""
+        mean, s = self.predict(x)
+        return self.mixture().deviance(self.problem.y[self.mask] - mean, s)
 
     def sd_norm(self, x, run: bool = False) -> float:
         """√tr(Σ⁻¹ V) at ``x`` (Σ the noise model's covariance on the rows, V the emulator's): its predictive

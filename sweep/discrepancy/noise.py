@@ -24,7 +24,7 @@ from .layout import CurveLayout
 from .observables import CURVES
 from .realizations import RealizationCovariance, realization_mean_spread, realizations
 
-__all__ = ["NoiseModel", "ScaledCovariance", "add_discretization_error", "correction_at", "add_model_jitter", "model_jitter_at",
+__all__ = ["NoiseModel", "ScaledCovariance", "ScaledMixture", "add_discretization_error", "correction_at", "add_model_jitter", "model_jitter_at",
            "rms_per_observable"]
 
 
@@ -156,6 +156,13 @@ class NoiseModel:
             total += -2.0 * (logsumexp(-0.5 * (q + logdet)) - np.log(q.size)) - float(rs @ rs)
         return total
 
+    def with_scaled_mixture(self, mask: np.ndarray, extra: np.ndarray) -> "ScaledMixture":
+        """The marginal deviance (:meth:`marginal_deviance`) on ``mask``'s rows with s × ``extra`` (kPa², mm²)
+        added to every member of the scale mixture, any s >= 0 (:class:`ScaledMixture`; valid until the
+        covariance changes: ``cov_version``)."""
+        members = self.real_cov.mixture_members(mask, self.sig_diag) if self.real_cov is not None else []
+        return ScaledMixture(self.with_scaled(mask, extra), members, extra)
+
     def null_calibration(self, mask: np.ndarray, seed: int) -> dict | None:
         """The residual test's null for the estimated realization covariance on ``mask``'s rows (None
         without one): :meth:`RealizationCovariance.null_calibration`."""
@@ -188,6 +195,60 @@ class ScaledCovariance:
     def sd_norm(self, s: float) -> float:
         """√tr(Σ⁻¹ s X): the expected norm of a deviation of covariance s·X whitened with Σ alone."""
         return float(math.sqrt(max(s * float(np.sum(self.gamma)), 0.0)))
+
+
+class ScaledMixture:
+    """The marginal deviance (:meth:`NoiseModel.marginal_deviance`) with a fixed added covariance X (an
+    emulator's, kPa², mm²) scaled by any s >= 0 in every Gaussian term: for the m-th member of a series'
+    scale mixture the covariance is Σ_m + s·X_ss instead of Σ_m.
+
+    Over σ_diag² (e = diff/σ_diag) a series' members are R_m = I + λ_m A + J and X_e its block of
+    D^(−1/2) X D^(−1/2).  With R_m = L_m L_mᵀ (Cholesky) and L_m⁻¹ X_e L_m⁻ᵀ = U_m Γ_m U_mᵀ,
+
+        eᵀ (R_m + s X_e)⁻¹ e = Σ_i z_mi² / (1 + s γ_mi),   z_m = U_mᵀ L_m⁻¹ e,
+        ln det(R_m + s X_e) = ln det R_m + Σ_i ln(1 + s γ_mi),
+
+    exact for any s, O(n³) per member once and O(n²) per member and evaluation.  The deviance is
+
+        D(diff, s) = r·r + Σ_series [−2 ln mean_m exp(−(q_m + ln det(R_m + sX_e) − ln det(R + sX_e))/2) − q_R],
+
+    r the residuals whitened with the whole Σ + sX (:class:`ScaledCovariance`: the emulator's covariance
+    across series kept), q_m and q_R the quadratic forms of the series' members and of R = I + A + J, its
+    covariance in the whitening.  It is −2 ln of the marginal likelihood with covariance Σ_m + sX per member
+    up to ln det(2π(Σ + sX)) (left out as in the profile's Gaussian Δχ², :class:`ScaledCovariance`), exactly
+    when X has no cross-series terms (one series, or a block-diagonal X); with cross-series terms the Gaussian
+    part is exact and each series' mixture correction uses its own block of X.  With s = 0 it is
+    :meth:`NoiseModel.marginal_deviance`; without mixture terms (k < 2) the Gaussian r·r with Σ + sX.
+    Dimensionless."""
+
+    def __init__(self, gauss: ScaledCovariance, members: list, extra: np.ndarray):
+        self.gauss = gauss
+        X_e = np.asarray(extra, float) / np.outer(gauss.d, gauss.d)
+        self.series = []
+        for pos, R, Rl in members:
+            stack = np.concatenate([R[None], Rl])                      # the reference R first, then R(λ_m)
+            L = np.linalg.cholesky(stack)
+            Linv = np.linalg.inv(L)
+            B = Linv @ X_e[np.ix_(pos, pos)] @ np.swapaxes(Linv, 1, 2)
+            g, U = np.linalg.eigh(0.5 * (B + np.swapaxes(B, 1, 2)))
+            ld0 = 2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2)), axis=1)
+            self.series.append((pos, np.swapaxes(U, 1, 2) @ Linv, np.maximum(g, 0.0), ld0))
+
+    def deviance(self, diff: np.ndarray, s: float) -> float:
+        """D(``diff``, ``s``) of the class docstring for differences ``diff`` (data − model, finite; kPa, mm)."""
+        from scipy.special import logsumexp
+
+        diff = np.asarray(diff, float)
+        r = self.gauss.standardize(diff, s)[0]
+        e = diff / self.gauss.d
+        total = float(r @ r)
+        for pos, T, g, ld0 in self.series:
+            z = T @ e[pos]                                             # (1 + n_nodes, m)
+            q = np.sum(z * z / (1.0 + s * g), axis=1)
+            ld = ld0 + np.sum(np.log1p(s * g), axis=1)
+            mix = -2.0 * (logsumexp(-0.5 * (q[1:] + ld[1:] - ld[0])) - np.log(q.size - 1))
+            total += mix - float(q[0])
+        return total
 
 
 def rms_per_observable(layout: CurveLayout, v: np.ndarray) -> dict:

@@ -147,9 +147,6 @@ class ProfileOptions(_Checked):
         if self.emulate_refits and self.emulator == "none":
             raise ValueError("discrepancy spec: profile.emulate_refits=true is not allowed with "
                              "profile.emulator=\"none\": set emulator = \"gp\" or emulate_refits = false")
-        if self.emulator != "none" and self.likelihood == "marginal":
-            raise ValueError(f"discrepancy spec: profile.emulator={self.emulator!r} is not allowed with "
-                             "profile.likelihood=\"marginal\": use \"weighted\" or \"gaussian\", or emulator = \"none\"")
 
 
 @dataclass(frozen=True)

@@ -103,10 +103,14 @@ class _Profile:
             self.problem.fixed = {}
 
     def fit_deviance(self, f: Fit) -> float:
-        """The profile's χ² of a refit: :meth:`deviance` of its residuals (an emulated refit's whitened with
-        the emulator's covariance added, so its error only lowers Δχ² and widens the interval; the Gaussian
-        likelihood's log-determinant of that covariance is left out: it grows where the emulator knows less,
-        along the profile away from its design, and would narrow the interval by the emulator's ignorance)."""
+        """The profile's χ² of a refit: :meth:`deviance` of its residuals.  An emulated refit's are whitened
+        with the emulator's covariance added (with "marginal": added to every member of the scale mixture,
+        :meth:`~.emulator.CurveEmulator.marginal_deviance`), so its error only lowers Δχ² and widens the
+        interval; the Gaussian likelihood's log-determinant of that covariance is left out: it grows where the
+        emulator knows less, along the profile away from its design, and would narrow the interval by the
+        emulator's ignorance."""
+        if self.em is not None and self.po.likelihood == "marginal":
+            return f.marginal_deviance
         return self.deviance(f.r)
 
     def refit(self, xj: float, x0: np.ndarray) -> Fit:
@@ -122,6 +126,8 @@ class _Profile:
                 break
             self.em.add([f.x_full])
             self.em.refinements += 1
+        if self.po.likelihood == "marginal":      # under the correction in use now, as the residuals f.r
+            f.marginal_deviance = self.em.marginal_deviance(f.x_full)
         self.last = f
         return f
 

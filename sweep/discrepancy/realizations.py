@@ -139,17 +139,15 @@ class RealizationCovariance:
             J = self.jitter[s][1][np.ix_(keep, keep)] / dd if self.jitter and s in self.jitter else None
             yield s, rows, r, C[np.ix_(keep, keep)] / dd, J
 
-    def scale_mixture(self, mask: np.ndarray, sig_diag: np.ndarray, n_nodes: int = 32) -> list:
-        """Terms of the whitened residuals' likelihood with the realization term's scale integrated out.
+    def mixture_members(self, mask: np.ndarray, sig_diag: np.ndarray, n_nodes: int = 32) -> list:
+        """The whitening's covariance and its scale mixture's members per series with rows in ``mask``.
 
         The realization covariance is estimated from k realizations: the data's true one is λ C with
         λ = v_true/v_est ~ ν/χ²_ν per series (ν from :meth:`scale_dof`, as :meth:`null_calibration`); the
-        jitter term is known.  With R = I + A + J (A, J: the realization and jitter terms over σ_diag², the
-        whitening's covariance) and R(λ) = I + λA + J, a whitened residual r = R^(−1/2) e has
-        −2 ln p(r) = −2 ln E_λ[exp(−(eᵀ R(λ)⁻¹ e + ln det R(λ))/2)] + const, e = R^(1/2) r.  The expectation is a
-        mean over ``n_nodes`` equal-probability nodes of λ (their mid quantiles).  Returns, per series with
-        rows in ``mask``, (positions in the masked vector, Q (n_nodes, m, m) with eᵀR(λ)⁻¹e = rᵀ Q r,
-        ln det R(λ) − ln det R (n_nodes,)); [] when k < 2 (no estimated scale)."""
+        jitter term is known.  Over σ_diag² (D^(−1/2) · D^(−1/2), dimensionless) the series' covariance is
+        R = I + A + J and the m-th member's R(λ_m) = I + λ_m A + J, λ_m the mid quantiles of ``n_nodes``
+        equal-probability nodes.  Returns [(positions in the masked vector, R (m, m), R(λ) (n_nodes, m, m))];
+        [] when k < 2 (no estimated scale)."""
         from scipy.stats import chi2
 
         if self.k < 2:
@@ -160,12 +158,25 @@ class RealizationCovariance:
             J = 0.0 if J is None else J
             nu = self.scale_dof(rows)
             lam = nu / chi2.ppf(1.0 - (np.arange(n_nodes) + 0.5) / n_nodes, nu)
-            w, V = np.linalg.eigh(np.eye(r.size) + A + J)
+            out.append((np.searchsorted(rows_m, r), np.eye(r.size) + A + J,
+                        np.eye(r.size) + lam[:, None, None] * A + J))
+        return out
+
+    def scale_mixture(self, mask: np.ndarray, sig_diag: np.ndarray, n_nodes: int = 32) -> list:
+        """Terms of the whitened residuals' likelihood with the realization term's scale integrated out.
+
+        With the members R(λ) of :meth:`mixture_members`, a whitened residual r = R^(−1/2) e has
+        −2 ln p(r) = −2 ln E_λ[exp(−(eᵀ R(λ)⁻¹ e + ln det R(λ))/2)] + const, e = R^(1/2) r.  The expectation is a
+        mean over the ``n_nodes`` equal-probability nodes of λ.  Returns, per series with rows in ``mask``,
+        (positions in the masked vector, Q (n_nodes, m, m) with eᵀR(λ)⁻¹e = rᵀ Q r,
+        ln det R(λ) − ln det R (n_nodes,)); [] when k < 2 (no estimated scale)."""
+        out = []
+        for pos, R, Rl in self.mixture_members(mask, sig_diag, n_nodes):
+            w, V = np.linalg.eigh(R)
             half = (V * np.sqrt(np.maximum(w, 1e-300))) @ V.T                 # R^(1/2)
-            Rl = np.eye(r.size) + lam[:, None, None] * A + J
             sign, logdet = np.linalg.slogdet(Rl)
             Q = half @ np.linalg.solve(Rl, np.broadcast_to(half, Rl.shape))
-            out.append((np.searchsorted(rows_m, r), Q, logdet - np.sum(np.log(np.maximum(w, 1e-300)))))
+            out.append((pos, Q, logdet - np.sum(np.log(np.maximum(w, 1e-300)))))
         return out
 
     def scale_dof(self, rows: np.ndarray) -> float:

@@ -56,7 +56,7 @@ Example (units mm, s, kPa)::
                                      # covariance added to the likelihood's; a design of emulator_design runs
     emulator_design = 8              # per training condition around the fit, refined with a real run where a
     emulator_tol = 0.1               # refit's emulator sd (whitened norm) exceeds emulator_tol, each interval
-    emulator_checks = 3              # end confirmed by real runs (at most emulator_checks); not with "marginal"
+    emulator_checks = 3              # end confirmed by real runs (at most emulator_checks)
     emulate_refits = false           # with "gp": also the candidates' multi-start refits and the profile's
     emulator_polish = 2              # re-centring refit on emulators, each optimum checked with a real run and
                                      # polished by emulator_polish real least-squares evaluations
