@@ -571,6 +571,30 @@ def test_a_bad_twin_is_refused_before_any_run(tmp_path, edit, msg):
     assert not (tmp_path / "res").exists()
 
 
+def test_twin_campaign_overrides_set_one_setting_and_refuse_bad_ones(tmp_path):
+    """``--set TABLE.KEY=VALUE`` (twins.apply_overrides) replaces one setting of a copy, as a TOML literal; a
+    missing table or key, a value that is not a literal, or one the spec's option loop refuses is an error
+    before any run."""
+    from pathlib import Path
+
+    from sweep.discrepancy.twins import apply_overrides, load_twin_campaign, run_twins
+
+    path = Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_coverage_e_rate.toml"
+    camp = load_twin_campaign(path)
+    out = apply_overrides(camp, ["spec.profile.fine=false", "spec.noise.disc_refresh=3", "data.seed=9"])
+    assert (out["spec"]["profile"]["fine"], out["spec"]["noise"]["disc_refresh"], out["data"]["seed"]) == (False, 3, 9)
+    assert camp["spec"]["profile"]["fine"] is True and camp["data"]["seed"] == 7          # the original untouched
+    assert spec_from_dict(out["spec"]).profile.fine is False
+    assert apply_overrides(camp, ["spec.fit.loss=\"linear\""])["spec"]["fit"]["loss"] == "linear"  # a new key of an option table
+    for bad, msg in [("spec.profile.fine", "TABLE.KEY=VALUE"), ("spec.nope.x=1", "no table 'nope'"),
+                     ("data.nope=1", "no setting 'nope'"), ("spec.profile.fine=flase", "not a TOML literal")]:
+        with pytest.raises(ValueError, match=msg):
+            apply_overrides(camp, [bad])
+    with pytest.raises(ValueError, match="disc_refresh"):
+        run_twins(str(path), tmp_path / "res", tmp_path / "cache", overrides=["spec.noise.disc_refresh=-1"])
+    assert not (tmp_path / "res").exists() and not (tmp_path / "cache").exists()
+
+
 def test_twins_refuse_data_on_a_checked_mesh_realization(tmp_path):
     """A twin whose data come from one of the fine check meshes would test an easier problem: refused first."""
     import copy

@@ -41,7 +41,8 @@ import numpy as np
 
 log = logging.getLogger("dchfrac.discrepancy")
 
-__all__ = ["load_twin_campaign", "run_twins", "twin_passed", "twin_conditions", "twin_observables"]
+__all__ = ["load_twin_campaign", "apply_overrides", "run_twins", "twin_passed", "twin_conditions",
+           "twin_observables"]
 
 
 def load_twin_campaign(path) -> dict:
@@ -52,6 +53,44 @@ def load_twin_campaign(path) -> dict:
         if key not in d:
             raise ValueError(f"twin campaign {path}: missing table [{key}]")
     return d
+
+
+def apply_overrides(camp: dict, overrides: list[str]) -> dict:
+    """A copy of the campaign with ``TABLE.KEY=VALUE`` settings replaced (``spec.profile.fine=false``).
+
+    The value is a TOML literal (``false``, ``8``, ``"gp"``, ``[1, 2]``).  Only settings of tables the campaign
+    already has may be set, and only existing keys or keys of its ``[spec]`` option tables, which
+    :func:`sweep.discrepancy.spec.spec_from_dict` validates with the rest of the spec before any run.  The
+    settings are recorded in every twin's ``summary.json`` entry (``overrides``).  Raises ValueError naming
+    the setting and what is allowed."""
+    import copy
+    import tomllib
+
+    from .options import OPTION_TABLES
+
+    out = copy.deepcopy(camp)
+    for item in overrides:
+        path, sep, raw = item.partition("=")
+        keys = path.strip().split(".")
+        if not sep or len(keys) < 2 or not all(keys):
+            raise ValueError(f"--set {item!r}: must be TABLE.KEY=VALUE, e.g. spec.profile.fine=false")
+        try:
+            value = tomllib.loads(f"v = {raw.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise ValueError(f"--set {item!r}: the value {raw.strip()!r} is not a TOML literal "
+                             "(false, 8, 0.05, \"gp\", [1, 2])") from None
+        node = out
+        for k in keys[:-1]:
+            if not isinstance(node.get(k), dict):
+                tables = sorted(k2 for k2, v in node.items() if isinstance(v, dict))
+                raise ValueError(f"--set {item!r}: no table {k!r} here; tables: {tables}")
+            node = node[k]
+        in_options = keys[0] == "spec" and len(keys) == 3 and keys[1] in OPTION_TABLES
+        if keys[-1] not in node and not in_options:
+            raise ValueError(f"--set {item!r}: no setting {keys[-1]!r} in [{'.'.join(keys[:-1])}]; "
+                             f"settings: {sorted(node)}")
+        node[keys[-1]] = value
+    return out
 
 
 def hidden_effects(twin: dict) -> list:
@@ -225,12 +264,16 @@ class _TwinSetup:
     ref: object = None
 
 
-def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) -> dict:
+def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None, overrides=()) -> dict:
     """Run the twin experiments of ``campaign`` (path or dict); returns the summary dict.
 
-    n_jobs : parallel solver runs (default: the spec's ``[fit] n_jobs``).  Every twin is validated before
-    any run starts; each twin's entry is merged into ``<results>/summary.json`` as soon as it ends.
+    n_jobs : parallel solver runs (default: the spec's ``[fit] n_jobs``).  overrides : ``TABLE.KEY=VALUE``
+    settings (:func:`apply_overrides`), recorded in each entry.  Every twin is validated before any run
+    starts; each twin's entry is merged into ``<results>/summary.json`` as soon as it ends.
     """
+    if overrides:
+        campaign = apply_overrides(campaign if isinstance(campaign, dict) else load_twin_campaign(campaign),
+                                   list(overrides))
     setup = _prepare_campaign(campaign, results, cache, n_jobs)
     summary_path = setup.results / "summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
@@ -240,6 +283,8 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None) ->
         if only and name not in only:
             continue
         summary[name] = _run_one_twin(setup, twin)
+        if overrides:
+            summary[name]["overrides"] = list(overrides)
         _write_summary_entry(summary_path, name, summary[name])
     return json.loads(summary_path.read_text()) if summary_path.is_file() else summary
 
@@ -364,10 +409,12 @@ def main(argv=None) -> int:
     ap.add_argument("--only", nargs="*")
     ap.add_argument("--jobs", type=int, default=None, help="parallel solver runs (default: the spec's [fit] n_jobs)")
     ap.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    ap.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE", dest="overrides",
+                    help="replace one campaign setting, a TOML literal (e.g. spec.profile.fine=false); repeatable")
     a = ap.parse_args(argv)
     from .cli import show_progress
     show_progress(a.quiet)
-    s = run_twins(a.campaign, a.results, a.cache, a.only, a.jobs)
+    s = run_twins(a.campaign, a.results, a.cache, a.only, a.jobs, a.overrides)
     print(json.dumps(s, indent=1))
     return 0
 
