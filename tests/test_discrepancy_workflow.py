@@ -296,8 +296,37 @@ def test_discretization_refresh_iterates_to_its_fixed_point(tmp_path):
             > reps[1]["forward_runs_by_stage"]["discretization_refresh"]["fine"])
 
 
+def test_discretization_refresh_stops_on_a_move_below_its_standard_error(tmp_path):
+    """``disc_refresh_tol_sd``: the refresh of the toy above (each pass leaves ~1/3 of the distance to the fixed
+    point) also stops at the first pass whose move is <= that many Wald standard errors.  Each pass records the
+    move in standard errors; with a loose relative tolerance switched off (1e-6), the passes run until the
+    standard-error rule holds, and never past it; a smaller sd tolerance needs at least as many passes."""
+    fwd = ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1)
+    d = load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"beta": 40.0}, seed=1,
+                                observables=("p_inj", "front_radius_mean", "crack_length")))
+    passes = {}
+    for tol_sd in (0.5, 0.05):
+        spec = spec_from_dict({"baseline": {"effects_off": OFF}, "candidates": {"effects": OFF},
+                               "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
+                               "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
+                                             {"name": "E", "lower": 150.0, "upper": 700.0}],
+                               "noise": {"disc_refresh": 12, "disc_refresh_tol": 1e-6, "disc_refresh_tol_sd": tol_sd}})
+        rep = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.1),
+                           fine_forward=ToyForward({}, h=2.0, beta_mesh=0.1))
+        ref = rep["discretization_refresh"]
+        moves = [r["sd_change"]["effect:damage_viscosity"] for r in ref]
+        assert rep["accepted"][0]["refresh_converged"] is True
+        assert moves[-1] <= tol_sd and all(m > tol_sd for m in moves[:-1])      # stops at the first small move
+        assert [r["converged"] for r in ref] == [False] * (len(ref) - 1) + [True]
+        lo, hi = rep["strength_interval"]
+        assert lo <= 40.0 <= hi
+        passes[tol_sd] = len(ref)
+    assert 1 <= passes[0.5] <= passes[0.05] < 12
+
+
 @pytest.mark.parametrize("key, value", [("disc_refresh", -1), ("disc_refresh", 2.5), ("disc_refresh", True),
-                                        ("disc_refresh_tol", 0.0), ("disc_refresh_tol", 1.5), ("disc_refresh_tol", "x")])
+                                        ("disc_refresh_tol", 0.0), ("disc_refresh_tol", 1.5), ("disc_refresh_tol", "x"),
+                                        ("disc_refresh_tol_sd", -0.5), ("disc_refresh_tol_sd", 11.0)])
 def test_spec_rejects_bad_refresh_settings(key, value):
     with pytest.raises(ValueError, match=f"noise.{key}={value!r} is not allowed"):
         spec_from_dict({**_DISC_SPEC, "noise": {key: value}})

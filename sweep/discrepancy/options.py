@@ -92,6 +92,9 @@ class NoiseOptions(_Checked):
                               doc="passes re-estimating the correction at the named model's fit (0: none)")
     disc_refresh_tol: float = _rule(0.05, "float", 0.0, 1.0, lo_open=True, hi_open=True,
                                     doc="refresh stops once every named strength moves by <= this (relative)")
+    disc_refresh_tol_sd: float = _rule(0.0, "float", 0.0, 10.0,
+                                       doc="refresh also stops once every named strength moves by <= this times "
+                                           "its Wald standard error at the pass's fit (0: off)")
     model_jitter: str = _rule("none", "choice", choices=("none", "estimated"),
                               doc="the coarse model's jitter in its parameters as an error term")
     model_jitter_steps: int = _rule(7, "int", 5, 21, odd=True, doc="runs per stepped parameter (odd)")

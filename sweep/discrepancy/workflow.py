@@ -11,6 +11,7 @@ likelihood (profile.py) and the report (report.py).  Units: mm, s, kPa; residual
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -215,7 +216,8 @@ def refresh_correction(run: WorkflowRun) -> None:
 
     The first correction is made at the baseline, without the effect not yet found; an effect that changes
     the discretization error biases its fitted strength.  Passes (correct at the fit, refit from it) until
-    every accepted strength moves by at most ``disc_refresh_tol`` (relative), at most ``disc_refresh``."""
+    every accepted strength moves by at most ``disc_refresh_tol`` (relative) or, with ``disc_refresh_tol_sd`` > 0,
+    by at most that many of its Wald standard errors (a move the data cannot resolve), at most ``disc_refresh``."""
     problem, opts, fit = run.problem, run.spec.noise, run.current
     keys = ["effect:" + a["effect"] for a in run.accepted]
     prev = {k: float(fit.values()[k]) for k in keys}
@@ -225,10 +227,11 @@ def refresh_correction(run: WorkflowRun) -> None:
         fit = run.refit(fit.params, [fit.x], fit, "discretization_refresh")
         cur = {k: float(fit.values()[k]) for k in keys}
         change = {k: abs(cur[k] - prev[k]) / max(abs(cur[k]), abs(prev[k]), 1e-300) for k in keys}
-        converged = all(c <= opts.disc_refresh_tol for c in change.values())
+        sd_change = _moves_in_sd(run, fit, keys, prev, cur)
+        converged = all(change[k] <= opts.disc_refresh_tol or sd_change[k] <= opts.disc_refresh_tol_sd for k in keys)
         run.refresh.append({"values": jsonable(fit.values()), "discretization_error_rms": err,
                             "realization_spread_rms": rms_per_observable(problem.layout, problem.realization_spread),
-                            "relative_change": change, "converged": converged})
+                            "relative_change": change, "sd_change": jsonable(sd_change), "converged": converged})
         prev = cur
         if converged:
             break
@@ -243,6 +246,21 @@ def refresh_correction(run: WorkflowRun) -> None:
                                                                     for r in run.refresh]}
     run.move_to(fit)
     run.ledger.mark("discretization_refresh")
+
+
+def _moves_in_sd(run: WorkflowRun, fit, keys: list, prev: dict, cur: dict) -> dict:
+    """Each strength's move in a refresh pass in units of its Wald standard error at the pass's fit (inf
+    when the error is not finite, so that a move is never judged small by an undefined error)."""
+    w = stats.series_weights(fit.r, run.problem.series[run.problem.mask(run.train)])
+    names = [p.name for p in fit.params]
+    out = {}
+    for k in keys:
+        j = names.index(k)
+        p = fit.params[j]
+        sd = wald_bounds(fit, j, w)[2]
+        move = abs(p.to_x(cur[k]) - p.to_x(prev[k]))
+        out[k] = float(move / sd) if np.isfinite(sd) and sd > 0 else math.inf
+    return out
 
 
 def noise_at_named_fit(run: WorkflowRun) -> None:
