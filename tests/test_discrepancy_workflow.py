@@ -258,23 +258,32 @@ def test_profile_points_corrected_where_they_are(tmp_path):
     assert corrected and all(q["delta_chi2"] <= q["delta_chi2_fit_correction"] + 1e-9 for q in corrected)
 
 
+def _refresh_twin(tmp_path):
+    """Toy data at β = 40 from the fine (h = 2) model with a strongly β-dependent mesh error."""
+    fwd = ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1)
+    return load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"beta": 40.0}, seed=1,
+                                   observables=("p_inj", "front_radius_mean", "crack_length")))
+
+
+def _refresh_run(d, noise: dict) -> dict:
+    """The workflow on the coarse h = 8 toy with the fine h = 2 toy as its check model, ``noise`` settings."""
+    spec = spec_from_dict({"baseline": {"effects_off": OFF}, "candidates": {"effects": OFF},
+                           "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
+                           "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
+                                         {"name": "E", "lower": 150.0, "upper": 700.0}],
+                           "noise": noise})
+    return run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.1), fine_forward=ToyForward({}, h=2.0, beta_mesh=0.1))
+
+
 def test_discretization_refresh_iterates_to_its_fixed_point(tmp_path):
     """The refresh is a fixed-point iteration (correct at the fit, refit): with a strongly β-dependent mesh
     error (toy: β → β (1 + 0.1 h): the coarse h = 8 model is 1.8/1.2 = 1.5x more sensitive to β than the fine
     h = 2 one, so each pass leaves ~1 − 1.2/1.8 = 1/3 of the distance to the fixed point β = 40) it stops once the strength moves by <= disc_refresh_tol, reports the trajectory and convergence, and a
     single pass is reported as not converged."""
-    fwd = ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1)
-    d = load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"beta": 40.0}, seed=1,
-                                observables=("p_inj", "front_radius_mean", "crack_length")))
+    d = _refresh_twin(tmp_path)
     reps = {}
     for n in (1, 12):
-        spec = spec_from_dict({"baseline": {"effects_off": OFF}, "candidates": {"effects": OFF},
-                               "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
-                               "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
-                                             {"name": "E", "lower": 150.0, "upper": 700.0}],
-                               "noise": {"disc_refresh": n, "disc_refresh_tol": 0.01}})
-        reps[n] = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.1),
-                               fine_forward=ToyForward({}, h=2.0, beta_mesh=0.1))
+        reps[n] = _refresh_run(d, {"disc_refresh": n, "disc_refresh_tol": 0.01})
         assert reps[n]["named_effect"] == "damage_viscosity"
     one, many = reps[1]["accepted"][0], reps[12]["accepted"][0]
     assert one["refresh_converged"] is False and len(reps[1]["discretization_refresh"]) == 1
@@ -301,18 +310,10 @@ def test_discretization_refresh_stops_on_a_move_below_its_standard_error(tmp_pat
     point) also stops at the first pass whose move is <= that many Wald standard errors.  Each pass records the
     move in standard errors; with a loose relative tolerance switched off (1e-6), the passes run until the
     standard-error rule holds, and never past it; a smaller sd tolerance needs at least as many passes."""
-    fwd = ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1)
-    d = load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"beta": 40.0}, seed=1,
-                                observables=("p_inj", "front_radius_mean", "crack_length")))
+    d = _refresh_twin(tmp_path)
     passes = {}
     for tol_sd in (0.5, 0.05):
-        spec = spec_from_dict({"baseline": {"effects_off": OFF}, "candidates": {"effects": OFF},
-                               "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0},
-                               "calibrate": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3},
-                                             {"name": "E", "lower": 150.0, "upper": 700.0}],
-                               "noise": {"disc_refresh": 12, "disc_refresh_tol": 1e-6, "disc_refresh_tol_sd": tol_sd}})
-        rep = run_workflow(d, spec, ToyForward({}, h=8.0, beta_mesh=0.1),
-                           fine_forward=ToyForward({}, h=2.0, beta_mesh=0.1))
+        rep = _refresh_run(d, {"disc_refresh": 12, "disc_refresh_tol": 1e-6, "disc_refresh_tol_sd": tol_sd})
         ref = rep["discretization_refresh"]
         moves = [r["sd_change"]["effect:damage_viscosity"] for r in ref]
         assert rep["accepted"][0]["refresh_converged"] is True
