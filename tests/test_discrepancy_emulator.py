@@ -151,6 +151,35 @@ def test_emulated_profile_ends_are_crossings_of_the_real_profile(tmp_path):
     assert exact["lower"] == pytest.approx(pr["lower"], rel=1e-2) and exact["upper"] == pytest.approx(pr["upper"], rel=1e-2)
 
 
+def test_an_end_check_takes_the_real_delta_chi2_under_the_points_own_correction(tmp_path):
+    """With fine models each profile point is compared under the correction re-estimated there; an end's
+    check records the real run's Δχ² under that same correction, so on an agreeing check it differs from the
+    emulated Δχ² by at most the emulator's error, 2 |r| |d| + |d|² (Cauchy–Schwarz, as above).  The toy's
+    mesh error depends strongly on β (β → β (1 + 0.1 h)), so the fit's correction would put the real Δχ²
+    off by far more."""
+    from sweep.discrepancy.noise import add_discretization_error
+    from sweep.discrepancy.problem import Problem
+    from sweep.discrepancy.profile import emulator_for, profile_interval
+
+    spec = _spec({"emulator": "gp", "fine": True, "refine": 10, "refine_tol": 0.01}, calibrate=("kbar", "E"))
+    data = load_measured(make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1), CONDS, TIMES,
+                                   {"beta": 40.0}, seed=1, observables=("p_inj", "front_radius_mean")))
+    prob = Problem(data, spec, ToyForward({}, h=8.0, beta_mesh=0.1))
+    fine = ToyForward({}, h=2.0, beta_mesh=0.1)
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    train = ["a", "b", "c"]
+    fit = prob.fit(params, [np.array([p.to_x(p.initial) for p in spec.calibrate] + [30.0])], train)
+    add_discretization_error(prob, fine, fit.values())
+    fit = prob.fit(params, [fit.x], train)
+    pr = profile_interval(prob, fit, 2, train, fine_forward=fine, emulator=emulator_for(prob, fit, train))
+    agreeing = [c for c in pr["emulator"]["checks"] if c["agrees"]]
+    assert len(agreeing) == 2 and pr["lower"] < 40.0 < pr["upper"]
+    for c in agreeing:
+        d = c["deviation"]
+        norm_r = math.sqrt(float(fit.r @ fit.r) + max(c["delta_chi2_emulated"], c["delta_chi2_real"]) + 1.0)
+        assert abs(c["delta_chi2_real"] - c["delta_chi2_emulated"]) <= 2 * norm_r * d + d * d + 1e-9
+
+
 def test_workflow_with_the_emulator_names_the_effect_with_the_exact_interval_for_fewer_runs(tmp_path):
     """The toy workflow with and without the emulator: the same verdict and named effect, fewer forward runs
     in the profile stage, and the interval's ends apart by at most what each end's stopping rule allows:

@@ -54,6 +54,7 @@ class _Profile:
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
         self.fines = realizations(fine_forward)
         self.checks: list = []
+        self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
         if emulator is not None:     # Δχ² within one likelihood: the emulator's (its covariance) at the fit too
             self.chi2_hat = self.fit_deviance(self.held(float(self.x_hat[j])))
 
@@ -77,8 +78,8 @@ class _Profile:
             f = self.refit(xj, np.delete(self.x_hat, self.j))
             if self.fines:
                 row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_hat)
-                old = problem.noise.shift_correction(
-                    correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)}))
+                self.point_correction = correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)})
+                old = problem.noise.shift_correction(self.point_correction)
                 try:
                     f = self.refit(xj, np.array(f.x, float))
                 finally:
@@ -143,16 +144,27 @@ class _Profile:
             x = self.last.x_full
             u, m = em.sd_norm(x, run=True), em.model_vectors([x])[0]
             dev = em.deviation(x, m)
-            r = problem.standardize(problem.y[self.mask] - m, self.mask, problem.spec.fit.nan_residual)
             agree = bool(dev <= max(self.po.emulator_tol, AGREE_SD * u))
             self.checks.append({"side": "lower" if sign < 0 else "upper", "value": float(self.p.from_x(xb)),
-                                "delta_chi2_emulated": d_em, "delta_chi2_real": float(self.deviance(r) - self.chi2_hat),
+                                "delta_chi2_emulated": d_em, "delta_chi2_real": self.real_dchi2(m),
                                 "deviation": dev, "emulator_sd": u, "agrees": agree})
             em.add([x], m[None, :])
             if agree:
                 break
             xb = self.side(sign)
         return xb
+
+    def real_dchi2(self, m: np.ndarray) -> float:
+        """Δχ² of a real run's model vector ``m`` at the last profile point, under the correction that point's
+        emulated Δχ² was taken with (its own, with fine models; else the fit's)."""
+        problem = self.problem
+        old = problem.noise.shift_correction(self.point_correction) if self.fines else None
+        try:
+            r = problem.standardize(problem.y[self.mask] - m, self.mask, problem.spec.fit.nan_residual)
+            return float(self.deviance(r) - self.chi2_hat)
+        finally:
+            if self.fines:
+                problem.noise.shift_correction(old)
 
     def cross(self, x_in: float, d_in: float, x_out: float, d_out: float) -> float:
         """The threshold's crossing, √Δχ² interpolated linearly between an inside and an outside point (exact
