@@ -100,6 +100,11 @@ def test_hidden_effect_is_named_with_its_strength(tmp_path, hidden, effect, trut
     assert saved["named_effect"] == effect and (tmp_path / "out" / "report.md").is_file()
     for key in ("strength", "strength_interval", "verdict", "candidates", "gap_before", "gap_after"):
         assert key in saved
+    import sweep.discrepancy
+    from solver.codehash import directory_hash
+    from sweep.store import current_code_hash
+    assert saved["code"] == {"solver": current_code_hash(),
+                             "workflow": directory_hash(Path(sweep.discrepancy.__file__).parent)}
 
 
 def test_negative_control_names_nothing(tmp_path):

@@ -80,7 +80,17 @@ def build_report(run, forward) -> dict:
               "profiles": run.profiles, "partial_explanation": run.partial}
     if run.emulated is not None:
         report["emulated_refits"] = run.emulated.summary()
+    report["code"] = code_provenance()
     return jsonable(report)
+
+
+def code_provenance() -> dict:
+    """The source that made a report: the solver's (the forward runs' cache key) and the workflow's
+    (``sweep/discrepancy/*.py``), each as :func:`solver.codehash.directory_hash`."""
+    from solver.codehash import directory_hash
+    from sweep.store import current_code_hash
+
+    return {"solver": current_code_hash(), "workflow": directory_hash(Path(__file__).parent)}
 
 # what a rough profile means for the named strength's interval (report.md verdict line, CLI)
 ROUGH_NOTE = "rough profile: a lower bound on the uncertainty"

@@ -385,7 +385,7 @@ def _summary_entry(setup: _TwinSetup, twin: dict, rep: dict, conds: dict, data_r
             "model_jitter_rms": {k: (v or {}).get("rms") for k, v in (rep.get("model_jitter") or {}).items()} or None,
             "strength_interval_raw": (rep["accepted"][0].get("strength_interval_raw")
                                       if rep["named_effect"] and rep.get("accepted") else None),
-            "observables": list(twin_observables(setup.camp, twin))}
+            "observables": list(twin_observables(setup.camp, twin)), "code": rep.get("code")}
 
 
 def _reference_entry(setup: _TwinSetup, name: str, rep: dict, truth: dict) -> dict:
