@@ -630,6 +630,25 @@ def test_twin_campaign_overrides_set_one_setting_and_refuse_bad_ones(tmp_path):
     assert not (tmp_path / "res").exists() and not (tmp_path / "cache").exists()
 
 
+def test_twin_data_may_observe_the_regime_label_and_refuse_a_bad_flag(tmp_path):
+    """``[data] regime = true`` is a measurement setting (not a run option of the data's solver runs); any
+    value but a boolean is refused before any run."""
+    import copy
+
+    from sweep.discrepancy.twins import _prepare_campaign, load_twin_campaign, run_twins
+
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_ci.toml")
+    good = copy.deepcopy(camp)
+    good["data"]["regime"] = True
+    setup = _prepare_campaign(good, tmp_path / "res", tmp_path / "cache", 1)
+    assert setup.data_opts.h == camp["data"]["h"]
+    bad = copy.deepcopy(camp)
+    bad["data"]["regime"] = "yes"
+    with pytest.raises(ValueError, match=r"\[data\] regime='yes' must be true or false"):
+        run_twins(bad, tmp_path / "res", tmp_path / "cache")
+    assert not (tmp_path / "res").exists()
+
+
 def test_twins_refuse_data_on_a_checked_mesh_realization(tmp_path):
     """A twin whose data come from one of the fine check meshes would test an easier problem: refused first."""
     import copy

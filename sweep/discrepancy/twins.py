@@ -7,6 +7,7 @@ Campaign TOML::
     times = [0.005, 0.05, 10]   # start, stop, count (s)
     observables = ["p_inj", "front_radius_mean"]
     noise = { p_inj = 2.0, front_radius_mean = 0.2 }
+    regime = false              # true: the regime label at the last time is observed too (default false)
     [conditions]                # id -> parameter overrides
     w35 = { w_i = 35.0 }
     [spec]                      # the workflow SPEC (sweep.discrepancy.spec format)
@@ -171,6 +172,8 @@ def twin_observables(camp: dict, twin: dict) -> tuple:
 
 
 VERDICTS = ("no_missing_effect", "unexplained_discrepancy", "tie", "not_identifiable")
+# [data] keys that describe the measurement, not the data-generating run's options
+DATA_KEYS = ("times", "observables", "noise", "seed", "regime")
 
 
 def validate_twin_campaign(camp: dict, spec) -> None:
@@ -186,6 +189,9 @@ def validate_twin_campaign(camp: dict, spec) -> None:
     from solver.effects import EFFECTS
 
     check_data_realization(camp, spec)
+    if not isinstance(camp["data"].get("regime", False), bool):
+        raise ValueError(f"twin campaign: [data] regime={camp['data']['regime']!r} must be true or false "
+                         "(the regime label observed at the last time)")
     fields = {f.name for f in dataclasses.fields(Parameters)}
     twins = {}
     for t in camp["twin"]:
@@ -300,7 +306,7 @@ def _prepare_campaign(campaign, results, cache, n_jobs) -> _TwinSetup:
     n_jobs = spec.fit.n_jobs if n_jobs is None else int(n_jobs)
     dat = camp["data"]
     a, b, n = dat["times"]
-    data_opts = RunOptions.from_dict({k: v for k, v in dat.items() if k not in ("times", "observables", "noise", "seed")})
+    data_opts = RunOptions.from_dict({k: v for k, v in dat.items() if k not in DATA_KEYS})
     return _TwinSetup(camp, spec, np.linspace(float(a), float(b), int(n)), data_opts,
                       RunOptions.from_dict(spec.options), Path(results), Path(cache), n_jobs)
 
@@ -365,7 +371,7 @@ def _make_twin_data(setup: _TwinSetup, twin: dict):
     conds = twin_conditions(camp, twin, spec)
     folder = make_twin(setup.results / twin["name"] / "data", gen, conds, setup.times, hidden,
                        noise=dat.get("noise"), seed=int(dat.get("seed", 0)),
-                       observables=twin_observables(camp, twin), regime=False)
+                       observables=twin_observables(camp, twin), regime=bool(dat.get("regime", False)))
     return gen, {**gen_base, **hidden}, conds, folder
 
 
