@@ -92,6 +92,8 @@ def test_init_writes_a_commented_spec_that_loads(tmp_path):
     assert spec.holdout(["w35", "w50", "w65"]) == ["w65"]
     assert spec.options["t_end"] == pytest.approx(0.31) and [p.name for p in spec.calibrate] == ["E", "kbar"]
     assert spec.fit == parse_options({}).fit                                     # defaults, spelled out
+    assert (spec.profile.emulator, spec.profile.emulate_refits) == ("gp", True)  # the solver's starting values
+    assert parse_options({}).profile.emulator == "none"                          # the library default
     for word in ("w35", "front_radius_branches (mm)", "p_inj (kPa)", "regime (label)", "[profile]", "rough_tol"):
         assert word in text
     parsed = tomllib.loads(text)
