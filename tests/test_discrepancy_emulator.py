@@ -531,3 +531,37 @@ def test_only_multi_start_refits_go_to_the_emulator():
     run.emulated = None
     assert run.refit((), [np.zeros(2), np.ones(2)], None, "refits") == "real"
     assert calls == [("real", 1, ("a", "b")), ("emulated", 2, "refits"), ("real", 2, ("a", "b"))]
+
+
+def test_an_emulated_refit_never_ends_above_the_model_it_nests(tmp_path, monkeypatch):
+    """The guard of EmulatedRefits: when the emulated, polished optimum's χ² exceeds that of the nested
+    model (the baseline's values with the strength off), the refit is redone on real runs from both points,
+    ends no higher than the nested model, and the record says so.  The emulated refit is made to stop far off
+    (one real evaluation at a wrong strength) to stand for an emulator led astray."""
+    import sweep.discrepancy.emulated as emulated
+    from sweep.discrepancy.emulated import EmulatedRefits
+    from sweep.discrepancy.problem import Problem
+
+    spec = _spec({"emulator": "gp", "emulate_refits": True})
+    prob = Problem(_twin(tmp_path, {"beta": 0.0}), spec, ToyForward({}, h=8.0))   # nothing hidden: off is best
+    train = ["a", "b", "c"]
+    base = prob.fit(tuple(spec.calibrate), [np.array([spec.calibrate[0].to_x(331.0)])], train)
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+
+    def astray(em, starts):
+        bad = prob.fit(params, [np.append(base.x, 250.0)], train, max_nfev=1)
+        return bad, {"chi2_real": float(bad.r @ bad.r), "polished": bad.values()}
+
+    monkeypatch.setattr(emulated, "emulated_fit", astray)
+    refits = EmulatedRefits(prob, train)
+    monkeypatch.setattr(refits, "build", lambda params, starts, ref: None)
+    nested_chi2 = float(base.r @ base.r)
+    f = refits.fit(params, [np.append(base.x, 30.0), np.append(base.x, 40.0)], base, "refits")
+    rec = refits.records[-1]
+    assert rec["chi2_real"] == pytest.approx(float(f.r @ f.r)) and float(f.r @ f.r) <= nested_chi2 * (1 + 1e-9)
+    assert "above the nested model" in rec["fallback"] and f.values()["effect:damage_viscosity"] < 250.0
+    # a refit already below its nested model is kept as it is
+    good = prob.fit(params, [np.append(base.x, 0.0)], train)
+    monkeypatch.setattr(emulated, "emulated_fit", lambda em, starts: (good, {"chi2_real": float(good.r @ good.r)}))
+    f2 = refits.fit(params, [np.append(base.x, 30.0), np.append(base.x, 40.0)], base, "refits")
+    assert f2 is good and "fallback" not in refits.records[-1]
