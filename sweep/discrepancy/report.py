@@ -84,13 +84,21 @@ def build_report(run, forward) -> dict:
     return jsonable(report)
 
 
-def code_provenance() -> dict:
-    """The source that made a report: the solver's (the forward runs' cache key) and the workflow's
-    (``sweep/discrepancy/*.py``), each as :func:`solver.codehash.directory_hash`."""
+def _source_hashes() -> dict:
     from solver.codehash import directory_hash
     from sweep.store import current_code_hash
 
     return {"solver": current_code_hash(), "workflow": directory_hash(Path(__file__).parent)}
+
+
+# taken when the workflow is imported: the files this process runs, even if they change on disk later
+_SOURCE = _source_hashes()
+
+
+def code_provenance() -> dict:
+    """The source that made a report: the solver's (the forward runs' cache key) and the workflow's
+    (``sweep/discrepancy/*.py``), each as :func:`solver.codehash.directory_hash` of the files as imported."""
+    return dict(_SOURCE)
 
 # what a rough profile means for the named strength's interval (report.md verdict line, CLI)
 ROUGH_NOTE = "rough profile: a lower bound on the uncertainty"
