@@ -235,7 +235,7 @@ def refresh_correction(run: WorkflowRun) -> None:
         prev = cur
         if converged:
             break
-    w = stats.series_weights(fit.r, problem.series[problem.mask(run.train)])
+    w = _train_weights(run, fit)
     names = [p.name for p in fit.params]
     for i, a in enumerate(run.accepted):
         j = names.index("effect:" + a["effect"])
@@ -248,10 +248,15 @@ def refresh_correction(run: WorkflowRun) -> None:
     run.ledger.mark("discretization_refresh")
 
 
+def _train_weights(run: WorkflowRun, fit) -> np.ndarray:
+    """The series weights (lag-1 n_eff/n) of ``fit``'s residuals on the training conditions."""
+    return stats.series_weights(fit.r, run.problem.series[run.problem.mask(run.train)])
+
+
 def _moves_in_sd(run: WorkflowRun, fit, keys: list, prev: dict, cur: dict) -> dict:
     """Each strength's move in a refresh pass in units of its Wald standard error at the pass's fit (inf
     when the error is not finite, so that a move is never judged small by an undefined error)."""
-    w = stats.series_weights(fit.r, run.problem.series[run.problem.mask(run.train)])
+    w = _train_weights(run, fit)
     names = [p.name for p in fit.params]
     out = {}
     for k in keys:
