@@ -99,6 +99,16 @@ def nodal_average(elem_values: np.ndarray, triangles: np.ndarray, areas: np.ndar
 # --------------------------------------------------------------------------
 # sparse assembly
 # --------------------------------------------------------------------------
+def node_pattern(triangles: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Node-to-node CSR pattern of P1 triangles: ``indptr`` (N + 1,), ``indices`` (columns sorted in each
+    row) and ``slot`` (M, 3 a, 3 b), the CSR position of the pair (node a, node b) of each element."""
+    t = np.asarray(triangles, dtype=np.int64)
+    key = (t[:, :, None] * n_nodes + t[:, None, :]).ravel()
+    ukey, slot = np.unique(key, return_inverse=True)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(ukey // n_nodes, minlength=n_nodes))])
+    return indptr, ukey % n_nodes, slot.reshape(len(t), 3, 3)
+
+
 class BlockAssembler:
     """CSR assembly of ``n_fields`` P1 fields with a pattern computed once.
 
@@ -112,20 +122,34 @@ class BlockAssembler:
         self.n_fields = int(n_fields)
         self.ndof = self.n_nodes * self.n_fields
         nf = self.n_fields
+        triangles = np.asarray(triangles, dtype=np.int64)
         self.edofs = (nf * triangles[:, :, None] + np.arange(nf)[None, None, :]).reshape(len(triangles), 3 * nf)
-        rows = np.repeat(self.edofs, 3 * nf, axis=1).ravel()
-        cols = np.tile(self.edofs, (1, 3 * nf)).ravel()
-        key = rows.astype(np.int64) * self.ndof + cols
-        ukey, self._slot = np.unique(key, return_inverse=True)
+        # the block pattern is the node pattern with a full nf x nf block per node pair: row nf n + f holds
+        # columns nf m + g for the neighbours m of n (sorted) and every g, and starts at
+        # nf² indptr_n[n] + f nf deg(n); so every slot follows from the node pattern without sorting
+        n_indptr, n_indices, n_slot = node_pattern(triangles, self.n_nodes)
+        deg = np.diff(n_indptr)
+        f = np.arange(nf)
+        row_start = nf * nf * n_indptr[:-1, None] + nf * f[None, :] * deg[:, None]  # (N, nf)
+        self.nnz = int(nf * nf * n_indptr[-1])
+        self.indptr = np.append(row_start.ravel(), self.nnz).astype(np.int32)
+        # block position of (node slot k, f, g): row_start[n, f] + nf (k - indptr_n[n]) + g
+        k_row = np.repeat(np.arange(self.n_nodes), deg)
+        k_off = nf * (np.arange(len(n_indices)) - n_indptr[k_row])
+        pos = row_start[k_row][:, :, None] + k_off[:, None, None] + f[None, None, :]  # (nnz_n, nf f, nf g)
+        cols = nf * n_indices[:, None, None] + f[None, None, :]
+        self.indices = np.empty(self.nnz, dtype=np.int32)
+        self.indices[pos.ravel()] = np.broadcast_to(cols, pos.shape).ravel()
+        # element slot map (M, 3 a, nf f, 3 b, nf g) in the local order a nf + f, b nf + g
+        na = triangles[:, :, None]  # (M, 3 a, 1)
+        base = nf * nf * n_indptr[na] + nf * (n_slot - n_indptr[na])  # (M, 3 a, 3 b)
+        frow = nf * f[None, None, :] * deg[triangles][:, :, None]  # (M, 3 a, nf f)
+        self._slot = (base[:, :, None, :, None] + frow[:, :, :, None, None] + f[None, None, None, None, :]).ravel()
         self._slot_fm = None  # the same map for field-major element matrices, made on first use
         self._slot_sum = None  # its inverse, for the compiled gather (solver.kernels.SlotSum)
-        self._ukey = ukey
-        self.indices = (ukey % self.ndof).astype(np.int32)
-        urows = ukey // self.ndof
-        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(urows, minlength=self.ndof))]).astype(np.int32)
-        self.nnz = len(ukey)
+        self._ukey = np.repeat(np.arange(self.ndof, dtype=np.int64), np.diff(self.indptr)) * self.ndof + self.indices
         # slot of each diagonal entry (every dof touches its own element)
-        self.diag_slot = np.searchsorted(ukey, np.arange(self.ndof, dtype=np.int64) * (self.ndof + 1))
+        self.diag_slot = np.searchsorted(self._ukey, np.arange(self.ndof, dtype=np.int64) * (self.ndof + 1))
 
     def slots(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """CSR data positions of entries (rows, cols); they must lie in the pattern."""

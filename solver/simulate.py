@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from . import damage, fem, linsolve, metrics, physics, profiling
+from .anderson import Anderson
 from .model import MU, P, S, UX, UY, build_discretization, element_fields, residual_and_jacobian, step_data
 from .options import RunOptions, check_run_inputs
 from .output import RunWriter
@@ -100,6 +101,7 @@ class Simulation:
         prev = None
         fresh = False
         x_back = None  # state before an update made with a reused Jacobian (rolled back if it diverged)
+        accel = Anderson(o.anderson_depth) if o.anderson_depth else None
         for it in range(1, o.newton_max_its + 1):
             need_j = self.lu is None or not reuse
             with phase("assembly"), np.errstate(all="ignore"):  # a diverging trial iterate is handled below
@@ -114,11 +116,17 @@ class Simulation:
                 continue
             if need_j:
                 self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind), data.dt, True
+                if accel:
+                    accel.reset()
             dx = self.lu.solve(-R)
             if not np.all(np.isfinite(dx)):
                 raise StepFailure("non-finite Newton update")
             x_back = None if fresh else x.copy()
-            x += dx
+            if accel:
+                w = np.tile(1.0 / np.maximum(np.abs(x.reshape(-1, nf)).max(axis=0), self.floors), disc.n_nodes)
+                x = accel.next_iterate(x, dx, w)
+            else:
+                x += dx
             X = x.reshape(-1, nf)
             scale = np.maximum(np.abs(X).max(axis=0), self.floors)
             upd = float((np.abs(dx.reshape(-1, nf)).max(axis=0) / scale).max())

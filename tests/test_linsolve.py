@@ -91,3 +91,29 @@ def test_mkl_runtime_is_located_for_pypardiso(monkeypatch):
     path = os.environ.get("PYPARDISO_MKL_RT")
     if path is not None:  # a layout other than the pip wheel's falls back to pypardiso's own search
         assert os.path.isfile(path) and "mkl_rt" in os.path.basename(path)
+
+
+@pytest.mark.parametrize("kind", ["superlu", "pypardiso"])
+def test_factors_are_checked_on_their_first_solve_and_trusted_after_a_good_one(kind):
+    if kind == "pypardiso":
+        pytest.importorskip("pypardiso")
+    J, R = _jacobian()
+    f = linsolve.factorize(J, kind)
+    assert not f.trusted
+    x = f.solve(-R)
+    assert f.trusted and _rel_res(J, x, -R) < 1e-10
+    b = np.random.default_rng(2).standard_normal(len(R))  # another right-hand side, not checked: still to round-off
+    assert _rel_res(J, f.solve(b), b) < 1e-10
+
+
+def test_pardiso_factors_whose_first_solve_needs_refinement_stay_checked(monkeypatch):
+    pytest.importorskip("pypardiso")
+    J, R = _jacobian()
+    f = linsolve.factorize(J, "pypardiso")
+    exact = f._substitute
+    monkeypatch.setattr(f, "_substitute", lambda s, b: exact(s, b) * (1.0 + 1e-6))  # a poor substitution
+    before = linsolve.STATS.get("refinements", 0)
+    x = f.solve(-R)
+    assert not f.trusted and _rel_res(J, x, -R) < 1e-10  # refined to round-off
+    f.solve(-R)
+    assert linsolve.STATS.get("refinements", 0) - before >= 2  # the second solve was checked and refined too
