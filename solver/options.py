@@ -17,7 +17,7 @@ TRANSPORTS = ("galerkin", "upwind")  # the transport discretizations solver.mode
 _OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format", "pressure_stabilization")
 # options added after runs were stored whose default changes no result beyond the Newton tolerance: omitted from
 # to_dict at their default, so that the run keys of earlier runs stay the same (the code hash tells the code apart)
-_OMIT_AT_DEFAULT = {"anderson_depth": 3}
+_OMIT_AT_DEFAULT = {"anderson_depth": 3, "first_stagger_rtol": 1e-3}
 # written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
 DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
 
@@ -78,8 +78,13 @@ class RunOptions:
         (hdf5 when h5py is installed). Omitted from :meth:`to_dict` when None, as h_inner.
     anderson_depth : Anderson acceleration of the Newton iterations made with a reused Jacobian (``solver.anderson``):
         the next iterate combines the last ``anderson_depth`` + 1 plain updates (0..20; 0: the plain iteration).
-        The Newton test and tolerance are unchanged.  Default 3 (h = 2 mm reference run to 2 s: 17 % fewer
-        factorizations than the plain iteration, p_inj the same to 2e-8; ``results/bench/README.md``).  Omitted
+        The Newton test and tolerance are unchanged.  Default 3 (its effect on cost and results:
+        ``results/bench/README.md``).  Omitted from :meth:`to_dict` at its default.
+    first_stagger_rtol : Newton tolerance of the first stagger iteration of each step (dimensionless, 0 or in
+        [``newton_rtol``, 0.1]): that iteration only supplies the damage that starts the second, which is always
+        made and solved to ``newton_rtol``, so the accepted state meets the same tests (``Simulation.step``).
+        Default 1e-3 (its effect on cost and results: ``results/bench/README.md``).  0: every stagger iteration
+        at ``newton_rtol``, the first allowed to end the stagger.  Used when ``stagger_max_its`` >= 2.  Omitted
         from :meth:`to_dict` at its default.
     """
 
@@ -110,6 +115,7 @@ class RunOptions:
     xdmf_format: str | None = None
     pressure_stabilization: float | None = None
     anderson_depth: int = 3
+    first_stagger_rtol: float = 1e-3
 
     def __post_init__(self):
         _check(self)
@@ -189,6 +195,7 @@ _NUMBERS = (
     ("max_wall_time", float, 0.0, None, True, True),
     ("pressure_stabilization", float, 0.0, 100.0, False, True),
     ("anderson_depth", int, 0, 20, False, False),
+    ("first_stagger_rtol", float, 0.0, 0.1, False, False),
 )
 
 
@@ -200,6 +207,7 @@ OPTION_UNITS = {
     "newton_rtol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
     "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
     "xdmf_format": "", "transport": "", "pressure_stabilization": "-", "anderson_depth": "",
+    "first_stagger_rtol": "-",
 }
 
 
@@ -259,6 +267,8 @@ def _check(o: RunOptions) -> None:
     for name in ("h_inner", "h_outer"):
         if getattr(o, name) is not None and not 0.0 < getattr(o, name) <= o.h:
             _fail(name, getattr(o, name), f"(0, h = {o.h}]")
+    if 0.0 < o.first_stagger_rtol < o.newton_rtol:
+        _fail("first_stagger_rtol", o.first_stagger_rtol, f"0 or in [newton_rtol={o.newton_rtol}, 0.1]")
     if not (o.dt_min <= o.dt0 <= o.dt_max):
         _fail("dt0", o.dt0, f"[dt_min={o.dt_min}, dt_max={o.dt_max}]")
     for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", TRANSPORTS),

@@ -82,8 +82,9 @@ class Simulation:
         self.fact0 = linsolve.STATS["factorizations"]  # counter at the start of this run
 
     # ------------------------------------------------------------ poromechanics
-    def newton(self, U0: np.ndarray, d: np.ndarray, data) -> tuple[np.ndarray, int]:
-        """Solve the poromechanics block with d frozen; raises StepFailure.
+    def newton(self, U0: np.ndarray, d: np.ndarray, data, rtol: float | None = None) -> tuple[np.ndarray, int]:
+        """Solve the poromechanics block with d frozen to the relative tolerance ``rtol`` (default
+        ``options.newton_rtol``); raises StepFailure.
 
         Newton with Jacobian reuse: a factorized Jacobian is kept across
         iterations, stagger iterations and time steps while the updates
@@ -139,7 +140,7 @@ class Simulation:
                 raise StepFailure(f"Newton diverged (relative update {upd:.2e}, S in [{X[:, S].min():.3g}, {X[:, S].max():.3g}])",
                                   node=int(np.argmax(np.abs(X[:, S] - 0.5))))
             # with a reused Jacobian convergence is linear: the error left is about upd * ratio / (1 - ratio)
-            if upd <= o.newton_rtol * (1.0 if fresh or ratio < 0.5 else 0.1):
+            if upd <= (rtol or o.newton_rtol) * (1.0 if fresh or ratio < 0.5 else 0.1):
                 return X.copy(), it
             if reuse and not fresh and ratio > 1.0 and x_back is not None:
                 x, self.lu, prev = x_back, None, None  # diverging with a stale Jacobian: undo, refresh
@@ -185,30 +186,38 @@ class Simulation:
         self.U, self.d, self.t = U, d, self.t + dt
 
     def step(self, dt: float):
-        """Advance by dt; returns (U, d, info) without committing. Raises StepFailure."""
+        """Advance by dt; returns (U, d, info) without committing. Raises StepFailure.
+
+        With ``first_stagger_rtol`` the first stagger iteration solves Newton to that looser tolerance
+        and cannot end the stagger: its damage only starts the second iteration, which (like every
+        later one) solves to ``newton_rtol``; the accepted state meets the same two tests as always
+        (Newton at ``newton_rtol`` with the final d, and max |Δd| < ``stagger_tol``).
+        """
+        o = self.options
         d_n = self.d
         U, d_k = self.predict(dt)
         newton_total = 0
-        for s in range(1, self.options.stagger_max_its + 1):
+        loose = o.first_stagger_rtol if o.first_stagger_rtol > 0 and o.stagger_max_its >= 2 else None
+        for s in range(1, o.stagger_max_its + 1):
             with phase("stagger"):
                 data = step_data(self.disc, self.params, self.U, d_k, dt)
-            U, its = self.newton(U, d_k, data)
+            U, its = self.newton(U, d_k, data, rtol=loose if s == 1 else None)
             newton_total += its
             with phase("stagger"):
                 psi = self.active_energy(U)
             with phase("damage"):
-                res = damage.solve(d_k, d_n, psi, self.params, dt, self.dmg, max_its=self.options.damage_max_its)
+                res = damage.solve(d_k, d_n, psi, self.params, dt, self.dmg, max_its=o.damage_max_its)
             if not res.converged:
                 raise StepFailure(f"damage active-set did not converge (KKT residual {res.kkt_residual:.2e})")
             # the first iteration's change is measured from d_n, not from the predicted start: a good
             # prediction must not end the stagger before one damage solve has been checked by a second
             change = float(np.max(np.abs(res.d - (d_n if s == 1 else d_k))))
             d_k = res.d
-            if change < self.options.stagger_tol:
+            if change < o.stagger_tol and not (s == 1 and loose):
                 with phase("stagger"):
                     data = step_data(self.disc, self.params, self.U, d_k, dt)
                 return U, d_k, {"newton_its": newton_total, "stagger_its": s, "damage_kkt": res.kkt_residual, "data": data}
-        raise StepFailure(f"stagger did not converge in {self.options.stagger_max_its} iterations (last max |Δd| {change:.2e})")
+        raise StepFailure(f"stagger did not converge in {o.stagger_max_its} iterations (last max |Δd| {change:.2e})")
 
 
 def _validate_mesh(mesh):
