@@ -47,9 +47,9 @@ def test_depth_below_one_is_refused():
 
 
 def test_the_default_depth_keeps_the_run_keys_of_earlier_runs():
-    assert "anderson_depth" not in RunOptions().to_dict()  # at its default: left out, as before the option
-    assert RunOptions(anderson_depth=0).to_dict()["anderson_depth"] == 0
-    assert RunOptions.from_dict(RunOptions().to_dict()).anderson_depth == 3
+    assert RunOptions().anderson_depth == 0 and "anderson_depth" not in RunOptions().to_dict()  # as before the option
+    assert RunOptions(anderson_depth=3).to_dict()["anderson_depth"] == 3
+    assert RunOptions.from_dict(RunOptions(anderson_depth=3).to_dict()).anderson_depth == 3
 
 
 def test_accelerated_run_meets_the_same_equations():
