@@ -139,16 +139,19 @@ def _refactorization_h1() -> dict:
             "solve_s": it["backends"][kind]["solve_s"], "residual_and_jacobian_s": it["residual_and_jacobian_s"]}
 
 
-def profiled_run(h: float, t_end: float = 2.0) -> dict:
+def profiled_run(h: float, t_end: float = 2.0, options: dict | None = None) -> dict:
     """The reference case at mesh size h (mm) to t_end (s) with its wall time split by phase and part of the
-    run (``SimulationResult.profile``, :mod:`solver.profiling`), plus the run's own figures."""
+    run (``SimulationResult.profile``, :mod:`solver.profiling`), plus the run's own figures.  ``options``: other
+    RunOptions of the run (e.g. ``{"anderson_depth": 3}``)."""
     from solver import Parameters, RunOptions, simulate
 
     threads = os.cpu_count() or 1
     with _assembly_threads(threads):
-        res = simulate(Parameters(), RunOptions(h=h, t_end=t_end, snapshot_times=[]))
+        res = simulate(Parameters(), RunOptions(**{**(options or {}), "h": h, "t_end": t_end, "snapshot_times": []}))
     n = len(res.timeseries)
-    return {"h_mm": h, "t_end_s": t_end, "assembly_threads": threads, "kernels": _kernels(), "status": res.status,
+    return {"h_mm": h, "t_end_s": t_end, "options": dict(options or {}), "assembly_threads": threads,
+            "kernels": _kernels(), "status": res.status,
+            "newton_iterations": int(res.timeseries["newton_its"].sum()) if n else 0,
             "wall_s": res.wall_time, "accepted_steps": n, "rejected_steps": len(res.rejected_steps),
             "factorizations": res.factorizations,
             "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None, "profile": res.profile,
@@ -192,9 +195,10 @@ def _kernels() -> str:
     return kernels.backend()
 
 
-def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0) -> dict:
+def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None = None) -> dict:
     """``dchfrac bench --profile``: profiled reference runs at each mesh size of ``sizes`` (mm) to ``t_end`` (s),
-    with the h = 1 refactorization time measured in the same process; written as JSON to ``out_path``."""
+    with the run options ``options`` (default none), and the h = 1 refactorization time measured in the same
+    process; written as JSON to ``out_path``."""
     from solver import linsolve
 
     result = {"machine": {"python": platform.python_version(), "cpu_count": os.cpu_count(), "platform": platform.platform(),
@@ -204,7 +208,7 @@ def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0) -> dict:
     result["h1_refactorization"] = _refactorization_h1()
     for h in sizes:
         print(f"bench: profiled reference run h = {h:g} mm to {t_end:g} s ...", flush=True)
-        result["runs"].append(profiled_run(h, t_end))
+        result["runs"].append(profiled_run(h, t_end, options))
     if hasattr(os, "getloadavg"):
         result["machine"]["load_average_after"] = list(os.getloadavg())
     _write_json(out_path, result)

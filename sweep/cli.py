@@ -121,6 +121,25 @@ def _writable_or_exit(command: str, path, what: str) -> int | None:
     return None
 
 
+def _bench_options(pairs: list[str]) -> dict:
+    """``KEY=VALUE`` run options of ``dchfrac bench --profile --option`` (a TOML literal each), validated as
+    RunOptions before any run; returns {key: value}."""
+    from solver import RunOptions
+    from solver.tomlio import tomllib
+
+    out = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"{pair!r}: must be KEY=VALUE (a run option and a TOML value)")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {text.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise ValueError(f"{pair!r}: the value {text.strip()!r} is not a TOML literal") from None
+    RunOptions.from_dict({**RunOptions().to_dict(), **out})  # names and ranges checked before any run
+    return out
+
+
 def cmd_bench(args) -> int:
     from .bench import run_benchmarks, run_profile
 
@@ -138,10 +157,15 @@ def cmd_bench(args) -> int:
         if not t_end > 0:
             print(f"dchfrac bench: --t-end {t_end!r} is out of range: allowed > 0 (s)", file=sys.stderr)
             return 2
-        run_profile(out, sizes, t_end)
+        try:
+            options = _bench_options(args.option or [])
+        except ValueError as e:
+            print(f"dchfrac bench: --option: {e}", file=sys.stderr)
+            return 2
+        run_profile(out, sizes, t_end, options=options)
         return 0
-    if args.h or args.t_end is not None:
-        print("dchfrac bench: --h and --t-end apply only with --profile", file=sys.stderr)
+    if args.h or args.t_end is not None or args.option:
+        print("dchfrac bench: --h, --t-end and --option apply only with --profile", file=sys.stderr)
         return 2
     run_benchmarks(out, quick=args.quick, reference=args.reference)
     return 0
@@ -303,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="wall time of the reference run split by phase and part of the run (h = 2 mm; with --reference also h = 1 mm)")
     b.add_argument("--h", type=float, action="append", help="with --profile: mesh size(s) to profile, mm (repeatable)")
     b.add_argument("--t-end", type=float, help="with --profile: final time, s (default 2)")
+    b.add_argument("--option", action="append", metavar="KEY=VALUE",
+                   help="with --profile: a run option of the profiled runs (repeatable), e.g. anderson_depth=3")
     b.set_defaults(func=cmd_bench)
     rp = sub.add_parser("report", help="figures and paper comparison of a reference run or a mesh-convergence set")
     rp.add_argument("kind", choices=["reference", "convergence"])

@@ -421,3 +421,26 @@ def test_workflow_runs_on_conditions_with_a_seed_column(tmp_path):
                            "holdout": {"ids": ["c"]}, "fit": {"max_nfev": 3}})
     rep = run_workflow(data, spec, ToyForward(), figures=False)
     assert rep["verdict"] in ("no_missing_effect", "named", "tie", "unexplained_discrepancy")
+
+
+@pytest.mark.parametrize("option,fragment", [
+    ("anderson_depth=-1", "anderson_depth=-1"), ("no_such_option=1", "no_such_option"),
+    ("anderson_depth", "must be KEY=VALUE"), ("first_stagger_rtol=fast", "not a TOML literal"),
+])
+def test_bench_profile_refuses_bad_run_options_before_any_run(tmp_path, capsys, option, fragment, monkeypatch):
+    import sweep.bench
+    from sweep.cli import main
+
+    monkeypatch.setattr(sweep.bench, "run_profile", lambda *a, **k: pytest.fail("a run started"))
+    _refused(capsys, main(["bench", "--profile", "--out", str(tmp_path / "p.json"), "--option", option]), fragment)
+
+
+def test_bench_profile_passes_its_run_options(tmp_path, monkeypatch):
+    import sweep.bench
+    from sweep.cli import main
+
+    seen = {}
+    monkeypatch.setattr(sweep.bench, "run_profile", lambda out, sizes, t_end, options=None: seen.update(options=options))
+    assert main(["bench", "--profile", "--out", str(tmp_path / "p.json"), "--option", "anderson_depth=3",
+                 "--option", "first_stagger_rtol=1e-3"]) == 0
+    assert seen["options"] == {"anderson_depth": 3, "first_stagger_rtol": 1e-3}
