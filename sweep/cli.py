@@ -30,11 +30,11 @@ def _parse_value(text: str):
         return text
 
 
-def _split_sets(pairs):
+def _split_sets(pairs, flag: str = "--set"):
     out = {}
     for item in pairs or []:
         if "=" not in item:
-            raise ValueError(f"--set {item!r} is not allowed: name=value")
+            raise ValueError(f"{flag} {item!r} is not allowed: name=value")
         k, v = item.split("=", 1)
         out[k.strip()] = _parse_value(v.strip())
     return out
@@ -122,20 +122,11 @@ def _writable_or_exit(command: str, path, what: str) -> int | None:
 
 
 def _bench_options(pairs: list[str]) -> dict:
-    """``KEY=VALUE`` run options of ``dchfrac bench --profile --option`` (a TOML literal each), validated as
-    RunOptions before any run; returns {key: value}."""
+    """``KEY=VALUE`` run options of ``dchfrac bench --profile --option``, validated as RunOptions before any
+    run; returns {key: value}."""
     from solver import RunOptions
-    from solver.tomlio import tomllib
 
-    out = {}
-    for pair in pairs:
-        key, sep, text = pair.partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"{pair!r}: must be KEY=VALUE (a run option and a TOML value)")
-        try:
-            out[key.strip()] = tomllib.loads(f"v = {text.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            raise ValueError(f"{pair!r}: the value {text.strip()!r} is not a TOML literal") from None
+    out = _split_sets(pairs, "--option")
     RunOptions.from_dict({**RunOptions().to_dict(), **out})  # names and ranges checked before any run
     return out
 
@@ -160,7 +151,7 @@ def cmd_bench(args) -> int:
         try:
             options = _bench_options(args.option or [])
         except ValueError as e:
-            print(f"dchfrac bench: --option: {e}", file=sys.stderr)
+            print(f"dchfrac bench: {e}", file=sys.stderr)
             return 2
         run_profile(out, sizes, t_end, options=options)
         return 0

@@ -425,7 +425,7 @@ def test_workflow_runs_on_conditions_with_a_seed_column(tmp_path):
 
 @pytest.mark.parametrize("option,fragment", [
     ("anderson_depth=-1", "anderson_depth=-1"), ("no_such_option=1", "no_such_option"),
-    ("anderson_depth", "must be KEY=VALUE"), ("first_stagger_rtol=fast", "not a TOML literal"),
+    ("anderson_depth", "--option 'anderson_depth' is not allowed: name=value"), ("first_stagger_rtol=fast", "first_stagger_rtol='fast'"),
 ])
 def test_bench_profile_refuses_bad_run_options_before_any_run(tmp_path, capsys, option, fragment, monkeypatch):
     import sweep.bench
