@@ -123,11 +123,7 @@ class Simulation:
             if not np.all(np.isfinite(dx)):
                 raise StepFailure("non-finite Newton update")
             x_back = None if fresh else x.copy()
-            if accel:
-                w = np.tile(1.0 / np.maximum(np.abs(x.reshape(-1, nf)).max(axis=0), self.floors), disc.n_nodes)
-                x = accel.next_iterate(x, dx, w)
-            else:
-                x += dx
+            x = self._advance(x, dx, accel)
             X = x.reshape(-1, nf)
             scale = np.maximum(np.abs(X).max(axis=0), self.floors)
             upd = float((np.abs(dx.reshape(-1, nf)).max(axis=0) / scale).max())
@@ -152,6 +148,15 @@ class Simulation:
         self.lu = None
         raise StepFailure(f"Newton did not converge in {o.newton_max_its} iterations (last relative update {upd:.2e})",
                           node=int(np.argmax((np.abs(dx.reshape(-1, nf)) / scale).max(axis=1))))
+
+    def _advance(self, x: np.ndarray, dx: np.ndarray, accel: Anderson | None) -> np.ndarray:
+        """The next Newton iterate: x + dx, or with ``accel`` the Anderson-accelerated one (residuals scaled by
+        each field's scale, as the Newton test)."""
+        if accel is None:
+            return x + dx
+        nf = self.disc.n_fields
+        w = np.tile(1.0 / np.maximum(np.abs(x.reshape(-1, nf)).max(axis=0), self.floors), self.disc.n_nodes)
+        return accel.next_iterate(x, dx, w)
 
     def active_energy(self, U: np.ndarray) -> np.ndarray:
         """Nodal (lumped-projected) active strain energy ψ_A (kPa) of displacement U."""
@@ -191,7 +196,7 @@ class Simulation:
         With ``first_stagger_rtol`` the first stagger iteration solves Newton to that looser tolerance
         and cannot end the stagger: its damage only starts the second iteration, which (like every
         later one) solves to ``newton_rtol``; the accepted state meets the same two tests as always
-        (Newton at ``newton_rtol`` with the final d, and max |Δd| < ``stagger_tol``).
+        (the last stagger iteration's Newton at ``newton_rtol``, and max |Δd| < ``stagger_tol``).
         """
         o = self.options
         d_n = self.d
