@@ -49,13 +49,13 @@ class ThresholdGrid:
 
 
 def _campaign_table(campaign_dir: Path) -> pd.DataFrame:
-    table = campaign_dir / "table.csv"
-    if not table.is_file():
-        raise FileNotFoundError(f"campaign_dir={str(campaign_dir)!r}: no table.csv (not a campaign results folder)")
-    df = pd.read_csv(table)
+    """The completed runs of a campaign folder (``sweep.load.load_campaign``), with the columns this study reads."""
+    from sweep.load import load_campaign
+
+    df = load_campaign(campaign_dir)
     missing = [c for c in ("run_dir", "status", "cement", "Ca_star") if c not in df.columns]
     if missing:
-        raise ValueError(f"{table}: columns {missing} missing (need run_dir, status, cement, Ca_star)")
+        raise ValueError(f"{campaign_dir}: table columns {missing} missing (need run_dir, status, cement, Ca_star)")
     return df[df["status"] == "ok"].reset_index(drop=True)
 
 
@@ -71,7 +71,7 @@ def crack_lengths(campaign_dir: str | Path, phi_open: Sequence[float]) -> pd.Dat
     rows = []
     for _, run in df.iterrows():
         t = run.get("t_classified")
-        at = float(t) if t is not None and math.isfinite(float(t)) else "last"
+        at = "last" if pd.isna(t) else float(t)
         row = {"key": run["key"], "cement": float(run["cement"]), "Ca_star": float(run["Ca_star"])}
         for level in phi_open:
             c, _ = classify_run(campaign_dir / run["run_dir"], at, phi_open=level)
