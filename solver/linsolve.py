@@ -193,12 +193,10 @@ class _Pardiso:
         if self.trusted:
             return x
         nb = max(np.linalg.norm(b), 1e-300)
-        for k in range(4):  # iterative refinement, rarely needed (perturbed pivots)
+        for k in range(3):  # iterative refinement, rarely needed (perturbed pivots)
             r = b - self.A @ x
             if np.linalg.norm(r) <= 1e-10 * nb:
                 self.trusted = k == 0
-                break
-            if k == 3:
                 break
             STATS["refinements"] = STATS.get("refinements", 0) + 1
             x = x + self._substitute(s, r)

@@ -14,10 +14,8 @@ _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
 TRANSPORTS = ("galerkin", "upwind")  # the transport discretizations solver.model implements
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format", "pressure_stabilization")
-# options added after runs were stored whose default changes no result beyond the Newton tolerance: omitted from
-# to_dict at their default, so that the run keys of earlier runs stay the same (the code hash tells the code apart)
-_OMIT_AT_DEFAULT = {"anderson_depth": 0, "first_stagger_rtol": 0.0}
+_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format", "pressure_stabilization", "anderson_depth",
+                   "first_stagger_rtol")
 # written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
 DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
 
@@ -77,21 +75,21 @@ class RunOptions:
     xdmf_format : "hdf5" (arrays in fields.h5 beside fields.xdmf; needs h5py), "xml" (inline) or None / "auto"
         (hdf5 when h5py is installed). Omitted from :meth:`to_dict` when None, as h_inner.
     anderson_depth : Anderson acceleration of the Newton iterations made with a reused Jacobian (``solver.anderson``):
-        the next iterate combines the last ``anderson_depth`` + 1 plain updates (0..20; 0: the plain iteration).
+        the next iterate combines the last ``anderson_depth`` + 1 plain updates (1..20).
         The Newton test and tolerance are unchanged, but fewer Newton iterations per step make the step-size
         controller (which grows dt after easy steps) choose other steps, so a run follows another trajectory
         within the time-discretization error; results near a decision threshold (the confounded twin's
-        identifiability) can move.  So it is off by default (0); its cost and effect: ``results/bench/README.md``.
-        Omitted from :meth:`to_dict` at its default.
-    first_stagger_rtol : Newton tolerance of the first stagger iteration of each step (dimensionless, 0 or in
+        identifiability) can move.  So it is off by default (None: the plain iteration); its cost and effect:
+        ``results/bench/README.md``.  Omitted from :meth:`to_dict` when None, as h_inner.
+    first_stagger_rtol : Newton tolerance of the first stagger iteration of each step (dimensionless, in
         [``newton_rtol``, 0.1]): that iteration only supplies the damage that starts the second, which is always
         made and solved to ``newton_rtol``, so the accepted state meets the same tests (``Simulation.step``).
         It saves Newton iterations, but the accepted state then moves within the stagger tolerance (up to 1e-3 of
         p_inj in the first steps) with the number of loose iterations, a discrete function of the parameters:
         the run's outputs are rougher in the parameters, which finite differences (the discrepancy workflow)
-        amplify.  So it is off by default (0: every stagger iteration at ``newton_rtol``, the first allowed to
-        end the stagger); for runs that are not differentiated, 1e-3 (``results/bench/README.md``).  Used when
-        ``stagger_max_its`` >= 2.  Omitted from :meth:`to_dict` at its default.
+        amplify.  So it is off by default (None: every stagger iteration at ``newton_rtol``, the first allowed
+        to end the stagger); for runs that are not differentiated, 1e-3 (``results/bench/README.md``).  Used when
+        ``stagger_max_its`` >= 2.  Omitted from :meth:`to_dict` when None, as h_inner.
     """
 
     h: float = 1.0
@@ -120,8 +118,8 @@ class RunOptions:
     frames: int | None = None
     xdmf_format: str | None = None
     pressure_stabilization: float | None = None
-    anderson_depth: int = 0
-    first_stagger_rtol: float = 0.0
+    anderson_depth: int | None = None
+    first_stagger_rtol: float | None = None
 
     def __post_init__(self):
         _check(self)
@@ -132,9 +130,6 @@ class RunOptions:
         d["snapshot_times"] = list(self.snapshot_times)
         for name in _OMIT_WHEN_NONE:
             if d[name] is None:
-                del d[name]
-        for name, default in _OMIT_AT_DEFAULT.items():
-            if d[name] == default:
                 del d[name]
         return d
 
@@ -200,8 +195,8 @@ _NUMBERS = (
     ("jacobian_reuse", float, 0.0, 1.0, False, False),
     ("max_wall_time", float, 0.0, None, True, True),
     ("pressure_stabilization", float, 0.0, 100.0, False, True),
-    ("anderson_depth", int, 0, 20, False, False),
-    ("first_stagger_rtol", float, 0.0, 0.1, False, False),
+    ("anderson_depth", int, 1, 20, False, True),
+    ("first_stagger_rtol", float, 0.0, 0.1, True, True),
 )
 
 
@@ -273,8 +268,8 @@ def _check(o: RunOptions) -> None:
     for name in ("h_inner", "h_outer"):
         if getattr(o, name) is not None and not 0.0 < getattr(o, name) <= o.h:
             _fail(name, getattr(o, name), f"(0, h = {o.h}]")
-    if 0.0 < o.first_stagger_rtol < o.newton_rtol:
-        _fail("first_stagger_rtol", o.first_stagger_rtol, f"0 or in [newton_rtol={o.newton_rtol}, 0.1]")
+    if o.first_stagger_rtol is not None and o.first_stagger_rtol < o.newton_rtol:
+        _fail("first_stagger_rtol", o.first_stagger_rtol, f"None or in [newton_rtol={o.newton_rtol}, 0.1]")
     if not (o.dt_min <= o.dt0 <= o.dt_max):
         _fail("dt0", o.dt0, f"[dt_min={o.dt_min}, dt_max={o.dt_max}]")
     for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", TRANSPORTS),

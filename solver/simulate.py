@@ -202,7 +202,7 @@ class Simulation:
         d_n = self.d
         U, d_k = self.predict(dt)
         newton_total = 0
-        loose = o.first_stagger_rtol if o.first_stagger_rtol > 0 and o.stagger_max_its >= 2 else None
+        loose = o.first_stagger_rtol if o.stagger_max_its >= 2 else None
         for s in range(1, o.stagger_max_its + 1):
             with phase("stagger"):
                 data = step_data(self.disc, self.params, self.U, d_k, dt)
