@@ -90,9 +90,8 @@ def _model_tables(data: MeasuredData) -> list[str]:
 
 
 # Where a starting SPEC departs from the option defaults, and why.  The solver's runs cost seconds each, so the
-# emulators pay for themselves (results/discrepancy/COST.md: every k6 twin in 252-562 s from a cold cache on
-# 2 cores, the verdicts of the all-real runs); the library defaults stay off, since for a model that costs
-# microseconds (the toy) the emulator's own fitting is what costs.
+# emulators pay for themselves (their cost and verdicts: results/discrepancy/COST.md); the library defaults stay
+# off, since for a model that costs microseconds (the toy) the emulator's own fitting is what costs.
 STARTING = {("profile", "emulator"): ("gp", "for solver runs (library default \"none\"):"),
             ("profile", "emulate_refits"): (True, "for solver runs (library default false):")}
 
