@@ -78,22 +78,39 @@ def localize(problem: Problem, fit: Fit, ids) -> dict:
 
 def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
     """Signature of each candidate (one perturbed run per condition at its probe strength), projected off
-    the calibrated parameters' directions; see :func:`stats.signature_table`."""
+    the calibrated parameters' directions and, when the SPEC lists ``[[alternative]]`` parameters, off
+    theirs too; see :func:`stats.signature_table`."""
     if not candidates:
         return {}
-    params = fit.params
     vals0 = fit.values()
-    vlist = [vals0] + [{**vals0, "effect:" + c: problem.spec.probe_strength(c)} for c in candidates]
+    alts = problem.spec.alternatives
+    vlist = ([vals0] + [{**vals0, "effect:" + c: problem.spec.probe_strength(c)} for c in candidates]
+             + [{**vals0, a.name: v} for a, v in zip(alts, alternative_steps(problem, alts))])
     preds = problem.predict(vlist, ids)
     m = problem.mask(ids)
     ms = [problem.model_vector(p, m) for p in preds]
     # the same standardization as the residuals (a signature is a difference of model curves; a point
     # where either run failed carries none)
-    sigs = {c: problem.standardize(ms[i + 1] - ms[0], m, 0.0) for i, c in enumerate(candidates)}
+    diffs = [problem.standardize(mi - ms[0], m, 0.0) for mi in ms[1:]]
+    sigs = dict(zip(candidates, diffs))
+    A = np.column_stack(diffs[len(candidates):]) if alts else None
     w = stats.series_weights(fit.r, problem.series[m])
     free = free_columns(fit)
     return stats.signature_table(fit.r, w, -fit.J[:, free], sigs, min_ratio=problem.spec.acceptance.min_ratio,
-                                 tie_cos=problem.spec.acceptance.tie_cos)
+                                 tie_cos=problem.spec.acceptance.tie_cos, A=A,
+                                 alternatives=tuple(a.name for a in alts))
+
+
+def alternative_steps(problem: Problem, alts) -> list:
+    """The stepped value of each alternative: its baseline value moved by its step (``CalibParam.x_step``,
+    2 % of its range in its scale unless given), toward the inside of its range."""
+    out = []
+    for a in alts:
+        x0 = a.to_x(a.initial)
+        lo, hi = a.x_bounds
+        h = a.x_step if x0 + a.x_step <= hi else -a.x_step
+        out.append(a.from_x(x0 + h))
+    return out
 
 
 def bound_sides(fit: Fit, rtol: float = 1e-4) -> list:

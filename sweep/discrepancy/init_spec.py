@@ -54,7 +54,8 @@ def _header(data: MeasuredData, folder: Path) -> list[str]:
 
 
 def _model_tables(data: MeasuredData) -> list[str]:
-    """[baseline], [[calibrate]], [candidates], [holdout], [options] and a commented [discretization]."""
+    """[baseline], [[calibrate]], a commented [[alternative]], [candidates], [holdout], [options] and a
+    commented [discretization]."""
     names = list(EFFECTS)
     set_by_conditions = set(data.conditions.columns)
     L = ["[baseline]                       # solver.Parameters fields common to every condition (model defaults",
@@ -66,6 +67,11 @@ def _model_tables(data: MeasuredData) -> list[str]:
             continue
         L += ["[[calibrate]]                    # fitted on the training conditions (initial: the model default)",
               f"name = {_toml(name)}", f"lower = {lo!r}", f"upper = {hi!r}", f"scale = {_toml(scale)}", ""]
+    L += ["# [[alternative]]                # optional: a baseline parameter held fixed but uncertain in [lower,",
+          "# name = \"K_s\"                   # upper]; a candidate whose signature a change of it reproduces is",
+          "# lower = 160.0                    # \"not identifiable against\" it and never named",
+          "# upper = 16000.0",
+          "# scale = \"log\"", ""]
     L += ["[candidates]                     # the effects the workflow may name (off in the baseline):"]
     for n in names:
         e = EFFECTS[n]

@@ -107,9 +107,10 @@ class Problem:
         y = c.value.to_numpy(float)
         self.phase = _phases(data, self.cond, self.obs, self.t, y)
         for cid in data.ids:
-            overlap = set(data.condition_params(cid)) & ({p.name for p in spec.calibrate})
-            if overlap:
-                raise ValueError(f"condition {cid!r} sets calibrated parameter(s) {sorted(overlap)}")
+            for kind, ps in (("calibrated", spec.calibrate), ("alternative", spec.alternatives)):
+                overlap = set(data.condition_params(cid)) & {p.name for p in ps}
+                if overlap:
+                    raise ValueError(f"condition {cid!r} sets {kind} parameter(s) {sorted(overlap)}")
         self.noise = NoiseModel(y, c.uncertainty.to_numpy(float), self.layout)
         self._cache: dict = {}
         self._cache_version = self.noise.version

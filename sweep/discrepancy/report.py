@@ -234,6 +234,12 @@ def _caveat_lines(report: dict) -> list[str]:
     if report["not_identifiable"]:
         L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null, "
               f"or a profile interval reaching off): {report['not_identifiable']}", ""]
+    for c in report["candidates"]:
+        if c.get("confounded_with"):
+            L += [f"{c['effect']}: not identifiable against {c['confounded_with']} (held fixed but uncertain, "
+                  f"[[alternative]]): only {c['alternative_ratio']:.3g} of its signature lies outside their and the "
+                  f"calibrated parameters' directions; a change of {' or '.join(c['confounded_with'])} within its "
+                  f"range would explain what it explains.", ""]
     for a in report.get("accepted") or []:
         if "refresh_converged" in a:
             traj = " → ".join(f"{v:.4g}" for v in a["refresh_trajectory"])
@@ -388,7 +394,8 @@ _METHOD = ["## Method", "",
            "misfit scale (for the named effect, then also its profile-likelihood interval excludes 'off': the others "
            "refitted at fixed strength), it explains at "
            "least the required fraction of the excess χ², and it shrinks the held-out gap; candidates whose signature "
-           "lies in the span of the calibrated parameters' sensitivities are not identifiable; candidates with "
+           "lies in the span of the calibrated parameters' sensitivities (and of the [[alternative]] parameters', "
+           "held fixed but uncertain) are not identifiable; candidates with "
            "collinear projected signatures, or passing refits within the tie threshold in ΔBIC, are ties.", ""]
 
 

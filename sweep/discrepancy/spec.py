@@ -9,6 +9,11 @@ Example (units mm, s, kPa)::
     [[calibrate]]                    # baseline parameters fitted on the training conditions
     name = "kbar"; lower = 5e-4; upper = 5e-3; scale = "log"     # initial = baseline value
 
+    [[alternative]]                  # optional: baseline parameters held fixed but uncertain in [lower, upper]
+    name = "K_s"; lower = 300.0; upper = 3000.0; scale = "log"  # (value: the baseline's).  The screen projects
+                                     # a candidate's signature off their sensitivity directions too: a
+                                     # candidate one of them can mimic is "not identifiable against" it
+
     [candidates]
     effects = ["damage_viscosity", "compliant_boundary"]        # default: every effect off in the baseline
     scaling = { damage_viscosity = "sqrt_cement" }              # optional: parameter = strength * sqrt(C)
@@ -126,6 +131,7 @@ class DiscrepancySpec:
     holdout_every: int | None
     options: dict
     discretization: dict | None = None
+    alternatives: tuple = ()
     fit: FitOptions = field(default_factory=FitOptions)
     acceptance: AcceptanceOptions = field(default_factory=AcceptanceOptions)
     noise: NoiseOptions = field(default_factory=NoiseOptions)
@@ -193,11 +199,50 @@ def _check_mesh_seeds(disc: dict) -> None:
         _bad("discretization.mesh_seed", disc["mesh_seed"], "absent when mesh_seeds sets it per realization")
 
 
+def _param_table(table: str, c: dict, base: dict) -> CalibParam:
+    """One entry of ``[[calibrate]]`` or ``[[alternative]]``: a numeric solver.Parameters field that is not an
+    effect strength, its bounds and scale, and its value (``initial``, default the baseline's) inside them.
+    An alternative's value is always the baseline's: it is held fixed, its range says how uncertain it is."""
+    from solver import Parameters
+
+    name = c.get("name")
+    if name not in Parameters.__dataclass_fields__ or name in (*CHOICE_FIELDS, "seed"):
+        _bad(f"{table}.name", name, "a numeric solver.Parameters field")
+    if name in {get_effect(e).parameter for e in EFFECTS}:
+        _bad(f"{table}.name", name, "not an effect strength (effects are candidates)")
+    lo, hi = float(c.get("lower", math.nan)), float(c.get("upper", math.nan))
+    scale = c.get("scale", "log")
+    if scale not in ("log", "linear"):
+        _bad(f"{table}[{name}].scale", scale, "'log' or 'linear'")
+    if not (lo < hi) or (scale == "log" and lo <= 0):
+        _bad(f"{table}[{name}].lower/upper", (lo, hi), "lower < upper (and > 0 for log scale)")
+    if table == "alternative" and "initial" in c:
+        _bad(f"{table}[{name}].initial", c["initial"], "absent: an alternative keeps its baseline value")
+    init = c.get("initial", base.get(name, getattr(Parameters(), name)))
+    if init is None or not (lo <= float(init) <= hi):
+        _bad(f"{table}[{name}].initial", init, f"inside [{lo}, {hi}]")
+    step = c.get("step")
+    if step is not None and not (isinstance(step, (int, float)) and not isinstance(step, bool) and step > 0):
+        _bad(f"{table}[{name}].step", step, "a number > 0 (decades for log scale, the unit for linear)")
+    return CalibParam(name, lo, hi, float(init), scale, step)
+
+
+def _check_alternatives(cal: tuple, alt: tuple) -> None:
+    """Alternatives are distinct and not calibrated (a calibrated parameter's direction is projected anyway)."""
+    names = [p.name for p in alt]
+    for n in names:
+        if names.count(n) > 1:
+            _bad("alternative.name", n, "each parameter once")
+        if n in {p.name for p in cal}:
+            _bad("alternative.name", n, "a parameter that is not calibrated ([[calibrate]] already fits it)")
+
+
 def spec_from_dict(d: dict) -> DiscrepancySpec:
     """Validate a parsed TOML spec (see the module docstring)."""
     from solver import Parameters, RunOptions
 
-    known = {"baseline", "calibrate", "candidates", "holdout", "options", "discretization", *OPTION_TABLES}
+    known = {"baseline", "calibrate", "alternative", "candidates", "holdout", "options", "discretization",
+             *OPTION_TABLES}
     extra = sorted(set(d) - known - {"workflow"})      # [workflow]: refused by parse_options, naming its keys
     if extra:
         _bad("tables", extra, f"only {sorted(known)}")
@@ -209,23 +254,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
         Parameters.from_dict(base)
     except ValueError as exc:
         raise ValueError(f"discrepancy spec [baseline]: {exc}") from None
-    cal = []
-    for c in d.get("calibrate", []):
-        name = c.get("name")
-        if name not in Parameters.__dataclass_fields__ or name in (*CHOICE_FIELDS, "seed"):
-            _bad("calibrate.name", name, "a numeric solver.Parameters field")
-        if name in {get_effect(e).parameter for e in EFFECTS}:
-            _bad("calibrate.name", name, "not an effect strength (effects are candidates)")
-        lo, hi = float(c.get("lower", math.nan)), float(c.get("upper", math.nan))
-        scale = c.get("scale", "log")
-        if scale not in ("log", "linear"):
-            _bad(f"calibrate[{name}].scale", scale, "'log' or 'linear'")
-        if not (lo < hi) or (scale == "log" and lo <= 0):
-            _bad(f"calibrate[{name}].lower/upper", (lo, hi), "lower < upper (and > 0 for log scale)")
-        init = c.get("initial", base.get(name, getattr(Parameters(), name)))
-        if init is None or not (lo <= float(init) <= hi):
-            _bad(f"calibrate[{name}].initial", init, f"inside [{lo}, {hi}]")
-        cal.append(CalibParam(name, lo, hi, float(init), scale, c.get("step")))
+    cal = tuple(_param_table("calibrate", c, base) for c in d.get("calibrate", []))
+    alt = tuple(_param_table("alternative", c, base) for c in d.get("alternative", []))
+    _check_alternatives(cal, alt)
     cand = d.get("candidates", {})
     names = tuple(cand.get("effects", off))
     for e in names:
@@ -262,9 +293,9 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
         except ValueError as exc:
             raise ValueError(f"discrepancy spec [discretization]: {exc}") from None
     wo = parse_options(d)
-    return DiscrepancySpec(base, off, tuple(cal), names, scaling, upper, probe,
+    return DiscrepancySpec(base, off, cal, names, scaling, upper, probe,
                            tuple(ids) if ids is not None else None, every, opts,
-                           dict(disc) if disc is not None else None, wo.fit, wo.acceptance, wo.noise, wo.profile)
+                           dict(disc) if disc is not None else None, alt, wo.fit, wo.acceptance, wo.noise, wo.profile)
 
 
 def load_spec(path) -> DiscrepancySpec:

@@ -212,7 +212,8 @@ def project_out(J, s) -> np.ndarray:
     return s - Q @ (Q.T @ s)
 
 
-def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_cos: float = 0.95) -> dict:
+def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_cos: float = 0.95,
+                    A=None, alternatives: tuple = ()) -> dict:
     """Screen candidate effects from their signatures.
 
     r : standardized residuals of the calibrated baseline; w : series weights; J : Jacobian of the
@@ -222,10 +223,19 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
     a = (w r·s⊥)/(w s⊥·s⊥) in units of the probe strength, and the score = linearized χ²_eff drop
     (0 when a <= 0: the data ask for the effect "below off").  ``tied_with`` lists identifiable
     candidates whose projected signatures have |cos| >= ``tie_cos`` with this one.
+
+    ``A`` (columns: the model's standardized change for a step of each of the ``alternatives``, baseline
+    parameters held fixed but uncertain): the signature is also projected off [J, A].  Its
+    ``alternative_ratio`` below ``min_ratio`` makes the candidate not identifiable, and ``confounded_with``
+    names the alternatives that bring it there (each alone, or all together when none does alone): what
+    the candidate would explain, a change of those parameters would explain as well.
     """
     r = np.asarray(r, float)
     sw = np.sqrt(np.asarray(w, float))
     Jw = np.asarray(J, float) * sw[:, None] if np.size(J) else np.zeros((r.size, 0))
+    Aw = np.asarray(A, float) * sw[:, None] if A is not None and np.size(A) else np.zeros((r.size, 0))
+    if Aw.shape[1] != len(alternatives):
+        raise ValueError(f"signature_table: {Aw.shape[1]} alternative columns for alternatives {alternatives}")
     out, perp = {}, {}
     for name, s in signatures.items():
         s = np.asarray(s, float)
@@ -235,12 +245,15 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
         sp = project_out(Jw, sw_s) if ns > 0 else sw_s
         nsp = float(np.linalg.norm(sp))
         ratio = nsp / ns if ns > 0 else 0.0
-        ident = bool(ok and ns > 1e-9 and ratio >= min_ratio)
+        alt_ratio, confounded = _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio)
+        ident = bool(ok and ns > 1e-9 and ratio >= min_ratio and not confounded
+                     and (alt_ratio is None or alt_ratio >= min_ratio))
         rw = r * sw
         a = float(rw @ sp / nsp**2) if nsp > 0 else 0.0
         score = float((rw @ sp) ** 2 / nsp**2) if (nsp > 0 and a > 0) else 0.0
         out[name] = {"norm": ns, "projected_norm": nsp, "ratio": ratio, "identifiable": ident,
-                     "amplitude": a, "score": score if ident else 0.0, "tied_with": [], "finite": bool(ok)}
+                     "amplitude": a, "score": score if ident else 0.0, "tied_with": [], "finite": bool(ok),
+                     "alternative_ratio": alt_ratio, "confounded_with": confounded}
         perp[name] = sp
     names = [n for n in out if out[n]["identifiable"]]
     for i, a in enumerate(names):
@@ -250,6 +263,23 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
                 out[a]["tied_with"].append(b)
                 out[b]["tied_with"].append(a)
     return out
+
+
+def _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio) -> tuple:
+    """(‖s off [J, A]‖/‖s‖, the alternatives that bring it below ``min_ratio``), or (None, []) without any."""
+    if not alternatives:
+        return None, []
+    if ns <= 0:
+        return 0.0, []
+
+    def ratio(cols):
+        return float(np.linalg.norm(project_out(np.column_stack([Jw, Aw[:, cols]]), sw_s))) / ns
+
+    total = ratio(list(range(len(alternatives))))
+    if total >= min_ratio:
+        return total, []
+    alone = [a for k, a in enumerate(alternatives) if ratio([k]) < min_ratio]
+    return total, alone or list(alternatives)
 
 
 def wald_interval(J, r, w, index: int, x_hat: float, level_z: float = 1.96,

@@ -1,0 +1,130 @@
+"""Baseline parameters held fixed but uncertain (``[[alternative]]``): the screen's identifiability against them.
+
+A candidate whose signature a change of such a parameter reproduces must not be named (never a confident wrong
+name): the screen projects the signature off the alternatives' directions as well as the calibrated ones.
+Checked on exact linear algebra and on twins of the closed-form toy (sweep.discrepancy.toy), where the
+compliance rescales the pressure exactly as k̄ does (P0/(1 + 2c), P0 ∝ 1/k̄).  Units mm, s, kPa.
+"""
+import numpy as np
+import pytest
+
+from sweep.discrepancy import ToyForward, load_measured, make_twin, run_workflow, spec_from_dict, stats
+from sweep.discrepancy.problem import Problem
+
+OFF = ["damage_viscosity", "compliant_boundary", "crack_permeability", "volumetric_coupling"]
+TIMES = np.linspace(0.02, 1.0, 50)
+CONDS = {"a": {"w_i": 30.0}, "b": {"w_i": 50.0}, "c": {"w_i": 70.0}, "d": {"w_i": 40.0}}
+DATA_BASE = {"beta": 0.0, "outer_compliance": 0.0, "crack_permeability": 0.0, "volumetric_coupling": 0.0}
+KBAR_ALT = {"name": "kbar", "lower": 5e-4, "upper": 5e-3}
+
+
+# ----------------------------------------------------------------------------- the projection
+def _columns():
+    t = np.linspace(0.0, 1.0, 60)
+    J = np.column_stack([np.ones_like(t)])                     # the calibrated parameter: an offset
+    a1, a2 = t, np.sin(2 * np.pi * t)                          # two alternatives' directions
+    return t, J, a1, a2
+
+
+def test_signature_in_an_alternatives_span_is_confounded_with_it():
+    t, J, a1, a2 = _columns()
+    sig = {"mimic": 2.0 * a1 + 0.01 * np.cos(7 * np.pi * t), "free": np.exp(-((t - 0.5) / 0.05) ** 2)}
+    r = np.zeros_like(t)
+    without = stats.signature_table(r, np.ones_like(t), J, sig)
+    assert without["mimic"]["identifiable"] and without["mimic"]["alternative_ratio"] is None
+    tab = stats.signature_table(r, np.ones_like(t), J, sig, A=np.column_stack([a1, a2]), alternatives=("x1", "x2"))
+    m = tab["mimic"]
+    assert not m["identifiable"] and m["confounded_with"] == ["x1"] and m["score"] == 0.0
+    # exact: the part of the signature outside span{1, t, sin 2πt}, over its norm
+    Q = np.linalg.qr(np.column_stack([J, a1, a2]))[0]
+    s = sig["mimic"]
+    assert m["alternative_ratio"] == pytest.approx(np.linalg.norm(s - Q @ (Q.T @ s)) / np.linalg.norm(s), rel=1e-9)
+    assert m["ratio"] == pytest.approx(without["mimic"]["ratio"], rel=1e-12)     # the calibrated-only ratio as before
+    assert tab["free"]["identifiable"] and tab["free"]["confounded_with"] == []
+
+
+def test_confounding_by_alternatives_together_names_them_all():
+    t, J, _, _ = _columns()
+    u, v, w = (np.sin(2 * k * np.pi * t) for k in (1, 2, 3))
+    sig = {"mix": u + v}                                      # neither alone reproduces it, both together do
+    A = np.column_stack([u + w, v - w])
+    tab = stats.signature_table(np.zeros_like(t), np.ones_like(t), J, sig, A=A, alternatives=("x1", "x2"))
+    assert tab["mix"]["alternative_ratio"] < 1e-12 and tab["mix"]["confounded_with"] == ["x1", "x2"]
+    with pytest.raises(ValueError, match="alternative columns"):
+        stats.signature_table(np.zeros_like(t), np.ones_like(t), J, sig, A=A, alternatives=("x1",))
+
+
+# ----------------------------------------------------------------------------- the SPEC
+def _spec(alternatives=(), calibrate=("E",), cands=("compliant_boundary", "damage_viscosity"), baseline=None):
+    bounds = {"kbar": (5e-4, 5e-3), "E": (150.0, 700.0)}
+    return spec_from_dict({"baseline": {"effects_off": OFF, **(baseline or {})},
+                           "calibrate": [{"name": n, "lower": bounds[n][0], "upper": bounds[n][1]} for n in calibrate],
+                           "alternative": list(alternatives),
+                           "candidates": {"effects": list(cands)}, "holdout": {"ids": ["d"]},
+                           "options": {"h": 8.0, "t_end": 1.0}})
+
+
+@pytest.mark.parametrize("alt,message", [
+    ({"name": "E", "lower": 150.0, "upper": 700.0}, "alternative.name='E'.*not calibrated"),
+    ({**KBAR_ALT, "initial": 0.002}, r"alternative\[kbar\].initial=0.002.*baseline value"),
+    ({"name": "no_such", "lower": 1.0, "upper": 2.0}, "alternative.name='no_such'"),
+    ({"name": "outer_compliance", "lower": 0.0, "upper": 1.0, "scale": "linear"}, "not an effect strength"),
+    ({"name": "kbar", "lower": 2e-3, "upper": 5e-3}, r"alternative\[kbar\].initial=0.0015.*inside"),
+    ({**KBAR_ALT, "step": -0.1}, r"alternative\[kbar\].step=-0.1"),
+    ({"name": "kbar", "lower": 0.0, "upper": 5e-3}, r"alternative\[kbar\].lower/upper"),
+])
+def test_bad_alternatives_are_refused_by_name(alt, message):
+    with pytest.raises(ValueError, match=message):
+        _spec(alternatives=[alt])
+
+
+def test_a_repeated_alternative_is_refused_and_a_good_one_is_kept():
+    with pytest.raises(ValueError, match="alternative.name='kbar'.*once"):
+        _spec(alternatives=[KBAR_ALT, KBAR_ALT])
+    spec = _spec(alternatives=[KBAR_ALT], baseline={"kbar": 0.002})
+    (a,) = spec.alternatives
+    assert (a.name, a.initial, a.scale) == ("kbar", 0.002, "log")         # the baseline's value, log by default
+
+
+def test_a_condition_may_not_set_an_alternative(tmp_path):
+    conds = {**CONDS, "d": {"w_i": 40.0, "kbar": 0.002}}
+    data = load_measured(make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0), conds, TIMES, {}, seed=1,
+                                   observables=("p_inj",)))
+    with pytest.raises(ValueError, match=r"condition 'd' sets alternative parameter\(s\) \['kbar'\]"):
+        Problem(data, _spec(alternatives=[KBAR_ALT]), ToyForward({}, h=8.0))
+
+
+# ----------------------------------------------------------------------------- twins
+def _twin(tmp_path, hidden):
+    fwd = ToyForward(DATA_BASE, h=2.0)
+    return load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, hidden, seed=1, observables=("p_inj",)))
+
+
+def test_a_fixed_parameter_mimicked_by_a_candidate_gives_a_wrong_name_unless_it_is_an_alternative(tmp_path):
+    """The truth is k̄ 10 % above the baseline's (not calibrated, not an effect): on pressure data the compliance
+    c = 0.05 reproduces it exactly.  Without alternatives the workflow names the compliance (the R3 failure);
+    with k̄ declared uncertain it names nothing and says against what the compliance is not identifiable."""
+    data = _twin(tmp_path, {"kbar": 0.00165})
+    wrong = run_workflow(data, _spec(), ToyForward({}, h=8.0))
+    assert wrong["verdict"] == "named" and wrong["named_effect"] == "compliant_boundary"
+    assert wrong["strength"] == pytest.approx(0.05, rel=0.1)
+    rep = run_workflow(data, _spec(alternatives=[KBAR_ALT]), ToyForward({}, h=8.0), out_dir=tmp_path / "out",
+                       figures=False)
+    assert rep["named_effect"] is None and rep["verdict"] == "unexplained_discrepancy"
+    rows = {c["effect"]: c for c in rep["candidates"]}
+    assert rows["compliant_boundary"]["confounded_with"] == ["kbar"]
+    assert rows["compliant_boundary"]["alternative_ratio"] < 0.15 <= rows["compliant_boundary"]["signature_ratio"]
+    assert "compliant_boundary" in rep["not_identifiable"]
+    assert rows["damage_viscosity"]["confounded_with"] == []
+    assert "not identifiable against ['kbar']" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_an_alternative_does_not_block_an_effect_it_cannot_mimic(tmp_path):
+    """Hidden β = 40: its pressure bump (∝ w_i, decaying in 0.2 s) is not a change of k̄, so with k̄ declared
+    uncertain the damage viscosity is still named with the truth inside its interval."""
+    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), _spec(alternatives=[KBAR_ALT]), ToyForward({}, h=8.0))
+    assert rep["verdict"] == "named" and rep["named_effect"] == "damage_viscosity"
+    lo, hi = rep["strength_interval"]
+    assert lo <= 40.0 <= hi
+    row = {c["effect"]: c for c in rep["candidates"]}["damage_viscosity"]
+    assert row["identifiable"] and row["alternative_ratio"] >= 0.15 and row["confounded_with"] == []
