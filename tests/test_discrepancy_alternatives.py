@@ -128,3 +128,18 @@ def test_an_alternative_does_not_block_an_effect_it_cannot_mimic(tmp_path):
     assert lo <= 40.0 <= hi
     row = {c["effect"]: c for c in rep["candidates"]}["damage_viscosity"]
     assert row["identifiable"] and row["alternative_ratio"] >= 0.15 and row["confounded_with"] == []
+
+
+def test_the_real_solver_campaign_declares_k_s_uncertain():
+    """campaigns/discrepancy_twins_alternatives_k6.toml: the k6 twins with K_s as an alternative, on emulators."""
+    from pathlib import Path
+
+    from sweep.discrepancy.twins import load_twin_campaign
+
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_alternatives_k6.toml")
+    spec = spec_from_dict(camp["spec"])
+    assert [(a.name, a.initial) for a in spec.alternatives] == [("K_s", 1600.0)]
+    assert spec.profile.emulator == "gp" and spec.profile.emulate_refits
+    assert {t["name"]: t["expect"] for t in camp["twin"]} == {
+        "outside_catalogue_k6": "unexplained_discrepancy", "damage_viscosity_k6": "damage_viscosity",
+        "compliant_boundary_k6": "not_identifiable"}
