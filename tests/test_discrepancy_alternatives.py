@@ -143,3 +143,61 @@ def test_the_real_solver_campaign_declares_k_s_uncertain():
     assert {t["name"]: t["expect"] for t in camp["twin"]} == {
         "outside_catalogue_k6": "unexplained_discrepancy", "damage_viscosity_k6": "damage_viscosity",
         "compliant_boundary_k6": "not_identifiable"}
+
+
+# ----------------------------------------------------------------------------- rival refits
+def _prepared(data, spec):
+    from sweep.discrepancy.evidence import refit, screen
+    from sweep.discrepancy.workflow import calibrate, prepare
+
+    run = prepare(data, spec, ToyForward({}, h=8.0), None)
+    calibrate(run)
+    scr = screen(run.problem, run.current, ["compliant_boundary"], run.train)
+    best = refit(run.problem, run.current, "compliant_boundary", scr["compliant_boundary"], run.train, run.holdout,
+                 run.gap_cur)
+    return run, best
+
+
+def test_a_rival_that_reproduces_the_candidate_ties_with_it(tmp_path):
+    """k̄ 10 % high on pressure data: the compliance's refit passes, and k̄ freed as a rival of it reaches the
+    truth 0.00165 with a BIC no worse (the two models are the same curves: P0/(1 + 2c) = 0.05 w η/k̄')."""
+    from sweep.discrepancy.evidence import rival_refits
+
+    run, best = _prepared(_twin(tmp_path, {"kbar": 0.00165}), _spec(alternatives=[KBAR_ALT]))
+    assert best["passed"] and best["strength"] == pytest.approx(0.05, rel=0.1)
+    (row,) = rival_refits(run.problem, best, run.current, run.train, run.holdout)
+    assert row["alternative"] == "kbar" and row["value"] == pytest.approx(0.00165, rel=0.02)
+    # same curves, same parameter count: the BICs agree to the fits' tolerance, far inside tie_bic = 10
+    assert abs(row["delta_bic"]) < 1.0 and row["ties"]
+
+
+def test_a_rival_that_cannot_reproduce_the_candidate_does_not_tie(tmp_path):
+    """Hidden compliance c = 0.05 with the front measured too: the compliance also speeds the front by
+    1 + 20 c, which no k̄ does, so k̄ freed is far worse and the compliance is named with k̄ declared uncertain."""
+    fwd = ToyForward(DATA_BASE, h=2.0)
+    data = load_measured(make_twin(tmp_path / "data", fwd, CONDS, TIMES, {"outer_compliance": 0.05}, seed=1,
+                                   observables=("p_inj", "front_radius_mean")))
+    rep = run_workflow(data, _spec(alternatives=[KBAR_ALT]), ToyForward({}, h=8.0), out_dir=tmp_path / "out",
+                       figures=False)
+    assert rep["verdict"] == "named" and rep["named_effect"] == "compliant_boundary"
+    lo, hi = rep["strength_interval"]
+    assert lo <= 0.05 <= hi
+    (row,) = rep["rivals"]
+    assert row["alternative"] == "kbar" and not row["ties"] and row["delta_bic"] > 10.0
+    assert "Rival of compliant_boundary" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_a_tying_rival_makes_the_verdict_a_tie_not_a_name(tmp_path):
+    """The accept step: with the screen's threshold at 0 (so the linear screen lets the compliance through, as
+    it does on the solver when the alternative's book value is far from the truth), k̄ 10 % high on pressure
+    data gives a passing compliance and a k̄ rival that ties with it: verdict "tie", never the name."""
+    d = {"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
+         "alternative": [KBAR_ALT], "candidates": {"effects": ["compliant_boundary", "damage_viscosity"]},
+         "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0}, "acceptance": {"min_ratio": 0.0}}
+    rep = run_workflow(_twin(tmp_path, {"kbar": 0.00165}), spec_from_dict(d), ToyForward({}, h=8.0),
+                       out_dir=tmp_path / "out", figures=False)
+    assert rep["verdict"] == "tie" and rep["named_effect"] is None
+    assert rep["tie"] == ["compliant_boundary", "alternative:kbar"]
+    (row,) = rep["rivals"]
+    assert row["ties"] and row["value"] == pytest.approx(0.00165, rel=0.02)
+    assert "it ties" in (tmp_path / "out" / "report.md").read_text()

@@ -877,6 +877,10 @@ def test_confounded_twin_pass_rule_and_condition_subsets():
     assert not twin_passed(tw, base)                                                  # silently absent: fails
     assert not twin_passed(tw, {**base, "verdict": "named", "not_identifiable": ["damage_viscosity"]})
     assert not twin_passed({**tw, "hidden": {}}, {**base, "not_identifiable": ["damage_viscosity"]})
+    # "not_named": any verdict but a name (R3, a hidden change outside the catalogue)
+    alt = {"name": "outside", "expect": "not_named", "hidden": {"K_s": 300.0}}
+    assert all(twin_passed(alt, {**base, "verdict": v}) for v in ("tie", "unexplained_discrepancy", "no_missing_effect"))
+    assert not twin_passed(alt, {**base, "verdict": "named", "named_effect": "compliant_boundary"})
     camp = {"conditions": {"w35": {"w_i": 35.0}, "w50": {"w_i": 50.0}, "w65": {"w_i": 65.0}}}
     spec = spec_from_dict({**_DISC_SPEC, "holdout": {"ids": ["w50"]}})
     assert twin_conditions(camp, tw, spec) == {"w50": {"w_i": 50.0}, "w65": {"w_i": 65.0}}

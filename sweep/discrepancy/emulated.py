@@ -148,11 +148,12 @@ class EmulatedRefits:
 
     def no_worse_than_nested(self, params: tuple, ref: Fit, real: Fit, rec: dict) -> Fit:
         """The refit never ends above the model it nests: ``ref``'s values with every parameter ``ref`` lacks
-        (a candidate's strength) at its lower bound, "off".  When the polished optimum's χ² exceeds that
+        at its nested value (``CalibParam.x_nested``: a candidate's strength at "off", an alternative at its
+        baseline value).  When the polished optimum's χ² exceeds that
         point's, the emulator led the fit astray (a model that changes abruptly, as the crack path does), and
         the refit is redone on real runs from both points; ``rec`` records it."""
         where = {p.name: i for i, p in enumerate(ref.params)}
-        nested = np.array([ref.x[where[p.name]] if p.name in where else p.x_bounds[0] for p in params], float)
+        nested = np.array([ref.x[where[p.name]] if p.name in where else p.x_nested for p in params], float)
         r0 = self.problem.residual_batch(params, [nested], self.ids)[0]
         if float(real.r @ real.r) <= float(r0 @ r0):
             return real

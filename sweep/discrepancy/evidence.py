@@ -189,6 +189,38 @@ def refit(problem: Problem, base_fit: Fit, cand: str, screen_row: dict, train, h
             "values": f.values()}
 
 
+def rival_refits(problem: Problem, best: dict, base_fit: Fit, train, holdout, fitter=None) -> list:
+    """The ``[[alternative]]`` parameters as rivals of the best passing candidate (nonlinear: the screen's
+    projection is linear at the baseline, and a parameter far from its book value can mimic an effect that
+    its direction there does not).  For each alternative the model without the candidate (``base_fit``'s) is
+    refitted with the alternative freed in its range, from the baseline (the alternative at its value) and
+    from the candidate's calibrated values with the alternative at the quarter and three-quarter points of
+    its range (in its scale), and compared with the candidate's model by BIC under the per-series minimum of
+    the two models' weights (as :func:`compare_passing`; both have one parameter more than the baseline).  A
+    rival within ``tie_bic`` of the candidate, or better, ties with it: the data cannot tell the effect from a
+    change of that parameter.  ``fitter`` as in :func:`refit`.  Returns one row per alternative: its name,
+    fitted value, Δ = BIC(rival) − BIC(candidate), whether it ties, its held-out gap."""
+    spec = problem.spec
+    ser = problem.series[problem.mask(train)]
+    xc = best["fit"].x[:-1]                     # the candidate's strength is the last parameter of its refit
+    rows = []
+    for alt in spec.alternatives:
+        params = base_fit.params + (alt,)
+        lo, hi = alt.x_bounds
+        starts = [np.append(base_fit.x, alt.to_x(alt.initial)),
+                  np.append(xc, lo + 0.25 * (hi - lo)), np.append(xc, lo + 0.75 * (hi - lo))]
+        f = problem.fit(params, starts, train) if fitter is None else fitter(params, starts, base_fit)
+        w = np.minimum(stats.series_weights(f.r, ser), stats.series_weights(best["fit"].r, ser))
+        delta = float(stats.bic(f.r, w, len(params)) - stats.bic(best["fit"].r, w, len(best["fit"].params)))
+        value = float(alt.from_x(f.x[-1]))
+        ties = bool(delta < spec.acceptance.tie_bic)
+        log.info("rival %s of %s: %s = %.5g, BIC(rival) - BIC(candidate) %.1f, %s", alt.name, best["effect"],
+                 alt.name, value, delta, "ties" if ties else "does not tie")
+        rows.append({"alternative": alt.name, "candidate": best["effect"], "value": value, "values": f.values(),
+                     "delta_bic": delta, "ties": ties, "gap": gap(problem, params, f.x, holdout)})
+    return rows
+
+
 def compare_passing(passing: list, problem: Problem, train) -> list:
     """The passing refits ranked for the tie rule by BIC under weights common to all of them.
 

@@ -77,7 +77,7 @@ def build_report(run, forward) -> dict:
               "residuals_systematic_after": bool(run.loc["systematic"] if named_ok else run.loc0["systematic"]),
               "rounds": run.rounds, "forward_runs": int(getattr(forward, "n_runs", 0)),
               "forward_runs_by_stage": run.ledger.stages, **_noise_fields(run),
-              "profiles": run.profiles, "partial_explanation": run.partial}
+              "profiles": run.profiles, "partial_explanation": run.partial, "rivals": run.rivals}
     if run.emulated is not None:
         report["emulated_refits"] = run.emulated.summary()
     report["code"] = code_provenance()
@@ -231,6 +231,12 @@ def _caveat_lines(report: dict) -> list[str]:
               f"so no effect is named: the cause may lie outside the catalogue.", ""]
     if report["tie"]:
         L += [f"Tie between {report['tie']}: the data cannot tell them apart; add a discriminating condition.", ""]
+    for r in report.get("rivals") or []:
+        L += [f"Rival of {r['candidate']}: the baseline refitted with {r['alternative']} freed ([[alternative]]) "
+              f"reaches {r['alternative']} = {r['value']:.4g}, BIC {r['delta_bic']:+.1f} against the candidate's model "
+              f"(held-out gap {r['gap']['total']:.3g} RMS σ): "
+              + ("it ties, so the effect cannot be told from a change of that parameter." if r["ties"] else
+                 "it does not tie."), ""]
     if report["not_identifiable"]:
         L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null, "
               f"or a profile interval reaching off): {report['not_identifiable']}", ""]

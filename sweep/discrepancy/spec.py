@@ -90,7 +90,9 @@ SCALINGS = ("none", "sqrt_cement")
 @dataclass(frozen=True)
 class CalibParam:
     """A fitted parameter: name (Parameters field), bounds, initial value, scale "log" | "linear", FD step
-    (in decades for log, in the parameter's unit for linear; None = 2 % of the range)."""
+    (in decades for log, in the parameter's unit for linear; None = 2 % of the range), and ``nested``: the
+    value at which a model with it reduces to the model without it (None: its lower bound, an effect's
+    "off"; an alternative's baseline value)."""
 
     name: str
     lower: float
@@ -98,6 +100,12 @@ class CalibParam:
     initial: float
     scale: str = "log"
     step: float | None = None
+    nested: float | None = None
+
+    @property
+    def x_nested(self) -> float:
+        """``nested`` in fit coordinates (the lower bound when None)."""
+        return self.x_bounds[0] if self.nested is None else self.to_x(self.nested)
 
     def to_x(self, v: float) -> float:
         return math.log10(v) if self.scale == "log" else float(v)
@@ -224,7 +232,7 @@ def _param_table(table: str, c: dict, base: dict) -> CalibParam:
     step = c.get("step")
     if step is not None and not (isinstance(step, (int, float)) and not isinstance(step, bool) and step > 0):
         _bad(f"{table}[{name}].step", step, "a number > 0 (decades for log scale, the unit for linear)")
-    return CalibParam(name, lo, hi, float(init), scale, step)
+    return CalibParam(name, lo, hi, float(init), scale, step, float(init) if table == "alternative" else None)
 
 
 def _check_alternatives(cal: tuple, alt: tuple) -> None:

@@ -16,8 +16,9 @@ Campaign TOML::
     name = "damage_viscosity"; hidden = { beta = 60.0 }; expect = "damage_viscosity"
     # hidden = { beta = "law" } lets β follow 65.7 √C in the data; give the fitted strength's truth as
     # truth = 65.7 (with [spec.candidates] scaling = { damage_viscosity = "sqrt_cement" })
-    # expect: an effect name, "no_missing_effect", "unexplained_discrepancy", "tie" or "not_identifiable"
-    # (the hidden effect listed as not identifiable, or in a tie: a confounded case)
+    # expect: an effect name, "no_missing_effect", "unexplained_discrepancy", "tie", "not_identifiable"
+    # (the hidden effect listed as not identifiable, or in a tie: a confounded case) or "not_named" (any
+    # verdict but a name: a hidden change the catalogue should not claim, e.g. of an [[alternative]] parameter)
     # conditions = ["w50", "w65"]: only these of [conditions] (default all; must contain the held-out ids);
     # observables = ["p_inj"]: only these of [data] observables are "measured" in this twin (default all)
     [reference_check]           # optional: the workflow's models on the paper's reference experiment
@@ -104,10 +105,12 @@ def hidden_effects(twin: dict) -> list:
 def twin_passed(twin: dict, rep: dict) -> bool:
     """The twin's requirement: hidden effect named with its strength inside the interval and the held-out
     gap halved; the expected verdict for controls; for a confounded twin ("not_identifiable"), the hidden
-    effect reported as not identifiable or tied, never named."""
+    effect reported as not identifiable or tied, never named; for "not_named", any verdict but a name."""
     exp = twin["expect"]
     if exp in ("no_missing_effect", "unexplained_discrepancy", "tie"):
         return rep["verdict"] == exp
+    if exp == "not_named":
+        return rep["verdict"] != "named"
     if exp == "not_identifiable":
         hid = hidden_effects(twin)
         flagged = set(rep.get("not_identifiable") or []) | set(rep.get("tie") or [])
@@ -171,7 +174,7 @@ def twin_observables(camp: dict, twin: dict) -> tuple:
     return tuple(obs)
 
 
-VERDICTS = ("no_missing_effect", "unexplained_discrepancy", "tie", "not_identifiable")
+VERDICTS = ("no_missing_effect", "unexplained_discrepancy", "tie", "not_identifiable", "not_named")
 # [data] keys that describe the measurement, not the data-generating run's options
 DATA_KEYS = ("times", "observables", "noise", "seed", "regime")
 

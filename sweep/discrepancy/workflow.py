@@ -22,7 +22,7 @@ from . import stats
 from .checks import check_data_against_model
 from .data import MeasuredData
 from .emulated import EmulatedRefits
-from .evidence import compare_passing, free_columns, gap, localize, refit, screen, wald_bounds
+from .evidence import compare_passing, free_columns, gap, localize, refit, rival_refits, screen, wald_bounds
 from .ledger import RunLedger
 from .noise import add_discretization_error, add_model_jitter, rms_per_observable
 from .problem import Fit, Problem, random_starts
@@ -65,6 +65,7 @@ class WorkflowRun:
     refresh: list = field(default_factory=list)
     profiles: dict = field(default_factory=dict)
     profile_unidentified: list = field(default_factory=list)
+    rivals: list = field(default_factory=list)
     partial: dict | None = None
     emulated: EmulatedRefits | None = None
 
@@ -182,6 +183,7 @@ def accept(run: WorkflowRun, passing: list, remaining: list) -> bool:
     whether another round may follow (the named model still misses systematically)."""
     best = passing[0]
     tied = [p["effect"] for p in passing[1:] if p["bic_common"] - best["bic_common"] < run.spec.acceptance.tie_bic]
+    tied += [f"alternative:{r['alternative']}" for r in rivals(run, best) if r["ties"]]
     if tied:
         run.tie, run.verdict = [best["effect"]] + tied, "tie"
         return False
@@ -193,6 +195,18 @@ def accept(run: WorkflowRun, passing: list, remaining: list) -> bool:
     run.loc = localize(run.problem, run.current, run.train)
     remaining.remove(best["effect"])
     return bool(run.loc["systematic"])
+
+
+def rivals(run: WorkflowRun, best: dict) -> list:
+    """The ``[[alternative]]`` parameters refitted as rivals of the best passing candidate
+    (:func:`evidence.rival_refits`), recorded for the report; [] without alternatives."""
+    if not run.spec.alternatives:
+        return []
+    fitter = None if run.emulated is None else (lambda params, starts, ref: run.refit(params, starts, ref, "rivals"))
+    rows = rival_refits(run.problem, best, run.current, run.train, run.holdout, fitter)
+    run.rivals += rows
+    run.ledger.mark("rivals")
+    return rows
 
 
 def search(run: WorkflowRun) -> None:
