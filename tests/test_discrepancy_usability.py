@@ -94,6 +94,9 @@ def test_init_writes_a_commented_spec_that_loads(tmp_path):
     assert spec.fit == parse_options({}).fit                                     # defaults, spelled out
     assert (spec.profile.emulator, spec.profile.emulate_refits) == ("gp", True)  # the solver's starting values
     assert parse_options({}).profile.emulator == "none"                          # the library default
+    # the coverage study's calibrated interval: the likelihood's own error terms
+    assert (spec.noise.disc_error_fraction, spec.profile.likelihood) == (0.0, "marginal")
+    assert (parse_options({}).noise.disc_error_fraction, parse_options({}).profile.likelihood) == (0.5, "weighted")
     for word in ("w35", "front_radius_branches (mm)", "p_inj (kPa)", "regime (label)", "[profile]", "rough_tol"):
         assert word in text
     parsed = tomllib.loads(text)

@@ -98,8 +98,13 @@ def _model_tables(data: MeasuredData) -> list[str]:
 # Where a starting SPEC departs from the option defaults, and why.  The solver's runs cost seconds each, so the
 # emulators pay for themselves (their cost and verdicts: results/discrepancy/COST.md); the library defaults stay
 # off, since for a model that costs microseconds (the toy) the emulator's own fitting is what costs.
+# The likelihood's own error terms (no fraction of the correction added to σ, the realization covariance's
+# scale integrated over its k-run estimate) make the interval's coverage nominal rather than conservative
+# (results/discrepancy/coverage/README.md); the library defaults keep the committed twins reproducible.
 STARTING = {("profile", "emulator"): ("gp", "for solver runs (library default \"none\"):"),
-            ("profile", "emulate_refits"): (True, "for solver runs (library default false):")}
+            ("profile", "emulate_refits"): (True, "for solver runs (library default false):"),
+            ("noise", "disc_error_fraction"): (0.0, "a calibrated interval (library default 0.5):"),
+            ("profile", "likelihood"): ("marginal", "a calibrated interval (library default \"weighted\"):")}
 
 
 def _option_tables() -> list[str]:
