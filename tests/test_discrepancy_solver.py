@@ -50,6 +50,21 @@ def test_solver_forward_runs_once_and_serves_the_cache(tmp_path):
     assert 5.0 < p1["front_radius_mean"][0] < 53.0
 
 
+def test_an_invalid_parameter_set_is_a_run_that_reached_no_time(tmp_path, caplog):
+    """A fit may step into a set the solver refuses (K_s below the drained bulk modulus K = E/(3(1-2nu))):
+    the batch goes on, that point is all NaN (the fit's nan_residual penalty), nothing is run or cached for
+    it, and the warning carries solver.Parameters' message."""
+    fwd = SolverForward({"beta": 0.0}, RunOptions(h=12.0, t_end=0.006, dt0=0.002, dt_max=0.002), tmp_path)
+    times = {"p_inj": np.array([0.002, 0.006]), "regime": np.array([0.006])}
+    bad = {"w_i": 50.0, "K_s": 100.0}
+    assert "K_s=100.0" in fwd.invalid(bad) and fwd.invalid({"w_i": 50.0}) is None
+    with caplog.at_level("WARNING", logger="dchfrac.discrepancy"):
+        p_bad, p_ok = fwd.predict_many([(bad, times), ({"w_i": 50.0}, times)])
+    assert np.all(np.isnan(p_bad["p_inj"])) and p_bad["regime"] is None
+    assert np.all(np.isfinite(p_ok["p_inj"])) and fwd.n_runs == 1
+    assert len(list(tmp_path.iterdir())) == 1 and "K_s=100.0" in caplog.text
+
+
 def test_solver_forward_reruns_an_interrupted_cache_entry(tmp_path):
     """A run killed mid-way leaves summary.json with status "running": not a result, it is run again."""
     import json

@@ -14,12 +14,15 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from .observables import get_observable, read_curves
+
+log = logging.getLogger("dchfrac.discrepancy")
 
 __all__ = ["ForwardModel", "SolverForward", "fine_forwards", "finished", "params_hash", "observables_from_timeseries"]
 
@@ -166,10 +169,31 @@ class SolverForward(ForwardModel):
         pd_ = {k: v for k, v in self._pdict(overrides).items() if v is not None}
         return self.cache_dir / params_hash(pd_, self.options.to_dict())
 
+    def invalid(self, overrides: dict) -> str | None:
+        """Why ``overrides`` are not a valid parameter set (solver.Parameters' message), or None.  A fit may
+        step into such a set (K_s below the drained bulk modulus of a softer E, say): it is answered as a
+        run that reached no time, never run and never cached."""
+        try:
+            self._pdict(overrides)
+        except ValueError as exc:
+            return str(exc)
+        return None
+
     def predict_many(self, jobs: list) -> list:
         from sweep.store import current_code_hash
 
         code = current_code_hash()
+        bad = [self.invalid(o) for o, _ in jobs]
+        for why in dict.fromkeys(b for b in bad if b):
+            log.warning("forward model: %s; the point counts as a run that reached no time", why)
+        out = [observables_from_timeseries(None, t, 0.0) if b else None for (_, t), b in zip(jobs, bad)]
+        good = [j for j, b in zip(jobs, bad) if not b]
+        for k, pred in zip([i for i, b in enumerate(bad) if not b], self._predict_valid(good, code)):
+            out[k] = pred
+        return out
+
+    def _predict_valid(self, jobs: list, code: str) -> list:
+        """Predictions of valid parameter sets: cached entries of the current code read, the others run."""
         todo = {}
         for o, _ in jobs:
             rd = self.run_dir(o)
