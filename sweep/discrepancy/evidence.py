@@ -210,8 +210,8 @@ def rival_refits(problem: Problem, best: dict, base_fit: Fit, train, holdout, fi
         starts = [np.append(base_fit.x, alt.to_x(alt.initial)),
                   np.append(xc, lo + 0.25 * (hi - lo)), np.append(xc, lo + 0.75 * (hi - lo))]
         f = problem.fit(params, starts, train) if fitter is None else fitter(params, starts, base_fit)
-        w = np.minimum(stats.series_weights(f.r, ser), stats.series_weights(best["fit"].r, ser))
-        delta = float(stats.bic(f.r, w, len(params)) - stats.bic(best["fit"].r, w, len(best["fit"].params)))
+        b_rival, b_best = common_bics([f, best["fit"]], ser)
+        delta = float(b_rival - b_best)
         value = float(alt.from_x(f.x[-1]))
         ties = bool(delta < spec.acceptance.tie_bic)
         log.info("rival %s of %s: %s = %.5g, BIC(rival) - BIC(candidate) %.1f, %s", alt.name, best["effect"],
@@ -233,8 +233,13 @@ def compare_passing(passing: list, problem: Problem, train) -> list:
     under its own weights)."""
     if not passing:
         return []
-    ser = problem.series[problem.mask(train)]
-    w = np.minimum.reduce([stats.series_weights(p["fit"].r, ser) for p in passing])
-    for p in passing:
-        p["bic_common"] = float(stats.bic(p["fit"].r, w, len(p["fit"].params)))
+    for p, b in zip(passing, common_bics([p["fit"] for p in passing], problem.series[problem.mask(train)])):
+        p["bic_common"] = b
     return sorted(passing, key=lambda d: d["bic_common"])
+
+
+def common_bics(fits: list, series) -> list:
+    """The BIC of each fit under the per-series minimum of their series weights (``series``: the series index
+    of each training point), so that models are compared on one scale (see :func:`compare_passing`)."""
+    w = np.minimum.reduce([stats.series_weights(f.r, series) for f in fits])
+    return [float(stats.bic(f.r, w, len(f.params))) for f in fits]

@@ -246,8 +246,7 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
         nsp = float(np.linalg.norm(sp))
         ratio = nsp / ns if ns > 0 else 0.0
         alt_ratio, confounded = _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio)
-        ident = bool(ok and ns > 1e-9 and ratio >= min_ratio and not confounded
-                     and (alt_ratio is None or alt_ratio >= min_ratio))
+        ident = bool(ok and ns > 1e-9 and ratio >= min_ratio and not confounded)
         rw = r * sw
         a = float(rw @ sp / nsp**2) if nsp > 0 else 0.0
         score = float((rw @ sp) ** 2 / nsp**2) if (nsp > 0 and a > 0) else 0.0
