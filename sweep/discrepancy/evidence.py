@@ -85,7 +85,7 @@ def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
     vals0 = fit.values()
     alts = problem.spec.alternatives
     vlist = ([vals0] + [{**vals0, "effect:" + c: problem.spec.probe_strength(c)} for c in candidates]
-             + [{**vals0, a.name: v} for a, v in zip(alts, alternative_steps(problem, alts))])
+             + [{**vals0, a.name: v} for a, v in zip(alts, alternative_steps(alts))])
     preds = problem.predict(vlist, ids)
     m = problem.mask(ids)
     ms = [problem.model_vector(p, m) for p in preds]
@@ -101,16 +101,10 @@ def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
                                  alternatives=tuple(a.name for a in alts))
 
 
-def alternative_steps(problem: Problem, alts) -> list:
-    """The stepped value of each alternative: its baseline value moved by its step (``CalibParam.x_step``,
-    2 % of its range in its scale unless given), toward the inside of its range."""
-    out = []
-    for a in alts:
-        x0 = a.to_x(a.initial)
-        lo, hi = a.x_bounds
-        h = a.x_step if x0 + a.x_step <= hi else -a.x_step
-        out.append(a.from_x(x0 + h))
-    return out
+def alternative_steps(alts) -> list:
+    """The stepped value of each alternative: its baseline value moved by its finite-difference step
+    (``CalibParam.inward_step``: 2 % of its range in its scale unless given, toward the inside of its range)."""
+    return [a.from_x(a.to_x(a.initial) + a.inward_step(a.to_x(a.initial))) for a in alts]
 
 
 def bound_sides(fit: Fit, rtol: float = 1e-4) -> list:

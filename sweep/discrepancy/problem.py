@@ -208,10 +208,7 @@ class Problem:
         """Forward-difference ∂r/∂x (steps toward the interior of the bounds), one batch of runs."""
         xs, steps = [], []
         for j, p in enumerate(params):
-            lo, hi = p.x_bounds
-            h = p.x_step
-            if x[j] + h > hi:
-                h = -h
+            h = p.inward_step(x[j])
             xp = np.array(x, float)
             xp[j] += h
             xs.append(xp)

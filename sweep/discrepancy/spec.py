@@ -102,6 +102,11 @@ class CalibParam:
     step: float | None = None
     nested: float | None = None
 
+    def inward_step(self, x: float) -> float:
+        """The finite-difference step at ``x`` (fit coordinates): ``x_step``, negated where it would leave the
+        upper bound."""
+        return -self.x_step if x + self.x_step > self.x_bounds[1] else self.x_step
+
     @property
     def x_nested(self) -> float:
         """``nested`` in fit coordinates (the lower bound when None)."""
