@@ -10,9 +10,10 @@ Example (units mm, s, kPa)::
     name = "kbar"; lower = 5e-4; upper = 5e-3; scale = "log"     # initial = baseline value
 
     [[alternative]]                  # optional: baseline parameters held fixed but uncertain in [lower, upper]
-    name = "K_s"; lower = 300.0; upper = 3000.0; scale = "log"  # (value: the baseline's).  The screen projects
-                                     # a candidate's signature off their sensitivity directions too: a
-                                     # candidate one of them can mimic is "not identifiable against" it
+    name = "K_s"; lower = 160.0; upper = 16000.0; scale = "log"  # (value: the baseline's).  The screen projects
+                                     # a candidate's signature off their sensitivity directions too, and the
+                                     # best passing candidate meets each as a rival refit (the baseline with
+                                     # it freed): a rival within tie_bic makes the verdict a tie, never a name
 
     [candidates]
     effects = ["damage_viscosity", "compliant_boundary"]        # default: every effect off in the baseline
