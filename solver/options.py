@@ -12,10 +12,10 @@ from .tomlio import read_toml, write_flat_toml
 
 _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
 TRANSPORTS = ("galerkin", "upwind")  # the transport discretizations solver.model implements
+STEP_CONTROLS = ("state_change", "iterations")  # the step-size controllers solver.simulate._next_dt implements
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format", "pressure_stabilization", "anderson_depth",
-                   "first_stagger_rtol")
+_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format", "pressure_stabilization", "first_stagger_rtol")
 # written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
 DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
 
@@ -38,9 +38,22 @@ class RunOptions:
     mesh_seed : perturbation seed of the mesh generator (None = deterministic default).
     t_end : final time, s.
     dt0, dt_min, dt_max : initial, minimum and maximum time step, s.
-    dt_grow : factor on dt after an easy step (<= ``easy_newton_its`` Newton iterations).
+    step_control : the step-size controller after an accepted step (``solver.simulate._next_dt``):
+        "state_change" (default): the step that would change the state by about ``dt_change_target``,
+        dt_next = dt 2c / (Δ + c) with Δ the step's largest nodal change of S or d, at most ``dt_grow`` dt.  It
+        reads the accepted states only, so the step sequence does not depend on the Newton iteration counts
+        (``anderson_depth`` leaves a run without rejected steps unchanged to the Newton tolerance) and is a
+        continuous function of the parameters.  "iterations": grow dt by ``dt_grow`` after an easy step (at most
+        ``easy_newton_its`` Newton iterations per stagger iteration), else keep it; the controller of the runs
+        made before "state_change" existed (with ``anderson_depth = 0`` it reproduces them).
+    dt_change_target : target change c per step of the saturation S and the damage d with
+        ``step_control = "state_change"`` (dimensionless, in (0, 1]).  The time-discretization error of backward
+        Euler is O(c) (``tests/test_step_control.py``); why 0.1: ``results/bench/README.md``, third round.
+    dt_grow : largest growth factor of dt from one step to the next (with "iterations", the factor after an
+        easy step).
     dt_cut : factor on dt after a rejected step.
-    easy_newton_its : Newton iterations per stagger iteration up to which a step counts as easy.
+    easy_newton_its : Newton iterations per stagger iteration up to which a step counts as easy
+        (``step_control = "iterations"``).
     stop_front_radius : stop when the S = 0.5 front connected to the inlet reaches this radius, mm (None: never);
         inside (r_inner, r_outer] (checked with the parameters by :func:`check_run_inputs`).
     snapshot_times : distinct times in [0, t_end] at which fields are written, s (the initial state t = 0 and
@@ -51,6 +64,9 @@ class RunOptions:
     newton_rtol : relative Newton tolerance on every field's update (dimensionless; 1e-6: with a reused
         Jacobian the error left is below this, far below the time-discretization error; 1e-7 cost 12 % more
         iterations for changes of p_inj below 1e-5 relative).
+    newton_mass_tol : Newton's second test (dimensionless): the global balances of the total and of the invading
+        fluid over the step hold to this fraction of the injection rate (``Simulation.balanced``), so the
+        cumulative volume balance (``mass_error`` of ``timeseries.csv``) holds to about this tolerance.
     newton_max_its : Newton iterations before a step is rejected.
     stagger_tol : stagger converged when max |Δd| between two stagger iterations is below this.
     stagger_max_its : stagger iterations before a step is rejected.
@@ -75,12 +91,12 @@ class RunOptions:
     xdmf_format : "hdf5" (arrays in fields.h5 beside fields.xdmf; needs h5py), "xml" (inline) or None / "auto"
         (hdf5 when h5py is installed). Omitted from :meth:`to_dict` when None, as h_inner.
     anderson_depth : Anderson acceleration of the Newton iterations made with a reused Jacobian (``solver.anderson``):
-        the next iterate combines the last ``anderson_depth`` + 1 plain updates (1..20).
-        The Newton test and tolerance are unchanged, but fewer Newton iterations per step make the step-size
-        controller (which grows dt after easy steps) choose other steps, so a run follows another trajectory
-        within the time-discretization error; results near a decision threshold (the confounded twin's
-        identifiability) can move.  So it is off by default (None: the plain iteration); its cost and effect:
-        ``results/bench/README.md``.  Omitted from :meth:`to_dict` when None, as h_inner.
+        the next iterate combines the last ``anderson_depth`` + 1 plain updates (1..20); 0 (or None): the plain
+        iteration.  The Newton test and tolerance are unchanged, so with ``step_control = "state_change"`` a run
+        without rejected steps is the plain one to the Newton tolerance, in fewer factorizations; a step that
+        diverges in one iteration and not in the other is rejected in one run only, and the runs then differ by
+        the time-discretization error.  With "iterations", fewer Newton iterations make the controller choose
+        other steps.  Default 3 (cost and effect: ``results/bench/README.md``).
     first_stagger_rtol : Newton tolerance of the first stagger iteration of each step (dimensionless, in
         [``newton_rtol``, 0.1]): that iteration only supplies the damage that starts the second, which is always
         made and solved to ``newton_rtol``, so the accepted state meets the same tests (``Simulation.step``).
@@ -103,9 +119,12 @@ class RunOptions:
     dt_grow: float = 1.5
     dt_cut: float = 0.25
     easy_newton_its: int = 4
+    step_control: str = "state_change"
+    dt_change_target: float = 0.1
     stop_front_radius: float | None = None
     snapshot_times: tuple = DEFAULT_SNAPSHOT_TIMES
     newton_rtol: float = 1e-6
+    newton_mass_tol: float = 1e-10
     newton_max_its: int = 25
     stagger_tol: float = 1e-4
     stagger_max_its: int = 30
@@ -118,7 +137,7 @@ class RunOptions:
     frames: int | None = None
     xdmf_format: str | None = None
     pressure_stabilization: float | None = None
-    anderson_depth: int | None = None
+    anderson_depth: int = 3
     first_stagger_rtol: float | None = None
 
     def __post_init__(self):
@@ -186,8 +205,10 @@ _NUMBERS = (
     ("dt_grow", float, 1.0, None, False, False),
     ("dt_cut", float, 0.0, 1.0, True, False),
     ("easy_newton_its", int, 1, None, False, False),
+    ("dt_change_target", float, 0.0, 1.0, True, False),
     ("stop_front_radius", float, 0.0, None, True, True),
     ("newton_rtol", float, 0.0, 1e-2, True, False),
+    ("newton_mass_tol", float, 0.0, 1e-2, True, False),
     ("newton_max_its", int, 1, None, False, False),
     ("stagger_tol", float, 0.0, 1.0, True, False),
     ("stagger_max_its", int, 1, None, False, False),
@@ -195,7 +216,7 @@ _NUMBERS = (
     ("jacobian_reuse", float, 0.0, 1.0, False, False),
     ("max_wall_time", float, 0.0, None, True, True),
     ("pressure_stabilization", float, 0.0, 100.0, False, True),
-    ("anderson_depth", int, 1, 20, False, True),
+    ("anderson_depth", int, 0, 20, False, True),     # None: 0 (the plain iteration), set after the loop
     ("first_stagger_rtol", float, 0.0, 0.1, True, True),
 )
 
@@ -204,8 +225,8 @@ _NUMBERS = (
 # campaign column dictionary reads; the meanings are the RunOptions docstring's
 OPTION_UNITS = {
     "h": "mm", "h_inner": "mm", "h_outer": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
-    "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "stop_front_radius": "mm", "snapshot_times": "s",
-    "newton_rtol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
+    "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "step_control": "", "dt_change_target": "-", "stop_front_radius": "mm", "snapshot_times": "s",
+    "newton_rtol": "-", "newton_mass_tol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
     "linear_solver": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
     "xdmf_format": "", "transport": "", "pressure_stabilization": "-", "anderson_depth": "",
     "first_stagger_rtol": "-",
@@ -268,11 +289,13 @@ def _check(o: RunOptions) -> None:
     for name in ("h_inner", "h_outer"):
         if getattr(o, name) is not None and not 0.0 < getattr(o, name) <= o.h:
             _fail(name, getattr(o, name), f"(0, h = {o.h}]")
+    if o.anderson_depth is None:
+        object.__setattr__(o, "anderson_depth", 0)
     if o.first_stagger_rtol is not None and o.first_stagger_rtol < o.newton_rtol:
         _fail("first_stagger_rtol", o.first_stagger_rtol, f"None or in [newton_rtol={o.newton_rtol}, 0.1]")
     if not (o.dt_min <= o.dt0 <= o.dt_max):
         _fail("dt0", o.dt0, f"[dt_min={o.dt_min}, dt_max={o.dt_max}]")
-    for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", TRANSPORTS),
+    for name, allowed in (("linear_solver", _LINEAR_SOLVERS), ("transport", TRANSPORTS), ("step_control", STEP_CONTROLS),
                           ("xdmf_format", (None, "auto", "hdf5", "xml"))):
         if getattr(o, name) not in allowed:
             _fail(name, getattr(o, name), f"one of {allowed}")

@@ -50,6 +50,7 @@ TIMESERIES_COLUMNS = {
     "newton_its": ("", "Newton iterations of the step (all stagger iterations)"),
     "stagger_its": ("", "stagger iterations of the step"),
     "damage_kkt": ("-", "KKT residual of the damage bound constraints"),
+    "step_change": ("-", "largest nodal change of S or d over the step (what the state-change step controller reads)"),
     "factorizations": ("", "cumulative sparse factorizations of the run"),
 }
 

@@ -8,7 +8,8 @@ import pytest
 
 from solver import Parameters, RunOptions, simulate
 
-FIXED = dict(h=6.0, t_end=0.05, dt0=2e-3, dt_max=2e-3, dt_grow=1.0, snapshot_times=[], write_xdmf=False)
+FIXED = dict(h=6.0, t_end=0.05, dt0=2e-3, dt_max=2e-3, dt_grow=1.0, step_control="iterations", snapshot_times=[],
+             write_xdmf=False)
 
 
 def test_loose_first_iteration_gives_the_same_run():
