@@ -1,0 +1,29 @@
+"""The dry-run cost rates that ``dchfrac bench`` writes (``sweep.bench._cost_rates``): from the longest run made at
+each mesh size, never from a failed run, and read back by the dry-run estimate (``sweep.campaign.wall_per_sim_second``)."""
+from sweep.bench import _cost_rates
+from sweep.campaign import wall_per_sim_second
+
+
+def _run(t_end, wall, status="ok"):
+    return {"t_end_s": t_end, "wall_s": wall, "status": status, "wall_s_per_sim_s": wall / t_end}
+
+
+def test_the_longest_run_at_each_size_sets_the_rate():
+    result = {"coupled_run_h2": _run(0.2, 9.4), "reference_run_h2": _run(2.0, 25.5), "reference_run_h1": _run(2.0, 134.0)}
+    _cost_rates(result)
+    assert result["coupled_run_h2_wall_s_per_sim_s"] == 25.5 / 2.0
+    assert result["coupled_run_h1_wall_s_per_sim_s"] == 134.0 / 2.0
+    assert result["coupled_run_h2_wall_s_per_sim_s_from"] == "2 s run at h = 2 mm"
+    # the estimate reads the exact key at h = 1, and scales the h = 2 rate elsewhere
+    assert wall_per_sim_second(1.0, result) == (67.0, "bench h=1")
+    assert wall_per_sim_second(4.0, result)[1] == "bench h=2 scaled"
+
+
+def test_without_the_long_runs_the_short_one_sets_it_and_a_failed_run_never_does():
+    result = {"coupled_run_h2": _run(0.05, 5.8)}
+    _cost_rates(result)
+    assert result["coupled_run_h2_wall_s_per_sim_s"] == 5.8 / 0.05 and "coupled_run_h1_wall_s_per_sim_s" not in result
+    result = {"coupled_run_h2": _run(0.2, 9.4), "reference_run_h2": _run(2.0, 1.0, status="failed"),
+              "reference_run_h1": _run(2.0, 1.0, status="failed")}
+    _cost_rates(result)
+    assert result["coupled_run_h2_wall_s_per_sim_s"] == 9.4 / 0.2 and "coupled_run_h1_wall_s_per_sim_s" not in result
