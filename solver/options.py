@@ -45,7 +45,8 @@ class RunOptions:
         (``anderson_depth`` leaves a run without rejected steps unchanged to the Newton tolerance) and is a
         continuous function of the parameters.  "iterations": grow dt by ``dt_grow`` after an easy step (at most
         ``easy_newton_its`` Newton iterations per stagger iteration), else keep it; the controller of the runs
-        made before "state_change" existed (with ``anderson_depth = 0`` it reproduces them).
+        made before "state_change" existed (with ``anderson_depth = 0`` and ``newton_mass_tol = 0.01``, their
+        step sequence).
     dt_change_target : target change c per step of the saturation S and the damage d with
         ``step_control = "state_change"`` (dimensionless, in (0, 1]).  The time-discretization error of backward
         Euler is O(c) (``tests/test_step_control.py``); why 0.1: ``results/bench/README.md``, third round.
