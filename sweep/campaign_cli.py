@@ -8,6 +8,7 @@
     dchfrac campaign report SPEC [--results DIR] [--html]
     dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
     dchfrac campaign columns SPEC [--results DIR] [--timeseries]   (column dictionary: name, unit, meaning)
+    dchfrac campaign prune SPEC [--results DIR]        (keep of each finished run what its label was read from)
 
 ``run`` reruns damaged runs and runs made by other solver code (stale); ``--accept-stale`` keeps
 the stale ones and lists them. ``plot``, ``report`` and ``classify`` refuse (exit 1) while runs
@@ -48,7 +49,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare}")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -75,6 +76,8 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         ("report", cmd_report, "write a Markdown summary with the figures"),
         ("classify", cmd_classify, "rerun the classifier on the finished runs (no simulation)"),
         ("columns", cmd_columns, "the column dictionary of the campaign table: name, unit, dtype, meaning"),
+        ("prune", cmd_prune, "remove the snapshots no label was read from (sweep.archive); keeps the campaign "
+                             "resumable and its diagrams drawable"),
     ):
         q = sub.add_parser(name, help=helptext)
         _common(q)
@@ -294,6 +297,21 @@ def cmd_classify(args) -> int:
     for k, e in errors:
         print(f"  no label for {k}: {e}", file=sys.stderr)
     return 1 if errors else 0
+
+
+@_guarded
+def cmd_prune(args) -> int:
+    from sweep.archive import prune_campaign
+
+    spec = _spec(args)
+    try:
+        rep = prune_campaign(spec, args.results)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    print(f"pruned {len(rep.pruned)} runs, {rep.bytes_freed / 2**20:.1f} MiB freed; {len(rep.skipped)} left as they were")
+    for k, why in rep.skipped.items():
+        print(f"  {k}: {why}", file=sys.stderr)
+    return 0
 
 
 @_guarded
