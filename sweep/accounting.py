@@ -1,0 +1,117 @@
+"""Where a campaign's hours went: run time, waiting cores, breaks, and the runs per hour it achieved.
+
+Every run record holds ``started_at`` and ``finished_at`` (ISO 8601, s resolution, local time of the host). From
+them alone (no log, no clock of the campaign process):
+
+* the campaign's *activity* is the union of the run intervals, joined across gaps shorter than ``break_s``: a gap
+  in which no run is in flight is a pause of the campaign process (a sampler fit, table writing) when short, and a
+  break (the process was not running) when long;
+* the *slots* are the most runs seen in flight at once (the campaign's ``--jobs``);
+* busy core time is the sum of the runs' wall times; the slots' time during activity, less that, is *waiting*:
+  cores a round leaves idle while its slowest run finishes, and the sampler's pauses between rounds.
+
+Units: seconds and hours as named; utilization dimensionless.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Iterable, Mapping
+
+__all__ = ["Throughput", "campaign_throughput", "run_intervals"]
+
+BREAK_S = 600.0  # s: a gap with no run in flight longer than this is a break, not waiting
+
+
+@dataclass(frozen=True)
+class Throughput:
+    """A campaign's accounting (see the module docstring). Times in s."""
+
+    runs: int
+    slots: int
+    periods: int
+    active_s: float
+    busy_s: float
+    waiting_s: float
+    breaks_s: float
+
+    @property
+    def utilization(self) -> float:
+        """Busy core time over the slots' time during activity (0..1)."""
+        return self.busy_s / (self.slots * self.active_s) if self.active_s > 0 else float("nan")
+
+    @property
+    def runs_per_hour(self) -> float:
+        """Runs finished per hour of activity."""
+        return 3600.0 * self.runs / self.active_s if self.active_s > 0 else float("nan")
+
+    def text(self) -> str:
+        """One line for ``dchfrac campaign status`` and the report."""
+        if not self.runs:
+            return "throughput: no run with start and end times yet"
+        return (f"throughput: {self.runs} runs in {self.active_s / 3600:.2f} h of activity "
+                f"({self.periods} period(s); breaks {self.breaks_s / 3600:.2f} h not counted): "
+                f"{self.runs_per_hour:.1f} runs/h on {self.slots} slot(s); cores busy {100 * self.utilization:.1f} %, "
+                f"{self.waiting_s / 3600:.2f} core-h waiting (rounds ending on their slowest run, sampler pauses)")
+
+
+def _time(v: str, key: str, field: str) -> float:
+    try:
+        return datetime.fromisoformat(v).timestamp()
+    except (TypeError, ValueError):
+        raise ValueError(f"run {key}: {field}={v!r} is not an ISO 8601 time") from None
+
+
+def run_intervals(records: Mapping[str, Mapping]) -> list[tuple[float, float]]:
+    """(start, end) in s (POSIX time) of every record with both times, sorted by start; end >= start."""
+    out = []
+    for key, rec in records.items():
+        a, b = rec.get("started_at"), rec.get("finished_at")
+        if a is None or b is None:
+            continue
+        t0, t1 = _time(a, key, "started_at"), _time(b, key, "finished_at")
+        if t1 < t0:
+            raise ValueError(f"run {key}: finished_at {b} is before started_at {a}")
+        out.append((t0, t1))
+    return sorted(out)
+
+
+def _max_in_flight(intervals: Iterable[tuple[float, float]]) -> int:
+    """Most intervals open at once (an interval ending when another starts does not overlap it)."""
+    events = sorted([(t0, 1) for t0, _ in intervals] + [(t1, -1) for _, t1 in intervals])
+    n = best = 0
+    for _, step in events:
+        n += step
+        best = max(best, n)
+    return best
+
+
+def _activity(intervals: list[tuple[float, float]], break_s: float) -> tuple[float, float, int]:
+    """(active s, breaks s, periods): the intervals' union, gaps under ``break_s`` joined in."""
+    active = breaks = 0.0
+    periods = 0
+    start, end = intervals[0]
+    for t0, t1 in intervals[1:]:
+        if t0 - end > break_s:
+            active += end - start
+            breaks += t0 - end
+            periods += 1
+            start = t0
+        end = max(end, t1)
+    return active + (end - start), breaks, periods + 1
+
+
+def campaign_throughput(records: Mapping[str, Mapping], *, break_s: float = BREAK_S) -> Throughput:
+    """The accounting of a campaign's run records ({key: record}, as ``ResultsStore.records``).
+
+    break_s : s; a gap with no run in flight longer than this is a break (default :data:`BREAK_S`).
+    """
+    if not break_s >= 0:
+        raise ValueError(f"break_s={break_s!r}: must be >= 0 s")
+    iv = run_intervals(records)
+    if not iv:
+        return Throughput(0, 0, 0, 0.0, 0.0, 0.0, 0.0)
+    slots = _max_in_flight(iv)
+    active, breaks, periods = _activity(iv, break_s)
+    busy = sum(t1 - t0 for t0, t1 in iv)
+    return Throughput(len(iv), slots, periods, active, busy, max(0.0, slots * active - busy), breaks)
