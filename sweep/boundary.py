@@ -26,13 +26,19 @@ Campaign TOML::
                                 #   (factor-2 grid, weighted by its evidence); 1 fixes it at prior_sd
     smoothness = 0.3            # prior sd ratio per extra degree (curvature is a priori small)
     confidence = 0.95           # of the boundary's uncertainty band
+    fill_batch = false          # true: when the picks' bands leave fewer than `batch` candidates, halve the
+                                #   bands until the round is full (fewer rounds; see results/boundary_sampler)
 
 Each round fits :func:`sweep.regime_model.fit_regime_model` to the labelled runs, measures the
 boundary-location uncertainty (z sigma_loc on the MAP boundaries, in tolerance units) and,
 unless it is <= 1 along the whole boundary or the budget is spent, picks the next batch by the
 straddle score z sigma_loc - distance to the boundary (both in tolerance units) over a seeded
 candidate set, each pick excluding the candidates within its own band (batch spread out); no point
-within half a tolerance of a sampled one.
+within half a tolerance of a sampled one. While the band is wide (the first rounds) one pick's band can
+cover every candidate, and the round runs fewer than ``batch`` points while a core waits. ``fill_batch``
+then halves the exclusion radii (never below half a tolerance) and picks again, so that every round runs
+``batch`` points. It is off by default: it changes the designs, and with them the coverage of the separatrix
+intervals on fuzzy labels (results/boundary_sampler/README.md).
 
 The prior sd of the classifier's slopes is the inverse of the regimes' transition width. It is not
 fixed: each fit weighs a grid of prior sds by their evidence (marginal likelihood of the labels), and
@@ -84,6 +90,7 @@ class BoundarySettings:
     smoothness: float = 0.3
     prior_span: float = 64.0
     confidence: float = 0.95
+    fill_batch: bool = False
 
 
 def _is_int(v) -> bool:
@@ -116,6 +123,7 @@ _CHECKS: dict[str, tuple] = {
     "smoothness": (lambda v: _is_num(v) and 0 < v <= 1, "a number in (0, 1]"),
     "prior_span": (lambda v: _is_num(v) and v >= 1, "a number >= 1 (1: prior_sd fixed)"),
     "confidence": (lambda v: _is_num(v) and 0.5 <= v < 1, "a number in [0.5, 1)"),
+    "fill_batch": (lambda v: isinstance(v, bool), "true or false"),
 }
 
 
@@ -299,7 +307,8 @@ class BoundarySampler:
                            f"{unc['max']:.3g} tolerance" + ("" if model else f" (fewer than two labels seen: {sorted(set(y))})"))
         else:
             pts = [c for r in st.rounds for c in r]
-            out["batch"] = _next_batch(cfg, model, pts, min(cfg.batch, s.budget - used), len(st.rounds))
+            out["batch"] = _next_batch(cfg, model, pts, min(cfg.batch, s.budget - used), len(st.rounds),
+                                       fill=s.fill_batch)
             if not out["batch"]:
                 out["stop"] = (f"resolution reached: no candidate farther than {_MIN_SPACING} tolerance from the "
                                f"{used} sampled points (largest boundary half-width {unc['max']:.3g} tolerance)")
@@ -366,9 +375,12 @@ def _tol_coords(axes, U) -> np.ndarray:
     return U * np.array([a.tol_per_u for a in axes])
 
 
-def _next_batch(cfg: _Config, model: RegimeModel | None, sampled, n: int, round_no: int) -> list:
+def _next_batch(cfg: _Config, model: RegimeModel | None, sampled, n: int, round_no: int, *,
+                fill: bool = False) -> list:
     """Up to n new points: the straddle score's best, each excluding the candidates within its band
-    (or, without a model, maximin space filling); none within _MIN_SPACING of a sampled point."""
+    (or, without a model, maximin space filling); none within _MIN_SPACING of a sampled point. With ``fill``,
+    a pass that ends short of n is redone with every exclusion radius halved (down to _MIN_SPACING), so
+    that the batch is full whenever enough candidates are left."""
     axes = cfg.axes
     d = len(axes)
     rng = np.random.default_rng([cfg.settings.seed, round_no])
@@ -376,8 +388,8 @@ def _next_batch(cfg: _Config, model: RegimeModel | None, sampled, n: int, round_
     T = _tol_coords(axes, U)
     S = _tol_coords(axes, np.stack([a.to_u(np.array(sampled)[:, j]) for j, a in enumerate(axes)], axis=1))
     dmin = np.min(np.linalg.norm(T[:, None, :] - S[None, :, :], axis=2), axis=1)
-    alive = dmin >= _MIN_SPACING
     band = boundary_band(model) if model is not None else {"U": np.empty((0, d))}
+    score = half = None
     if len(band["U"]):
         # straddle, measured geometrically: the band's half-width at the nearest point of an estimated
         # boundary minus the distance to it (sd(g) away from the boundary also carries the slope's
@@ -385,19 +397,31 @@ def _next_batch(cfg: _Config, model: RegimeModel | None, sampled, n: int, round_
         dist, j = cKDTree(_tol_coords(axes, band["U"])).query(T)
         half = band["half"][j]
         score = half - dist
-    else:
-        model = None
-    out = []
+    shrink = 1.0
+    while True:
+        out = _picks(U, T, dmin, score, half, n, shrink)
+        if not fill or len(out) >= n or score is None or shrink * max(float(half.max()), 1.0) <= _MIN_SPACING:
+            return [_coords(axes, U[i]) for i in out]
+        shrink *= 0.5
+
+
+def _picks(U, T, dmin, score, half, n: int, shrink: float) -> list[int]:
+    """Indices of up to n candidates, best first (straddle ``score``, or maximin distance ``dmin`` without a
+    model); each pick excludes the candidates within its radius: ``shrink`` x its band half-width (at least
+    one tolerance, and at least _MIN_SPACING after shrinking), or _MIN_SPACING without a model."""
+    dmin = dmin.copy()
+    alive = dmin >= _MIN_SPACING
+    out: list[int] = []
     for _ in range(n):
         if not alive.any():
             break
-        if model is None:
+        if score is None:
             i = int(np.argmax(np.where(alive, dmin, -np.inf)))
             radius = _MIN_SPACING
         else:
             i = int(np.argmax(np.where(alive, score, -np.inf)))
-            radius = max(float(half[i]), 1.0)
-        out.append(_coords(axes, U[i]))
+            radius = max(shrink * max(float(half[i]), 1.0), _MIN_SPACING)
+        out.append(i)
         di = np.linalg.norm(T - T[i], axis=1)
         dmin = np.minimum(dmin, di)
         alive &= di >= radius

@@ -314,6 +314,7 @@ def test_cli_status_shows_round_budget_and_uncertainty(tmp_path, capsys):
     ({"budget": 40, "tolerance": 0.1, "initial": "sobol"}, CA_AXES, "sampler.initial"),
     ({"budget": 40, "tolerance": 0.1, "budjet": 3}, CA_AXES, "sampler.budjet"),
     ({"budget": 40, "tolerance": 0.1, "prior_span": 0.5}, CA_AXES, "sampler.prior_span"),
+    ({"budget": 40, "tolerance": 0.1, "fill_batch": "yes"}, CA_AXES, "sampler.fill_batch"),
     ({"tolerance": 0.1}, CA_AXES, "sampler.budget"),
     ({"budget": 40, "tolerance": 0.1}, {"cement": [0.5, 1.0, 2.0], "eta_o": {"log": [1e-3, 1.0, 3]}}, "axes.cement"),
     ({"budget": 8, "tolerance": 0.1, "initial": "grid"}, CA_AXES, "sampler.budget"),
@@ -321,6 +322,26 @@ def test_cli_status_shows_round_budget_and_uncertainty(tmp_path, capsys):
 def test_bad_settings_are_rejected_before_any_run_naming_the_key(sampler, axes, key):
     with pytest.raises(SpecError, match=key.replace(".", r"\.")):
         _spec(axes, **sampler)
+
+
+def _round_sizes(fill: bool, seeds, batch: int = 2) -> list[list[int]]:
+    """Points per round after the initial design (the last round left out: the budget may cut it)."""
+    sizes = []
+    for seed in seeds:
+        spec = _spec(CA_AXES, budget=150, tolerance={"cement": 0.1, "eta_o": 0.1}, seed=seed, batch=batch,
+                     fill_batch=fill)
+        st, _ = drive(spec, separatrix_sharp, seed)
+        sizes.append([len(r) for r in st.rounds[1:-1]])
+    return sizes
+
+
+def test_fill_batch_runs_full_rounds_where_one_band_covers_every_candidate():
+    # without it the first rounds, whose band is wide, run one point and leave a core waiting; with it every
+    # round runs the batch (the candidates never run out on this 2D domain at tolerance 0.1)
+    short_off = sum(k < 2 for sizes in _round_sizes(False, range(4)) for k in sizes)
+    on = _round_sizes(True, range(4))
+    assert short_off >= 1
+    assert all(k == 2 for sizes in on for k in sizes)
 
 
 def test_nf_vs_nb_classifier_shading_recovers_a_known_map(tmp_path):
