@@ -1156,3 +1156,49 @@ def test_report_with_observables_split_across_conditions_and_a_pinned_parameter(
     md = (tmp_path / "out" / "report.md").read_text()
     assert "figures failed" not in md and "E is at its upper bound" in md
     assert any((tmp_path / "out").glob("*.png"))
+
+
+def test_twin_data_refuse_a_run_that_stopped_early(tmp_path):
+    """make_twin: a data-generating run without values at some observation times (it stopped early) is an
+    error naming the condition, the observable and the first missing time, and nothing is written."""
+    from sweep.discrepancy.toy import ToyForward
+    from sweep.discrepancy.twin import make_twin
+
+    class StopsEarly(ToyForward):
+        def predict_one(self, overrides, times):
+            out = super().predict_one(overrides, times)
+            if overrides.get("w_i") == 65.0:  # this condition's run "stopped" at 0.2 s
+                out["p_inj"] = np.where(np.asarray(times["p_inj"]) > 0.2, np.nan, out["p_inj"])
+            return out
+
+    times = np.linspace(0.02, 0.3, 15)
+    conds = {"w50": {"w_i": 50.0}, "w65": {"w_i": 65.0}}
+    with pytest.raises(ValueError, match=r"condition 'w65': the data-generating run gives no p_inj from t = 0\.22 s"):
+        make_twin(tmp_path / "data", StopsEarly(), conds, times, {}, observables=("p_inj",))
+    assert not (tmp_path / "data").exists()
+    assert (make_twin(tmp_path / "ok", StopsEarly(), {"w50": {"w_i": 50.0}}, times, {}, observables=("p_inj",))
+            / "observations.csv").is_file()
+
+
+def test_a_failed_twin_is_recorded_and_the_next_one_runs(tmp_path, monkeypatch):
+    """run_twins: a twin that raises gets verdict "failed" with the reason in summary.json; the others run."""
+    from pathlib import Path
+
+    import sweep.discrepancy.twins as tw
+
+    camp = tw.load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_long.toml")
+    names = [t["name"] for t in camp["twin"]]
+    ran = []
+
+    def fake(setup, twin):
+        ran.append(twin["name"])
+        if twin["name"] == names[0]:
+            raise ValueError("twin data: condition 'w50': stopped early")
+        return {"verdict": "named", "passed": True}
+
+    monkeypatch.setattr(tw, "_run_one_twin", fake)
+    summary = tw.run_twins(camp, tmp_path / "res", tmp_path / "cache")
+    assert ran == names
+    assert summary[names[0]]["verdict"] == "failed" and summary[names[0]]["passed"] is False
+    assert "stopped early" in summary[names[0]]["reason"]
+    assert all(summary[n]["verdict"] == "named" for n in names[1:])

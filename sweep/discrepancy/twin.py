@@ -25,6 +25,8 @@ def make_twin(folder, forward, conditions: dict, times, hidden: dict, noise: dic
     hidden : parameter overrides of the data-generating model (never told to the workflow);
     noise : {observable: sd} in the observable's unit (also written as the uncertainty column; default
         the registry's default noise, observables.py).
+    Raises ValueError, before writing anything, when a data-generating run gives no value at some of the
+    times (it stopped early): a twin's data cover every observation time or the twin is not made.
     """
     noise = dict(DEFAULT_NOISE, **(noise or {}))
     rng = np.random.default_rng(seed)
@@ -34,6 +36,7 @@ def make_twin(folder, forward, conditions: dict, times, hidden: dict, noise: dic
         tt["regime"] = times[-1:]
     jobs = [({**hidden, **cp}, tt) for cp in conditions.values()]
     preds = forward.predict_many(jobs)
+    _check_complete(conditions, preds, observables, times)
     rows, regimes = [], {}
     for cid, pr in zip(conditions, preds):
         for o in observables:
@@ -42,3 +45,14 @@ def make_twin(folder, forward, conditions: dict, times, hidden: dict, noise: dic
         if regime and pr.get("regime") is not None:
             regimes[cid] = (float(times[-1]), pr["regime"])
     return write_measured(folder, conditions, pd.DataFrame(rows, columns=list(OBS_COLUMNS)), regimes)
+
+
+def _check_complete(conditions: dict, preds, observables, times: np.ndarray) -> None:
+    """ValueError naming the condition, the observable and the first time (s) without a value, if any."""
+    for cid, pr in zip(conditions, preds):
+        for o in observables:
+            bad = ~np.isfinite(np.asarray(pr[o], float))
+            if bad.any():
+                raise ValueError(f"twin data: condition {cid!r}: the data-generating run gives no {o} from "
+                                 f"t = {times[bad][0]:.4g} s of the {times[-1]:.4g} s asked (it stopped early; its "
+                                 f"summary.json in the data cache says why)")

@@ -278,7 +278,9 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None, ov
 
     n_jobs : parallel solver runs (default: the spec's ``[fit] n_jobs``).  overrides : ``TABLE.KEY=VALUE``
     settings (:func:`apply_overrides`), recorded in each entry.  Every twin is validated before any run
-    starts; each twin's entry is merged into ``<results>/summary.json`` as soon as it ends.
+    starts; each twin's entry is merged into ``<results>/summary.json`` as soon as it ends.  A twin that fails
+    (its data cannot be made, or the workflow raises) gets the entry ``verdict = "failed"`` with the reason,
+    and the next twin runs.
     """
     if overrides:
         campaign = apply_overrides(campaign if isinstance(campaign, dict) else load_twin_campaign(campaign),
@@ -291,7 +293,12 @@ def run_twins(campaign, results, cache, only=None, n_jobs: int | None = None, ov
         name = twin["name"]
         if only and name not in only:
             continue
-        summary[name] = _run_one_twin(setup, twin)
+        try:
+            summary[name] = _run_one_twin(setup, twin)
+        except Exception as e:  # noqa: BLE001 - one twin that cannot be made or run does not stop the others
+            log.error("twin %s failed: %s: %s", name, type(e).__name__, e)
+            summary[name] = {"hidden": twin.get("hidden", {}), "expect": twin["expect"], "verdict": "failed",
+                             "passed": False, "reason": f"{type(e).__name__}: {e}"}
         if overrides:
             summary[name]["overrides"] = list(overrides)
         _write_summary_entry(summary_path, name, summary[name])
