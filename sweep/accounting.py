@@ -111,7 +111,7 @@ def campaign_throughput(records: Mapping[str, Mapping], *, break_s: float = BREA
     iv = run_intervals(records)
     if not iv:
         return Throughput(0, 0, 0, 0.0, 0.0, 0.0, 0.0)
-    slots = _max_in_flight(iv)
+    slots = max(1, _max_in_flight(iv))  # runs shorter than the records' 1 s resolution overlap nothing
     active, breaks, periods = _activity(iv, break_s)
     busy = sum(t1 - t0 for t0, t1 in iv)
     return Throughput(len(iv), slots, periods, active, busy, max(0.0, slots * active - busy), breaks)

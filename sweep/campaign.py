@@ -1054,7 +1054,7 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
     if plan.records:
         from sweep.accounting import campaign_throughput
 
-        acc = campaign_throughput(plan.records).text()
+        acc = campaign_throughput(plan.store.records()).text()
         L += [f"{acc[0].upper()}{acc[1:]} (`sweep/accounting.py`).", ""]
     if not table.empty and table["regime"].notna().any():
         L += ["## Regimes", "", "| regime | runs |", "|---|---|"]

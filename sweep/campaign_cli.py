@@ -234,7 +234,7 @@ def cmd_status(args) -> int:
     counts = code_counts(plan)
     print(f"  current code: solver {plan.code_hash}, classifier {plan.classifier_hash}; stored runs by code: "
           + ", ".join(f"{h}{' (current)' if h == plan.code_hash else ''}: {n}" for h, n in counts.items()))
-    print("  " + campaign_throughput(plan.records).text())
+    print("  " + campaign_throughput(plan.store.records()).text())
     if plan.misclassified:
         print(f"  {len(plan.misclassified)} run(s) labelled by other classifier code (`campaign run` reclassifies)")
     if plan.stale:

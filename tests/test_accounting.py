@@ -52,3 +52,11 @@ def test_bad_times_are_named():
         run_intervals({"y": _rec(10, 5)})
     with pytest.raises(ValueError, match="break_s=-1"):
         campaign_throughput({}, break_s=-1)
+
+
+def test_runs_shorter_than_the_time_resolution_still_occupy_a_slot():
+    # records have 1 s resolution: instant runs (start = end) in successive seconds
+    recs = {k: _rec(i, i) for i, k in enumerate("abc")}
+    acc = campaign_throughput(recs)
+    assert (acc.runs, acc.slots, acc.busy_s, acc.active_s) == (3, 1, 0.0, 2.0)
+    assert acc.utilization == 0.0 and "3 runs" in acc.text()

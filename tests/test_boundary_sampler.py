@@ -22,6 +22,7 @@ sharp separatrix the intervals bound the separating separatrices and are conserv
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pandas as pd
@@ -302,6 +303,9 @@ def test_cli_status_shows_round_budget_and_uncertainty(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "boundary sampler: round " in out and "/40 runs of the budget" in out and "x tolerance" in out
     assert "stopped: converged" in out
+    # the accounting counts every run of the campaign folder, not only the initial design's
+    used = re.search(r"round \d+, (\d+)/40 runs", out).group(1)
+    assert f"throughput: {used} runs in" in out
 
 
 @pytest.mark.parametrize("sampler, axes, key", [
