@@ -20,6 +20,7 @@ from typing import Iterable, Mapping
 
 __all__ = ["Throughput", "campaign_throughput", "run_intervals"]
 
+_RESOLUTION_S = 1.0  # s: the records' times are written to the second
 BREAK_S = 600.0  # s: a gap with no run in flight longer than this is a break, not waiting
 
 
@@ -63,15 +64,17 @@ def _time(v: str, key: str, field: str) -> float:
 
 
 def run_intervals(records: Mapping[str, Mapping]) -> list[tuple[float, float]]:
-    """(start, end) in s (POSIX time) of every record with both times, sorted by start; end >= start."""
+    """(start, end) in s (POSIX time) of every record with both times, sorted by start; an end up to the
+    records' 1 s resolution before its start is taken as the start (ValueError if earlier still)."""
     out = []
     for key, rec in records.items():
         a, b = rec.get("started_at"), rec.get("finished_at")
         if a is None or b is None:
             continue
         t0, t1 = _time(a, key, "started_at"), _time(b, key, "finished_at")
-        if t1 < t0:
+        if t1 < t0 - _RESOLUTION_S:
             raise ValueError(f"run {key}: finished_at {b} is before started_at {a}")
+        t1 = max(t1, t0)  # the two times are rounded apart: a run shorter than 1 s may end "before" it starts
         out.append((t0, t1))
     return sorted(out)
 

@@ -50,6 +50,8 @@ def test_bad_times_are_named():
         run_intervals({"x": {"started_at": "yesterday", "finished_at": "2026-11-26T12:00:00"}})
     with pytest.raises(ValueError, match="run y: finished_at .* is before started_at"):
         run_intervals({"y": _rec(10, 5)})
+    # within the records' 1 s resolution an end may be written before the start: an instant run
+    assert run_intervals({"z": _rec(10, 9)}) == [(run_intervals({"s": _rec(10, 10)})[0])]
     with pytest.raises(ValueError, match="break_s=-1"):
         campaign_throughput({}, break_s=-1)
 
