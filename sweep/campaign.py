@@ -1051,10 +1051,11 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
     if not table.empty and "wall_time_s" in table.columns:
         L += [f"Total wall time of the runs: {table['wall_time_s'].sum():.1f} s "
               f"(median {table['wall_time_s'].median():.1f} s per run).", ""]
-    if plan.records:
+    stored = plan.store.records()  # every run of the folder (a sampler's plan holds only its initial design)
+    if stored:
         from sweep.accounting import campaign_throughput
 
-        acc = campaign_throughput(plan.store.records()).text()
+        acc = campaign_throughput(stored).text()
         L += [f"{acc[0].upper()}{acc[1:]} (`sweep/accounting.py`).", ""]
     if not table.empty and table["regime"].notna().any():
         L += ["## Regimes", "", "| regime | runs |", "|---|---|"]
