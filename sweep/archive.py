@@ -5,8 +5,9 @@ A run folder holds every snapshot its spec asked for (``snapshot_times``), each 
 threshold-sensitivity study (``sweep.threshold_sensitivity``) and its relabelling (``dchfrac campaign classify``)
 read one snapshot a run, the one the classifier judged, and of it only the fields of :data:`LABEL_FIELDS`.
 Pruning keeps that snapshot with those fields, the mesh, the time series, the summary and the inputs; it removes
-the other snapshots and the ParaView copy of them all (:data:`FIELD_COPIES`). The run's record lists the files that remain (with their SHA-256, so
-:func:`sweep.store.verify_run` checks them as before) and says what was removed (``record["pruned"]``).
+the other snapshots and the ParaView copy of them all (:data:`FIELD_COPIES`). The run's record lists the files
+that remain (with their SHA-256, so :func:`sweep.store.verify_run` checks them as before) and says what was
+removed (``record["pruned"]``).
 
 A pruned run is a finished run: a resumed campaign reuses it, relabels it with a changed classifier (as long as
 the classifier reads no other field), and draws it in every diagram; a grid of field maps of another field leaves
@@ -18,8 +19,6 @@ Usage::
 """
 from __future__ import annotations
 
-import os
-import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping
@@ -66,23 +65,23 @@ def _classified_snapshot(run_dir: Path, record: Mapping) -> Path:
 
 
 def _strip_snapshot(path: Path, fields: tuple[str, ...]) -> None:
-    """Rewrite a snapshot with ``fields`` only (atomic: written beside it, then renamed over it)."""
+    """Rewrite a snapshot with ``fields`` only, with the run folders' own atomic NPZ writer (solver.output)."""
+    from solver.output import _atomic_npz
+
     with np.load(path) as z:
         missing = [f for f in fields if f not in z.files]
         if missing:
             raise ValueError(f"{path.name} lacks the fields {missing}")
         kept = {f: np.asarray(z[f]) for f in fields}
-    tmp = path.with_name(f".{path.stem}-{uuid.uuid4().hex[:8]}.npz")
-    np.savez_compressed(tmp, **kept)
-    os.replace(tmp, path)
+    _atomic_npz(path, **kept)
 
 
 def prune_run(run_dir, record: Mapping, *, fields: tuple[str, ...] = LABEL_FIELDS) -> dict:
     """Prune one finished, labelled run folder; returns its new record (also written to ``record.json``).
 
     Keeps the classified snapshot with ``fields`` and every file that is no snapshot; removes the other
-    ``snapshots/snap_*.npz`` and :data:`FIELD_COPIES`. Raises ValueError, before touching anything, for a run that is not "ok", has no
-    label, is already pruned, or whose files fail :func:`sweep.store.verify_run`.
+    ``snapshots/snap_*.npz`` and :data:`FIELD_COPIES`. Raises ValueError, before touching anything, for a run
+    that is not "ok", has no label, is already pruned, or whose files fail :func:`sweep.store.verify_run`.
     """
     run_dir = Path(run_dir)
     if record.get("status") != "ok":
