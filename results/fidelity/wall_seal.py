@@ -1,0 +1,111 @@
+"""The wall-seal probe (campaigns/wall_seal_h2.toml): per run, the quantities its header reads.
+
+For each finished run of the campaign store: from the time series, the crack (``open_tip_radius - r_inner``, mm)
+at its largest and at the judged time, the time of the largest, p_inj (kPa) at 1, 2 s and at the end, and the
+outflow through r_o as a fraction of the injected volume at 1, 2 s and at the end; from each snapshot, the
+pressure (kPa) and the porosity (-) averaged over rings at the radii RADII and r_o - WALL (mm), and the smallest
+porosity within 2 mm of r_o.  Units: mm, s, kPa.
+
+    python results/fidelity/wall_seal.py STORE/wall_seal_h2 --out wall_seal.json [--md wall_seal.md]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sweep.classify import list_snapshots
+
+RADII = (6.0, 10.0, 20.0, 30.0, 40.0, 45.0)   # mm, ring centres (half-width 1 mm)
+WALL = ((3.0, 0.5), (1.0, 0.5), (0.2, 0.1))   # mm inside r_o: ring centres near the wall and their half-widths
+
+
+def _at(ts: pd.DataFrame, col: str, t: float) -> float:
+    return float(np.interp(t, ts["t"], ts[col])) if t <= ts["t"].iloc[-1] + 1e-9 else float("nan")
+
+
+def series_row(ts: pd.DataFrame, r_i: float, t_judged: float) -> dict:
+    """The time-series quantities of one run (see the module docstring)."""
+    crack = (ts["open_tip_radius"] - r_i).clip(lower=0.0)
+    upto = ts["t"] <= t_judged + 1e-9
+    i = crack[upto].idxmax()
+    out_frac = ts["outflow_volume"] / ts["injected_volume"].where(ts["injected_volume"] > 0)
+    row = {"t_judged": t_judged, "crack_longest": float(crack[i]), "t_longest": float(ts.loc[i, "t"]),
+           "crack_judged": float(crack[upto].iloc[-1])}
+    for t in (1.0, 2.0):
+        row[f"p_inj_{t:g}s"] = _at(ts, "p_inj", t)
+        row[f"outflow_frac_{t:g}s"] = float(np.interp(t, ts["t"], out_frac.fillna(0.0)))
+    row["p_inj_end"] = float(ts["p_inj"].iloc[-1])
+    row["outflow_frac_end"] = float(out_frac.iloc[-1])
+    return row
+
+
+def ring_profiles(run_dir: Path, r_o: float) -> list[dict]:
+    """Per snapshot: ring means of p (nodal) and phi (per element, at its centroid) at RADII and the smallest
+    element phi within 2 mm of r_o."""
+    with np.load(run_dir / "snapshots" / "mesh.npz") as m:
+        pts, tris = np.asarray(m["points"], float), np.asarray(m["triangles"], np.int64)
+    r, r_el = np.hypot(*pts.T), np.hypot(*pts[tris].mean(axis=1).T)
+    rows = []
+    for t, f in list_snapshots(run_dir):
+        if t <= 0.0:
+            continue
+        with np.load(f) as z:
+            p, phi = np.asarray(z["p"], float), np.asarray(z["phi"], float)
+        row = {"t": float(t), "phi_min_wall": float(phi[r_el > r_o - 2.0].min())}
+        rings = [(rc, 1.0) for rc in RADII] + [(r_o - w, half) for w, half in WALL]
+        for rc, half in rings:
+            row[f"p@{rc:g}"] = float(p[np.abs(r - rc) <= half].mean())
+            row[f"phi@{rc:g}"] = float(phi[np.abs(r_el - rc) <= half].mean())
+        rows.append(row)
+    return rows
+
+
+def run_summary(run_dir: Path) -> dict:
+    rec = json.loads((run_dir / "record.json").read_text())
+    p = rec["params"]
+    ts = pd.read_csv(run_dir / "timeseries.csv")
+    t_judged = (rec.get("classification") or {}).get("t_classified") or float(ts["t"].iloc[-1])
+    return {"key": run_dir.name, "porosity_floor": p["porosity_floor"],
+            "label": (rec.get("classification") or {}).get("regime"),
+            **series_row(ts, p["r_inner"], float(t_judged)), "rings": ring_profiles(run_dir, p["r_outer"])}
+
+
+def _markdown(runs: list[dict]) -> str:
+    cols = ["porosity_floor", "label", "t_judged", "crack_longest", "t_longest", "crack_judged", "p_inj_1s",
+            "p_inj_2s", "p_inj_end", "outflow_frac_1s", "outflow_frac_2s", "outflow_frac_end"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols) + " |"
+              for r in runs]
+    for r in runs:
+        lines += ["", f"Rings, porosity floor {r['porosity_floor']} (p kPa, phi -; ring means at r mm):", ""]
+        keys = ["t", "phi_min_wall"] + [k for k in r["rings"][0] if k.startswith("p@")] + \
+            [k for k in r["rings"][0] if k.startswith("phi@")]
+        lines += ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+        lines += ["| " + " | ".join(f"{row[k]:.3g}" for k in keys) + " |" for row in r["rings"]]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("campaign_dir", type=Path)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--md", type=Path)
+    a = ap.parse_args(argv)
+    runs = []
+    for d in sorted((a.campaign_dir / "runs").iterdir()):
+        rec = d / "record.json"
+        if not d.name.startswith(".") and rec.is_file() and json.loads(rec.read_text()).get("status") == "ok":
+            runs.append(run_summary(d))
+    runs.sort(key=lambda r: r["porosity_floor"])
+    a.out.write_text(json.dumps(runs, indent=1))
+    if a.md:
+        a.md.write_text(_markdown(runs))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
