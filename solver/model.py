@@ -264,6 +264,7 @@ def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -
     from :func:`darcy_fluxes`.
 
     * φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p/K_s (Eq. summary_equations_3), with the optional porosity floor;
+    * k from :func:`solver.physics.permeability` (Eq. permeability), with the optional permeability floor;
     * σ = g(d) σ_A + σ_I − κ ∇S⊗∇S − b p I with Miehe's split (Eq. summary_equations_4, _secondary_3);
     * w_α = −λ_α (∇p + φ⁻¹ κ ∇·(∇S⊗∇S)), λ_α = k k_rα/η_α (Eq. fluid_equation);
     * M from :func:`solver.physics.ch_mobility` (Sec. 2.8, option ``ch_mobility``).
@@ -279,7 +280,8 @@ def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -
         sxx = sxx - kap * Sx * Sx
         syy = syy - kap * Sy * Sy
         sxy = sxy - kap * Sx * Sy
-    k = physics.permeability(phi, phi0, params.kbar, params.k_max, params.crack_permeability)
+    k = physics.permeability(phi, phi0, params.kbar, params.k_max, params.crack_permeability,
+                             params.permeability_floor)
     kr1, kr2 = physics.relative_permeabilities(Sat if S_flow is None else S_flow, params.viscosity_ratio)
     lam1 = k * kr1 / params.eta_w
     lam2 = k * kr2 / params.eta_o

@@ -80,6 +80,8 @@ _FIELD_DOCS = {
     "crack_permeability": "blend s: k = k(φ0) + s (min(k(φ), k_max) - k(φ0)) (1 paper, 0 frozen at k(φ0))",
     "porosity_floor": "smooth lower bound φ_f of the porosity law, - (None: the paper's unbounded linear law; "
                       "below φ_f, φ = φ_f²/(2φ_f − φ_lin), solver.physics.porosity_floor)",
+    "permeability_floor": "smooth lower bound k_f of the permeability, mm² (None: the paper's Kozeny–Carman law, "
+                          "k = 0 at closed pores; below k_f, k = k_f²/(2k_f − k_KC), solver.physics.permeability_floor)",
 }
 
 
@@ -91,7 +93,7 @@ _UNITS = {
     "psi_c": "kPa", "beta": "kPa·s", "cell_height": "mm", "r_inner": "mm", "r_outer": "mm", "bead_diameter": "mm",
     "phi_mean": "-", "phi_range": "-", "seed": "", "porosity_field": "", "mu_outer_bc": "", "ch_mobility": "", "outer_saturation_bc": "",
     "volumetric_coupling": "-", "korteweg_factor": "-", "outer_compliance": "mm/kPa", "crack_permeability": "-",
-    "porosity_floor": "-",
+    "porosity_floor": "-", "permeability_floor": "mm²",
 }
 
 # allowed values of every parameter, as `_coerce_and_check` enforces them (tests/test_params.py holds the
@@ -117,6 +119,7 @@ _ALLOWED = {
     "ch_mobility": f"one of {CH_MOBILITIES}",
     "outer_saturation_bc": f"one of {OUTER_SATURATION_BCS}",
     "porosity_floor": "None or in (0, phi_mean - phi_range) (below every initial porosity)",
+    "permeability_floor": "None or in (0, k(phi_mean - phi_range)) mm² (below every initial permeability)",
 }
 
 @dataclass(frozen=True)
@@ -158,6 +161,9 @@ class Parameters:
     porosity_floor : smooth lower bound φ_f of the porosity, - (None = the paper's linear law, which reaches
         φ <= 0 under compaction; see :func:`solver.physics.porosity_floor`).  Omitted from :meth:`to_dict`
         when None, so the run keys of runs made before it existed do not change.
+    permeability_floor : smooth lower bound k_f of the permeability, mm² (None = the paper's Kozeny–Carman law,
+        k = 0 where the pores close; see :func:`solver.physics.permeability_floor`).  Omitted from
+        :meth:`to_dict` when None.
     """
 
     eta_o: float = 0.29
@@ -192,6 +198,7 @@ class Parameters:
     outer_compliance: float = 0.0
     crack_permeability: float = 1.0
     porosity_floor: float | None = None
+    permeability_floor: float | None = None
 
     def __post_init__(self):
         _coerce_and_check(self)
@@ -346,10 +353,10 @@ _FLOAT_FIELDS = (
     "mu_i", "mu_o", "cell_height", "r_inner", "r_outer", "bead_diameter", "phi_mean",
     "phi_range", "volumetric_coupling", "korteweg_factor", "outer_compliance", "crack_permeability",
 )
-_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta", "porosity_floor")
+_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta", "porosity_floor", "permeability_floor")
 # fields added after runs were stored: left out of to_dict() at None, so the parameter dicts (and the run keys
 # made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("porosity_floor",)
+_OMIT_WHEN_NONE = ("porosity_floor", "permeability_floor")
 _CHOICES = (("porosity_field", POROSITY_FIELDS), ("mu_outer_bc", MU_OUTER_BCS), ("ch_mobility", CH_MOBILITIES),
             ("outer_saturation_bc", OUTER_SATURATION_BCS))
 CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
@@ -428,6 +435,13 @@ def _coerce_and_check(p: Parameters) -> None:
     if p.porosity_floor is not None and not 0.0 < p.porosity_floor < p.phi_mean - p.phi_range:
         _fail("porosity_floor", p.porosity_floor, f"None or in (0, phi_mean - phi_range = {p.phi_mean - p.phi_range:.6g}) "
                                                   "(below every initial porosity)")
+    if p.permeability_floor is not None:
+        from .physics import kozeny_carman
+
+        k_min = float(kozeny_carman(np.asarray(p.phi_mean - p.phi_range), p.kbar, p.k_max))
+        if not 0.0 < p.permeability_floor < k_min:
+            _fail("permeability_floor", p.permeability_floor, f"None or in (0, k(phi_mean - phi_range) = {k_min:.6g}) mm² "
+                                                              "(below every initial permeability)")
     bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
     if not p.l_d <= bound * (1.0 + 1e-12):
         _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")

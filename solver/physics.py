@@ -31,13 +31,19 @@ def porosity_floor(phi, floor: float):
     branch keeps φ positive and decreasing to 0 as the linear value goes to −∞: the grains come into contact
     and the pore space stiffens.  Value and slope match at φ_f (C¹), so Newton keeps its convergence.
     """
-    v = ad.value(phi)
+    return smooth_floor(phi, floor)
+
+
+def smooth_floor(x, floor: float):
+    """x for x >= floor > 0, floor² / (2 floor − x) below: C¹ at the floor, positive, and decreasing to 0 as
+    x goes to −∞ (at x = 0 it is floor / 2).  The one form of the porosity and permeability floors."""
+    v = ad.value(x)
     below = v < floor
-    if isinstance(phi, Dual):
-        safe = ad.where(below, phi, floor)
-        return ad.where(below, floor * floor / (2.0 * floor - safe), phi)
-    safe = np.where(below, phi, floor)  # the unused branch stays finite where φ >= 2 φ_f
-    return np.where(below, floor * floor / (2.0 * floor - safe), phi)
+    if isinstance(x, Dual):
+        safe = ad.where(below, x, floor)
+        return ad.where(below, floor * floor / (2.0 * floor - safe), x)
+    safe = np.where(below, x, floor)  # the unused branch stays finite where x >= 2 floor
+    return np.where(below, floor * floor / (2.0 * floor - safe), x)
 
 
 def kozeny_carman(phi, kbar: float, k_max: float):
@@ -71,17 +77,31 @@ def cap_porosity(kbar: float, k_max: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def permeability(phi, phi0, kbar: float, k_max: float, crack_permeability: float = 1.0):
-    """Absolute permeability (mm²) with the ``crack_permeability`` effect strength s.
+def permeability(phi, phi0, kbar: float, k_max: float, crack_permeability: float = 1.0,
+                 floor: float | None = None):
+    """Absolute permeability (mm²) with the ``crack_permeability`` effect strength s and the optional floor.
 
     k = k(φ0) + s (k(φ) − k(φ0)): s = 1 is the paper's model, s = 0 freezes the
-    permeability at its initial value (no flow enhancement by opening cracks).
+    permeability at its initial value (no flow enhancement by opening cracks).  With ``floor`` (the
+    ``permeability_floor`` parameter, mm²; None: the paper's law) k is bounded below by
+    :func:`permeability_floor`.
     """
     k = kozeny_carman(phi, kbar, k_max)
-    if crack_permeability == 1.0:
-        return k
-    k0 = kozeny_carman(phi0, kbar, k_max)
-    return k0 + crack_permeability * (k - k0)
+    if crack_permeability != 1.0:
+        k0 = kozeny_carman(phi0, kbar, k_max)
+        k = k0 + crack_permeability * (k - k0)
+    return k if floor is None else permeability_floor(k, floor)
+
+
+def permeability_floor(k, floor: float):
+    """Smooth lower bound k_f > 0 of the permeability (mm²): k for k >= k_f, k_f² / (2 k_f − k) below.
+
+    Under the compaction of the drained, rigid outer wall the porosity law closes the pores of the wall's
+    element row (φ -> 0, so Kozeny–Carman k -> 0) and the row seals the layer.  The floor keeps a path for the
+    fluid through such a row: at closed pores k = k_f / 2.  Not the paper's model (which states no bound):
+    an option to test what the seal does.  C¹ at k_f, like :func:`porosity_floor`.
+    """
+    return smooth_floor(k, floor)
 
 
 def relative_permeabilities(S, M: float):
