@@ -166,3 +166,34 @@ def test_damage_viscosity_lags_and_vanishes_with_beta():
         ratio = lags[b] / lags[b / 10]
         assert 7 < ratio < 13, (b, ratio)
     assert lags[0.001] < 1e-3 * d0.max()
+
+
+def test_block_solve_by_cg_matches_the_direct_solve_and_falls_back_when_not_definite():
+    """The damage block's linear solve: Jacobi-CG where the block is positive definite (it must agree with
+    SuperLU to the CG tolerance), and the direct solve where CG cannot apply (a negative diagonal entry, or
+    positive diagonal but indefinite)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    from solver.mesh import annulus_mesh
+
+    p, mesh = Parameters(), annulus_mesh(h=4.0)
+    ops = damage.damage_operators(mesh.points, mesh.triangles)
+    rng = np.random.default_rng(1)
+    n = len(mesh.points)
+    d, psi = 0.3 * rng.random(n), 50 * rng.random(n)
+    for dt in (1e-3, 0.02, 10.0):  # β/Δt from dominant to small beside the gradient term
+        J = damage.jacobian(d, psi, p, dt, ops).tocsr()
+        inside = np.flatnonzero(rng.random(n) > 0.1)
+        A = J[inside][:, inside].tocsc()
+        b = rng.standard_normal(len(inside))
+        direct = spla.splu(A, permc_spec="COLAMD", diag_pivot_thresh=1.0).solve(b)
+        assert damage._jacobi_cg(A, b) is not None
+        x = damage._symmetric_solve(A, b)
+        assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b) * (1 + 1e-9)
+        assert np.allclose(x, direct, rtol=0, atol=1e-9 * np.abs(direct).max())
+    # not positive definite: CG declines and the direct solve answers
+    for A in (sp.csc_matrix(np.array([[1.0, 2.0], [2.0, 1.0]])), sp.csc_matrix(np.array([[-1.0, 0.5], [0.5, 2.0]]))):
+        b = np.array([1.0, -3.0])
+        assert damage._jacobi_cg(A, b) is None
+        assert np.allclose(damage._symmetric_solve(A, b), np.linalg.solve(A.toarray(), b), rtol=1e-12)

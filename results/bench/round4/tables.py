@@ -1,8 +1,8 @@
-"""Print the table of results/bench/README.md, fourth round (PARDISO's two-level factorization), from the JSON
-files beside this script (each made by ``dchfrac bench --profile --h H --out FILE``), and p_inj(t) of each "after"
-run against its "before" run and against the committed reference curve (h = 1).
+"""Print a before / after table of results/bench/README.md from the JSON files ``{before,after}_h{2,1}.json`` of a
+folder (each made by ``dchfrac bench --profile --h H --out FILE``; default: this script's folder, the fourth
+round), and p_inj(t) of each "after" run against its "before" run and against the committed reference curve.
 
-    python results/bench/round4/tables.py
+    python results/bench/round4/tables.py [FOLDER]      # e.g. results/bench/round5
 """
 import sys
 from pathlib import Path
@@ -15,7 +15,7 @@ sys.path.insert(0, str(HERE.parent / "round3"))
 import tables  # noqa: E402
 from tables import WINDOWS, counts_table, deviation, load  # noqa: E402
 
-tables.HERE = HERE  # the round-3 readers, on this folder's files
+tables.HERE = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE  # the round-3 readers, on these files
 
 
 def against(name, ref_t, ref_p, label):
