@@ -57,10 +57,14 @@ def _assembly_threads(n: int):
             os.environ["DCHFRAC_ASSEMBLY_THREADS"] = old
 
 
-def _newton_iteration(h: float, backends) -> dict:
-    from solver import Parameters, kernels, linsolve
+def newton_state(h: float) -> dict:
+    """The state every Newton-iteration benchmark uses: the reference parameters on the annulus of mesh size
+    h mm, a displacement of 1e-3 mm noise, a pressure falling linearly from 200 kPa at r_i to 0 at r_o, an
+    invaded zone S = 1 to 5 mm beyond r_i, and the step data of a 10 ms step.  Returns p (Parameters), disc, U
+    (nodes x fields), data and the set-up times mesh_s and setup_s (s)."""
+    from solver import Parameters
     from solver.mesh import annulus_mesh
-    from solver.model import build_discretization, residual_and_jacobian, step_data
+    from solver.model import build_discretization, step_data
     from solver.porosity import random_porosity
 
     p = Parameters()
@@ -78,6 +82,16 @@ def _newton_iteration(h: float, backends) -> dict:
     U[:, 2] = 200 * (p.r_outer - r) / (p.r_outer - p.r_inner)
     U[:, 3] = np.clip(1.5 - (r - p.r_inner) / 10, 0, 1)
     data = step_data(disc, p, 0.99 * U, np.zeros(N), 1e-2)
+    return {"p": p, "disc": disc, "U": U, "data": data, "mesh_s": t_mesh, "setup_s": t_setup}
+
+
+def _newton_iteration(h: float, backends) -> dict:
+    from solver import kernels, linsolve
+    from solver.model import residual_and_jacobian
+
+    st = newton_state(h)
+    p, disc, U, data, t_mesh, t_setup = (st[k] for k in ("p", "disc", "U", "data", "mesh_s", "setup_s"))
+    N, nf = disc.n_nodes, disc.n_fields
     t_res = _best(lambda: residual_and_jacobian(disc, p, U, data, need_jacobian=False))
     # assembly on 1 thread (what each solver of a campaign gets) and on every core (a single run; the
     # PARDISO factorization below uses every core too): best of 3 after a warm-up call

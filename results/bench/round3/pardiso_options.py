@@ -6,7 +6,7 @@ H: mesh size, mm; CONFIGS: comma-separated names of CONFIGS below.  Each configu
 handle with the solver's settings of round three (solver/linsolve.py before the two-level factorization became
 its setting) plus its extra iparm entries (1-based), one analysis, then
 three rounds of (numeric factorization, substitution); prints the best of three, the relative residual and the
-factors' entries (iparm(18)).  The state is that of `dchfrac bench`'s Newton iteration (sweep/bench.py).  Units: s.
+factors' entries (iparm(18)).  The state is `dchfrac bench`'s (sweep.bench.newton_state).  Units: s.
 """
 import os
 import sys
@@ -17,10 +17,9 @@ os.environ.setdefault("MKL_CBWR", "AUTO,STRICT")
 import numpy as np  # noqa: E402
 import scipy.sparse as sp  # noqa: E402
 
-from solver import Parameters, linsolve  # noqa: E402
-from solver.mesh import annulus_mesh  # noqa: E402
-from solver.model import build_discretization, residual_and_jacobian, step_data  # noqa: E402
-from solver.porosity import random_porosity  # noqa: E402
+from solver import linsolve  # noqa: E402
+from solver.model import residual_and_jacobian  # noqa: E402
+from sweep.bench import newton_state  # noqa: E402
 
 CONFIGS = {"base": {}, "vbsr80": {37: -80}, "vbsr95": {37: -95}, "twolevel": {24: 1}, "twolevel10": {24: 10}}
 SOLVER_IPARM = {1: 1, 2: 2, 8: 0, 10: 13, 11: 0, 13: 0}   # solver.linsolve._pardiso_solver's, round three
@@ -29,17 +28,9 @@ REPORT_IPARM = {18: -1, 19: -1}                          # report the factors' e
 
 def jacobian(h: float):
     """(A, b): the Dirichlet-applied Jacobian (CSR, sorted) and residual of the bench state at mesh size h mm."""
-    p = Parameters()
-    mesh = annulus_mesh(p.r_inner, p.r_outer, h)
-    disc = build_discretization(mesh, p, random_porosity(mesh, seed=0))
-    n, nf = disc.n_nodes, disc.n_fields
-    rng, r = np.random.default_rng(0), np.hypot(*disc.points.T)
-    U = np.zeros((n, nf))
-    U[:, 0:2] = 1e-3 * rng.standard_normal((n, 2))
-    U[:, 2] = 200 * (p.r_outer - r) / (p.r_outer - p.r_inner)
-    U[:, 3] = np.clip(1.5 - (r - p.r_inner) / 10, 0, 1)
-    R, J = residual_and_jacobian(disc, p, U, step_data(disc, p, 0.99 * U, np.zeros(n), 1e-2))
-    disc.dirichlet.apply_matrix(J)
+    st = newton_state(h)
+    R, J = residual_and_jacobian(st["disc"], st["p"], st["U"], st["data"])
+    st["disc"].dirichlet.apply_matrix(J)
     A = sp.csr_matrix(J, dtype=float)
     A.sort_indices()
     return A, np.asfortranarray(R.reshape(-1, 1).astype(float))
