@@ -68,7 +68,7 @@ def kkt_residual(d, R, lb, ub, c) -> float:
     return float(np.max(np.abs(d - np.clip(d - c * R, lb, ub)))) if len(d) else 0.0
 
 
-def _symmetric_solve(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
+def _symmetric_solve(A: sp.spmatrix, b: np.ndarray) -> np.ndarray:
     """Solve A x = b for the symmetric damage block A (a principal submatrix of K-scaled stiffness plus a diagonal).
 
     First Jacobi-preconditioned conjugate gradients (:func:`_jacobi_cg`): where β/Δt + g''(d) ψ_A > 0 the block
@@ -81,6 +81,7 @@ def _symmetric_solve(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
     x = _jacobi_cg(A, b)
     if x is not None:
         return x
+    A = A.tocsc()  # SuperLU's format, made only when it is needed
     x = spla.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True)).solve(b)
     nb = max(np.linalg.norm(b), 1e-300)
     if not np.all(np.isfinite(x)) or np.linalg.norm(A @ x - b) > 1e-10 * nb:
@@ -150,7 +151,7 @@ def solve(d_start, d_n, psi_a, params, dt: float, ops: DamageOperators, tol: flo
         if inactive.any():
             I = np.flatnonzero(inactive)
             rhs = -R[I] - (J @ delta)[I]  # delta is zero on the inactive nodes
-            delta[I] = _symmetric_solve(J[I][:, I].tocsc(), rhs)
+            delta[I] = _symmetric_solve(J[I][:, I], rhs)
         d = d + delta
         if err < tol and np.max(np.abs(delta)) < tol:
             R = residual(d, d_n, psi_a, params, dt, ops)
