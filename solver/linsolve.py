@@ -30,6 +30,16 @@ substitution at h = 1 mm) is made on the first solve with each set of factors: a
 factorization gives small residuals for every right-hand side, and an unstable one shows on the
 first.  Factors whose first solve needed a fallback or a refinement are checked on every solve.
 
+Precision of the factors (``factorize(..., precision=)``, run option ``linear_precision``): "double", or
+"single": the factors are made and applied in single precision (float32; PARDISO's iparm(28) = 1, SuperLU's
+sgstrf) while the matrix, the right-hand side, the residual check and the solution stay in double.  Newton
+then takes inexact steps: a linear solve whose relative residual is at most ``SINGLE_FORCING`` (1e-3) leaves
+Newton's convergence linear with a rate of about that residual (Dembo, Eisenstat and Steihaug 1982, inexact
+Newton methods), far below the contraction the Jacobian reuse already accepts (0.3), and the converged state
+meets the same residual-based tests.  The first solve with single factors is checked: above the forcing
+tolerance it is refined in mixed precision (residual in double, correction with the single factors; up to three
+steps), and if that does not reach it the matrix is factorized again in double.
+
 Each call counts a factorization in ``STATS`` so runs can report how many
 factorizations they needed (the floor of this solver's cost).
 """
@@ -44,6 +54,12 @@ import scipy.sparse.linalg as spla
 from .profiling import phase
 
 STATS = {"factorizations": 0}
+
+PRECISIONS = ("double", "single")
+#: the largest relative residual ||A x - b|| / ||b|| accepted from a solve with single-precision factors: the
+#: forcing term of the inexact Newton iteration, 300x below the contraction the Jacobian reuse accepts (0.3).
+#: The first solves of the reference run's factors fall below it (results/bench/README.md, sixth round).
+SINGLE_FORCING = 1e-3
 
 
 def available_backends() -> list[str]:
@@ -92,8 +108,49 @@ def resolve(kind: str, n: int | None = None) -> str:
     return kind
 
 
-class _SuperLU:
-    def __init__(self, A):
+def resolve_precision(precision: str | None, kind: str) -> str:
+    """The factors' precision for the resolved backend ``kind``: ``precision`` when given, else (None) "single"
+    with PARDISO and "double" with SuperLU (whose single-precision factorization is slower than its double
+    one on the coupled Jacobian: 14.2 s against 3.9 s at h = 2 mm)."""
+    if precision is None:
+        return "single" if kind == "pypardiso" else "double"
+    if precision not in PRECISIONS:
+        raise ValueError(f"linear_precision={precision!r} is not one of {PRECISIONS} or None")
+    return precision
+
+
+class _Factors:
+    """What both backends share: the single-precision layer of ``solve`` (see the module docstring)."""
+
+    single: bool
+    trusted: bool
+    A: sp.csr_matrix
+
+    def solve(self, b):
+        with phase("solve"):
+            b = np.asarray(b, float)
+            if not self.single or self.trusted:
+                return self._solve(b)
+            x = self._solve(b)
+            nb = max(np.linalg.norm(b), 1e-300)
+            for k in range(4):  # the check, and up to three mixed-precision refinement steps
+                r = b - self.A @ x
+                if np.linalg.norm(r) <= SINGLE_FORCING * nb:
+                    self.trusted = k == 0  # a solve that needed refinement keeps its factors checked
+                    return x
+                if k < 3:
+                    STATS["refinements"] = STATS.get("refinements", 0) + 1
+                    x = x + self._solve(r)
+            STATS["factorizations"] += 1
+            STATS["precision_fallbacks"] = STATS.get("precision_fallbacks", 0) + 1
+            with phase("numeric_factorization"):
+                self.single, self.trusted = False, False
+                self._factorize()
+            return self._solve(b)
+
+
+class _SuperLU(_Factors):
+    def __init__(self, A, single: bool = False):
         self.A = sp.csr_matrix(A)
         rmax = np.asarray(abs(self.A).max(axis=1).todense()).ravel()
         if np.any(rmax == 0):
@@ -101,18 +158,25 @@ class _SuperLU:
         self.dr = 1.0 / rmax
         As = sp.diags(self.dr) @ self.A
         self.As = As.tocsc()
-        self.lu = spla.splu(self.As, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, options=dict(SymmetricMode=True))
+        self.single = single
+        self._factorize()
+
+    def _factorize(self):
+        self.lu = self._splu("MMD_AT_PLUS_A", 0.1, dict(SymmetricMode=True))
         self.safe = False
         self.trusted = False  # the first solve passed its check without a fallback: later solves are not checked
 
-    def solve(self, b):
-        with phase("solve"):
-            return self._solve(b)
+    def _splu(self, order: str, thresh: float, options: dict | None = None):
+        return spla.splu(self.As.astype(np.float32) if self.single else self.As, permc_spec=order,
+                         diag_pivot_thresh=thresh, options=options or {})
+
+    def _substitute(self, b):
+        rhs = self.dr * b
+        return self.lu.solve(rhs.astype(np.float32) if self.single else rhs).astype(float)
 
     def _solve(self, b):
-        b = np.asarray(b, float)
-        x = self.lu.solve(self.dr * b)
-        if self.trusted:
+        x = self._substitute(b)
+        if self.trusted or self.single:  # single factors: checked against the forcing tolerance by solve()
             return x
         nb = np.linalg.norm(b)
         rel = np.linalg.norm(self.A @ x - b) / max(nb, 1e-300)
@@ -120,20 +184,21 @@ class _SuperLU:
             STATS["factorizations"] += 1
             STATS["pivoting_fallbacks"] = STATS.get("pivoting_fallbacks", 0) + 1
             with phase("numeric_factorization"):
-                self.lu = spla.splu(self.As, permc_spec="COLAMD", diag_pivot_thresh=1.0)
+                self.lu = self._splu("COLAMD", 1.0)
             self.safe = True
-            x = self.lu.solve(self.dr * b)
+            x = self._substitute(b)
         else:
             self.trusted = not self.safe
         return x
 
 
-_PARDISO = {}
+_PARDISO = {}  # per precision: the process-wide solver, its pattern, 1-based index arrays, and the owner
 
 
-def _pardiso_solver():
-    """One PyPardisoSolver per process: constructing one searches the file system for MKL (slow)."""
-    if "solver" not in _PARDISO:
+def _pardiso_solver(precision: str = "double") -> dict:
+    """The process-wide PARDISO handle of ``precision`` with its state (one per process and precision:
+    constructing one searches the file system for MKL, and a handle holds one factorization at a time)."""
+    if precision not in _PARDISO:
         # Conditional numerical reproducibility: without it MKL's threaded kernels may sum in another
         # order from run to run (p_inj differed by 1e-14 between identical runs); set before MKL loads.
         os.environ.setdefault("MKL_CBWR", "AUTO,STRICT")
@@ -147,52 +212,55 @@ def _pardiso_solver():
         # perturbed pivots of the coupled Jacobian, relative residual 4e-3 at h = 2 mm; without them none is
         # perturbed and the residual is 3e-12, every diagonal entry here being nonzero: mass, storage,
         # stiffness), pivot perturbation 1e-13 (10), no internal iterative refinement (8, reset before each
-        # solve: PARDISO writes the number of steps it made there), refined in solve() only when needed, and
-        # the two-level factorization (24: 1), with which the substitution uses every core (same fill, and the
-        # same result bitwise run to run; results/bench/README.md, fourth round).
-        for i, v in {1: 1, 2: 2, 8: 0, 10: 13, 11: 0, 13: 0, 24: 1}.items():
+        # solve: PARDISO writes the number of steps it made there), refined in solve() only when needed, the
+        # two-level factorization (24: 1), with which the substitution uses every core (same fill, and the
+        # same result bitwise run to run; results/bench/README.md, fourth round), and the precision of the
+        # factors (28: 1 single, 0 double).
+        for i, v in {1: 1, 2: 2, 8: 0, 10: 13, 11: 0, 13: 0, 24: 1, 28: int(precision == "single")}.items():
             s.set_iparm(i, v)
-        _PARDISO.update(solver=s, pattern=None, owner=None)
-    return _PARDISO["solver"]
+        _PARDISO[precision] = dict(solver=s, pattern=None, pattern_arrays=None, owner=None, one_based=None)
+    return _PARDISO[precision]
 
 
-class _Pardiso:
-    """PARDISO factors of one matrix; the process-wide solver holds one factorization at a time."""
+class _Pardiso(_Factors):
+    """PARDISO factors of one matrix; the process-wide handle of their precision holds one factorization at a
+    time."""
 
-    def __init__(self, A):
+    def __init__(self, A, single: bool = False):
         self.A = sp.csr_matrix(A, dtype=float)
         self.A.sort_indices()
-        self.trusted = False  # set by the first solve when its residual needs no refinement
+        self.single = single
         self._factorize()
 
     def _factorize(self):
-        s, A = _pardiso_solver(), self.A
-        s._check_A(A)
-        pat = _PARDISO["pattern"]
-        same = pat is not None and pat[0].shape == A.indptr.shape and pat[1].shape == A.indices.shape \
-            and np.array_equal(pat[0], A.indptr) and np.array_equal(pat[1], A.indices)
-        rhs = np.zeros((A.shape[0], 1))
+        self.trusted = False  # set by the first solve when its residual needs no refinement
+        self.data = self.A.data.astype(np.float32) if self.single else self.A.data
+        state, A = _pardiso_solver("single" if self.single else "double"), self.A
+        state["solver"]._check_A(A)
+        pat = state["pattern"]
+        # the same pattern: the very index arrays of the last analysis (the assembler shares its pattern's arrays
+        # with every matrix it makes, fem.BlockAssembler._csr), or equal ones
+        same = pat is not None and ((state["pattern_arrays"][0] is A.indptr and state["pattern_arrays"][1] is A.indices)
+                                    or (pat[0].shape == A.indptr.shape and pat[1].shape == A.indices.shape
+                                        and np.array_equal(pat[0], A.indptr) and np.array_equal(pat[1], A.indices)))
+        rhs = np.zeros((A.shape[0], 1), self.data.dtype)
         if not same:  # the symbolic analysis (phase 11) is done once per pattern and reused after
-            _PARDISO["pattern"] = (A.indptr.copy(), A.indices.copy())
-            _PARDISO["one_based"] = ((A.indptr + 1).astype(np.int32), (A.indices + 1).astype(np.int32))
+            state["pattern"] = (A.indptr.copy(), A.indices.copy())
+            state["pattern_arrays"] = (A.indptr, A.indices)
+            state["one_based"] = ((A.indptr + 1).astype(np.int32), (A.indices + 1).astype(np.int32))
             with phase("symbolic_factorization"):
-                _call(s, A, 11, rhs)
-        _call(s, A, 22, rhs)
-        _PARDISO["owner"] = self
-
-    def solve(self, b):
-        with phase("solve"):
-            return self._solve(b)
+                _call(state["solver"], self.data, state["one_based"], 11, rhs)
+        _call(state["solver"], self.data, state["one_based"], 22, rhs)
+        state["owner"] = self
 
     def _solve(self, b):
-        s = _pardiso_solver()
-        if _PARDISO["owner"] is not self:  # another matrix was factorized since: factorize this one again
+        state = _pardiso_solver("single" if self.single else "double")
+        if state["owner"] is not self:  # another matrix was factorized since: factorize this one again
             STATS["factorizations"] += 1
             with phase("numeric_factorization"):
                 self._factorize()
-        b = np.asarray(b, float)
-        x = self._substitute(s, b)
-        if self.trusted:
+        x = self._substitute(state, b)
+        if self.trusted or self.single:  # single factors: checked against the forcing tolerance by solve()
             return x
         nb = max(np.linalg.norm(b), 1e-300)
         for k in range(3):  # iterative refinement, rarely needed (perturbed pivots)
@@ -201,34 +269,37 @@ class _Pardiso:
                 self.trusted = k == 0
                 break
             STATS["refinements"] = STATS.get("refinements", 0) + 1
-            x = x + self._substitute(s, r)
+            x = x + self._substitute(state, r)
         return x
 
-    def _substitute(self, s, b: np.ndarray) -> np.ndarray:
-        """Forward and back substitution with the current factors (PARDISO phase 33)."""
+    def _substitute(self, state: dict, b: np.ndarray) -> np.ndarray:
+        """Forward and back substitution with the current factors (PARDISO phase 33), in double."""
         # No internal iterative refinement (PARDISO overwrites iparm(8) with the number of steps it made, so
         # it is reset before every call): solve() checks the residual and refines only when needed.
-        s.set_iparm(8, 0)
-        return _call(s, self.A, 33, np.asfortranarray(b)).reshape(b.shape)
+        state["solver"].set_iparm(8, 0)
+        rhs = np.asfortranarray(b, dtype=self.data.dtype)
+        return _call(state["solver"], self.data, state["one_based"], 33, rhs).reshape(b.shape).astype(float, copy=False)
 
 
-def _call(s, A, phase_id: int, b: np.ndarray) -> np.ndarray:
+def _call(s, data: np.ndarray, one_based: tuple, phase_id: int, b: np.ndarray) -> np.ndarray:
     """One PARDISO call (``phase_id`` 11 analysis, 22 numeric factorization, 33 substitution) on the matrix
-    of the current pattern, with its 1-based int32 index arrays made once per pattern: pypardiso's own
+    with values ``data`` (float64, or float32 for a handle with iparm(28) = 1; ``b`` of the same type) and
+    the 1-based int32 index arrays ``one_based`` = (ia, ja), made once per pattern: pypardiso's own
     ``_call_pardiso`` converts them on every call (20 ms per call at h = 1 mm, half a substitution)."""
     import ctypes
 
-    ia, ja = _PARDISO["one_based"]
+    ia, ja = one_based
     x = np.zeros_like(b)
     err = ctypes.c_int32(0)
-    i32, f64 = ctypes.POINTER(ctypes.c_int32), ctypes.POINTER(ctypes.c_double)
+    i32 = ctypes.POINTER(ctypes.c_int32)
+    real = ctypes.POINTER(ctypes.c_float if data.dtype == np.float32 else ctypes.c_double)
     s._mkl_pardiso(s.pt.ctypes.data_as(ctypes.POINTER(s._pt_type[0])), ctypes.byref(ctypes.c_int32(1)),
                    ctypes.byref(ctypes.c_int32(1)), ctypes.byref(ctypes.c_int32(s.mtype)),
-                   ctypes.byref(ctypes.c_int32(phase_id)), ctypes.byref(ctypes.c_int32(A.shape[0])),
-                   A.data.ctypes.data_as(f64), ia.ctypes.data_as(i32), ja.ctypes.data_as(i32),
+                   ctypes.byref(ctypes.c_int32(phase_id)), ctypes.byref(ctypes.c_int32(len(ia) - 1)),
+                   data.ctypes.data_as(real), ia.ctypes.data_as(i32), ja.ctypes.data_as(i32),
                    s.perm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(1 if b.ndim == 1 else b.shape[1])),
                    s.iparm.ctypes.data_as(i32), ctypes.byref(ctypes.c_int32(s.msglvl)),
-                   b.ctypes.data_as(f64), x.ctypes.data_as(f64), ctypes.byref(err))
+                   b.ctypes.data_as(real), x.ctypes.data_as(real), ctypes.byref(err))
     if err.value != 0:
         from pypardiso.pardiso_wrapper import PyPardisoError
 
@@ -236,11 +307,13 @@ def _call(s, A, phase_id: int, b: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x)
 
 
-def factorize(A: sp.spmatrix, kind: str = "auto"):
-    """Factorize ``A`` with the chosen backend; returns an object with ``solve(b)``."""
+def factorize(A: sp.spmatrix, kind: str = "auto", precision: str | None = "double"):
+    """Factorize ``A`` with the chosen backend and precision ("double", "single", or None for
+    :func:`resolve_precision`'s choice); returns an object with ``solve(b)`` (in double either way)."""
     kind = resolve(kind, A.shape[0])
+    single = resolve_precision(precision, kind) == "single"
     STATS["factorizations"] += 1
     # charged to the active profile (solver.profiling) as numeric factorization, except PARDISO's symbolic
     # analysis of a new pattern; SuperLU orders and factorizes in one call, all charged as numeric
     with phase("numeric_factorization"):
-        return _Pardiso(A) if kind == "pypardiso" else _SuperLU(A)
+        return _Pardiso(A, single) if kind == "pypardiso" else _SuperLU(A, single)

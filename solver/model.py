@@ -32,7 +32,7 @@ the paper's dimensionless section writes 3γl_S/4, which is inconsistent with it
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 import scipy.sparse as sp
@@ -59,8 +59,8 @@ class Discretization:
     inner_edges: np.ndarray
     outer_edges: np.ndarray
     phi0: np.ndarray  # (M,)
-    boundary_slots: np.ndarray  # CSR slots of the constant boundary couplings
-    boundary_vals: np.ndarray
+    boundary_slots: np.ndarray  # CSR slots of the constant boundary couplings, each once
+    boundary_vals: np.ndarray  # their values, summed per slot
     boundary_op: sp.csr_matrix  # the same couplings as a matrix (for the residual)
     inject: np.ndarray  # constant residual part (ndof,)
     dirichlet: fem.DirichletRows
@@ -70,6 +70,8 @@ class Discretization:
     upwind_length: np.ndarray | None = None  # (M,) mm, h_e/2 with transport = "upwind"; None: Galerkin
     stab_tau: np.ndarray | None = None  # (M,) mm²/kPa, pressure stabilization τ_e; None: plain Galerkin
     chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
+    # arrays reused by every assembly (by name; see _element_matrices)
+    workspace: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_nodes(self) -> int:
@@ -144,6 +146,8 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
     order = np.argsort(dofs)
     dofs, values = dofs[order], values[order]
     lumped = np.bincount(tri.ravel(), weights=np.repeat(geom.areas / 3, 3), minlength=n)
+    slots, inverse = np.unique(slots, return_inverse=True)  # one value per slot: J.data[slots] += vals
+    vals = np.bincount(inverse.ravel(), weights=vals, minlength=len(slots))
     return Discretization(
         points=pts, triangles=tri, geom=geom, asm=asm, n_fields=nf,
         inner_nodes=inner_n, outer_nodes=outer_n, inner_edges=inner_e, outer_edges=outer_e,
@@ -428,6 +432,19 @@ def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepDat
     return Fe, Ke
 
 
+def _element_matrices(disc: Discretization) -> np.ndarray:
+    """The element-matrix buffer (M, nf, nf, 3, 3) of ``disc``, made once and reused (its chunks are zeroed by
+    :func:`residual_and_jacobian` before each use): at h = 1 mm it holds 37 MB, above the allocator's
+    largest heap block (32 MB), so a new array at every assembly would be a fresh memory mapping whose pages
+    are faulted in one by one (a third of the element work).  Used only inside :func:`residual_and_jacobian`
+    (the Jacobian it returns has its own data)."""
+    shape = (len(disc.triangles), disc.n_fields, disc.n_fields, 3, 3)
+    Ke = disc.workspace.get("element_matrices")
+    if Ke is None or Ke.shape != shape:
+        Ke = disc.workspace["element_matrices"] = np.empty(shape)
+    return Ke
+
+
 def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: StepData, need_jacobian=True):
     """Unconstrained residual (ndof,) and Jacobian (CSR) at nodal state U (N, nf).
 
@@ -439,9 +456,11 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
     nf = disc.n_fields
     M = len(disc.triangles)
     Fe = np.zeros((M, 3, nf))
-    Ke = np.zeros((M, nf, nf, 3, 3)) if need_jacobian else None
+    Ke = _element_matrices(disc) if need_jacobian else None
 
     def work(sl):
+        if need_jacobian:
+            Ke[sl] = 0.0  # each chunk zeroes its own rows of the reused buffer, on its thread, just before use
         element_residuals(disc, params, U, data, sl, need_jacobian,
                           out=(Fe[sl], Ke[sl] if need_jacobian else None))
 
@@ -451,7 +470,7 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
     if not need_jacobian:
         return R, None
     J = disc.asm.matrix_field_major(Ke)
-    J.data += np.bincount(disc.boundary_slots, weights=disc.boundary_vals, minlength=disc.asm.nnz)
+    J.data[disc.boundary_slots] += disc.boundary_vals
     return R, J
 
 

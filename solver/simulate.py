@@ -73,6 +73,7 @@ class Simulation:
         self.dmg = damage.damage_operators(self.disc.points, self.disc.triangles)
         self.edges = metrics.mesh_edges(self.disc.triangles)
         self.solver_kind = linsolve.resolve(options.linear_solver, self.disc.asm.ndof)
+        self.precision = linsolve.resolve_precision(options.linear_precision, self.solver_kind)
         nf = self.disc.n_fields
         U = np.zeros((self.disc.n_nodes, nf))
         self.U = U
@@ -118,7 +119,7 @@ class Simulation:
                 x, x_back, self.lu, prev = x_back, None, None, None  # stale Jacobian diverged: back off, refresh
                 continue
             if need_j:
-                self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind), data.dt, True
+                self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind, self.precision), data.dt, True
                 if accel:
                     accel.reset()
             dx = self.lu.solve(-R)

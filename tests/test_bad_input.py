@@ -42,6 +42,7 @@ from solver.options import check_run_inputs
     (dict(newton_max_its=2.5), "newton_max_its=2.5 is out of range: allowed an integer"),
     (dict(dt0=1.0), "dt0=1.0 is out of range: allowed [dt_min=1e-07, dt_max=0.02]"),
     (dict(linear_solver="mumps"), "linear_solver='mumps'"),
+    (dict(linear_precision="half"), "linear_precision='half'"),
     (dict(max_wall_time=0.0), "max_wall_time=0.0"),
     (dict(h=1.0, h_inner=np.float64(2.0)), "h_inner=2.0 is out of range: allowed (0, h = 1.0]"),
 ])

@@ -117,3 +117,70 @@ def test_pardiso_factors_whose_first_solve_needs_refinement_stay_checked(monkeyp
     assert not f.trusted and _rel_res(J, x, -R) < 1e-10  # refined to round-off
     f.solve(-R)
     assert linsolve.STATS.get("refinements", 0) - before >= 2  # the second solve was checked and refined too
+
+
+# ---------------------------------------------------------------- single-precision factors (inexact Newton)
+def _kinds():
+    return ["superlu"] + (["pypardiso"] if "pypardiso" in linsolve.available_backends() else [])
+
+
+@pytest.mark.parametrize("kind", _kinds())
+def test_single_precision_factors_meet_the_forcing_tolerance_on_the_coupled_jacobian(kind):
+    """Factors in float32 solve the Newton system to the inexact-Newton forcing tolerance (relative residual
+    <= SINGLE_FORCING) in double output, and the solution differs from the double one by at most what that
+    residual allows (||dx|| <= ||A^-1|| ||r||, bounded here by the double solution's own scale)."""
+    J, R = _jacobian()
+    x64 = linsolve.factorize(J, kind, precision="double").solve(-R)
+    f = linsolve.factorize(J, kind, precision="single")
+    assert f.single
+    x32 = f.solve(-R)
+    assert x32.dtype == np.float64
+    assert _rel_res(J, x32, -R) <= linsolve.SINGLE_FORCING
+    assert f.single  # met by the single factors (refined or not), with no fallback to double
+    assert np.linalg.norm(x32 - x64) <= 1e-2 * np.linalg.norm(x64)
+    assert np.linalg.norm(x32 - x64) > 0.0  # the factors really are single precision
+    b = np.random.default_rng(2).standard_normal(len(R))  # another right-hand side meets it too
+    assert _rel_res(J, f.solve(b), b) <= linsolve.SINGLE_FORCING
+
+
+def test_single_precision_falls_back_to_double_when_refinement_cannot_reach_the_forcing_tolerance(monkeypatch):
+    """Single factors whose substitutions are off by a factor 3 (an unstable factorization: refinement with
+    them diverges) are replaced by double factors after the three refinement steps, and the solve is then
+    exact to round-off."""
+    J, R = _jacobian()
+    f = linsolve.factorize(J, "superlu", precision="single")
+    exact = f._substitute
+    monkeypatch.setattr(f, "_substitute", lambda b: exact(b) * (3.0 if f.single else 1.0))
+    n_fact, n_fall = linsolve.STATS["factorizations"], linsolve.STATS.get("precision_fallbacks", 0)
+    n_ref = linsolve.STATS.get("refinements", 0)
+    x = f.solve(-R)
+    assert not f.single
+    assert linsolve.STATS.get("refinements", 0) == n_ref + 3
+    assert linsolve.STATS["factorizations"] == n_fact + 1
+    assert linsolve.STATS.get("precision_fallbacks", 0) == n_fall + 1
+    assert _rel_res(J, x, -R) < 1e-10
+
+
+def test_precision_choice_is_validated_and_defaults_to_single_with_pardiso_only():
+    assert linsolve.resolve_precision(None, "pypardiso") == "single"
+    assert linsolve.resolve_precision(None, "superlu") == "double"
+    assert linsolve.resolve_precision("double", "pypardiso") == "double"
+    with pytest.raises(ValueError, match="linear_precision='half'"):
+        linsolve.resolve_precision("half", "superlu")
+
+
+def test_a_run_with_single_precision_factors_is_the_double_run_to_the_newton_tolerance():
+    """The inexact Newton iteration converges to the same tests (update below newton_rtol = 1e-6, volume balance
+    to newton_mass_tol): the same accepted steps, p_inj within 10x the Newton tolerance, and the cumulative
+    volume balance to 1e-9 of the injected volume (SuperLU forced to float32 factors, h = 4 mm, to 0.05 s)."""
+    from solver import RunOptions, simulate
+
+    runs = {prec: simulate(Parameters(), RunOptions(h=4.0, t_end=0.05, snapshot_times=[], write_xdmf=False,
+                                                    linear_solver="superlu", linear_precision=prec))
+            for prec in ("double", "single")}
+    a, b = (runs[k].timeseries for k in ("double", "single"))
+    assert runs["single"].status == runs["double"].status == "ok"
+    # the step controller is a continuous function of the accepted states: the same steps to their accuracy
+    assert len(a) == len(b) and np.allclose(a["t"], b["t"], rtol=1e-5, atol=0.0)
+    assert np.max(np.abs(b["p_inj"] - a["p_inj"]) / np.abs(a["p_inj"])) <= 1e-5
+    assert np.max(np.abs(b["mass_error"])) <= 1e-9

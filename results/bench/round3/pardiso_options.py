@@ -50,21 +50,21 @@ def main(h: float, names: list) -> None:
     linsolve._locate_mkl_rt()
     A, b = jacobian(h)
     # the solver's own PARDISO call, with the 1-based index arrays of this matrix's pattern
-    linsolve._PARDISO["one_based"] = ((A.indptr + 1).astype(np.int32), (A.indices + 1).astype(np.int32))
+    one_based = ((A.indptr + 1).astype(np.int32), (A.indices + 1).astype(np.int32))
     print(f"unknowns {A.shape[0]}, entries {A.nnz}", flush=True)
     handles = {k: handle(CONFIGS[k]) for k in names}
     for s in handles.values():
-        linsolve._call(s, A, 11, b)
+        linsolve._call(s, A.data, one_based, 11, b)
     times = {k: {"factorize": [], "substitute": []} for k in names}
     residual = {}
     for _ in range(3):
         for k, s in handles.items():
             t = time.perf_counter()
-            linsolve._call(s, A, 22, b)
+            linsolve._call(s, A.data, one_based, 22, b)
             times[k]["factorize"].append(time.perf_counter() - t)
             s.set_iparm(8, 0)
             t = time.perf_counter()
-            x = linsolve._call(s, A, 33, b)
+            x = linsolve._call(s, A.data, one_based, 33, b)
             times[k]["substitute"].append(time.perf_counter() - t)
             residual[k] = np.linalg.norm(A @ x.ravel() - b.ravel()) / np.linalg.norm(b)
     for k, s in handles.items():
