@@ -208,7 +208,8 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     ev_n = grads[:, UX, 0] + grads[:, UY, 1]
     p_n = fem.at_quadrature(U_n[:, P], tri, q)
     S_n = fem.at_quadrature(U_n[:, S], tri, q)
-    phi_n = physics.porosity(disc.phi0[:, None], ev_n[:, None], p_n, params.K_s, params.porosity_floor)
+    phi_n = physics.porosity(disc.phi0[:, None], ev_n[:, None], p_n, params.K_s, params.porosity_floor,
+                             params.porosity_ceiling)
     up_x, up_y = upwind_shift(disc, grads[:, P]) if disc.upwind_length is not None else (None, None)
     stab = {} if disc.stab_tau is None else {"tau": disc.stab_tau, "px_n": grads[:, P, 0], "py_n": grads[:, P, 1]}
     return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n, up_x=up_x, up_y=up_y,
@@ -267,14 +268,15 @@ def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -
     :func:`upwind_saturation`).  Numpy arrays, Duals or traced symbols alike.  The Darcy fluxes follow
     from :func:`darcy_fluxes`.
 
-    * φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p/K_s (Eq. summary_equations_3), with the optional porosity floor;
+    * φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p/K_s (Eq. summary_equations_3), with the optional porosity floor and
+      ceiling;
     * k from :func:`solver.physics.permeability` (Eq. permeability), with the optional permeability floor;
     * σ = g(d) σ_A + σ_I − κ ∇S⊗∇S − b p I with Miehe's split (Eq. summary_equations_4, _secondary_3);
     * w_α = −λ_α (∇p + φ⁻¹ κ ∇·(∇S⊗∇S)), λ_α = k k_rα/η_α (Eq. fluid_equation);
     * M from :func:`solver.physics.ch_mobility` (Sec. 2.8, option ``ch_mobility``).
     """
     kap = params.kappa * params.korteweg_factor
-    phi = physics.porosity(phi0, exx + eyy, p, params.K_s, params.porosity_floor)
+    phi = physics.porosity(phi0, exx + eyy, p, params.K_s, params.porosity_floor, params.porosity_ceiling)
     (ax, ay, axy), (ex, ey, exy_s), psi_a = physics.spectral_split(exx, eyy, exy, params.lame_lambda, params.lame_mu)
     deg = gd - 1.0  # σ' = σ_elastic + (g − 1) σ_A
     sxx = ex + ax * deg - params.biot * p

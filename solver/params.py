@@ -82,6 +82,9 @@ _FIELD_DOCS = {
                       "below φ_f, φ = φ_f²/(2φ_f − φ_lin), solver.physics.porosity_floor)",
     "permeability_floor": "smooth lower bound k_f of the permeability, mm² (None: the paper's Kozeny–Carman law, "
                           "k = 0 at closed pores; below k_f, k = k_f²/(2k_f − k_KC), solver.physics.permeability_floor)",
+    "porosity_ceiling": "onset φ_c of a smooth upper bound 1 of the porosity law, - (None: the paper's unbounded "
+                        "linear law, φ > 1 in dilated cracks; above φ_c, φ = 1 − (1−φ_c)²/(2(1−φ_c) − (1−φ_lin)), "
+                        "solver.physics.porosity_ceiling)",
 }
 
 
@@ -93,7 +96,7 @@ _UNITS = {
     "psi_c": "kPa", "beta": "kPa·s", "cell_height": "mm", "r_inner": "mm", "r_outer": "mm", "bead_diameter": "mm",
     "phi_mean": "-", "phi_range": "-", "seed": "", "porosity_field": "", "mu_outer_bc": "", "ch_mobility": "", "outer_saturation_bc": "",
     "volumetric_coupling": "-", "korteweg_factor": "-", "outer_compliance": "mm/kPa", "crack_permeability": "-",
-    "porosity_floor": "-", "permeability_floor": "mm²",
+    "porosity_floor": "-", "permeability_floor": "mm²", "porosity_ceiling": "-",
 }
 
 # allowed values of every parameter, as `_coerce_and_check` enforces them (tests/test_params.py holds the
@@ -120,6 +123,7 @@ _ALLOWED = {
     "outer_saturation_bc": f"one of {OUTER_SATURATION_BCS}",
     "porosity_floor": "None or in (0, phi_mean - phi_range) (below every initial porosity)",
     "permeability_floor": "None or in (0, k(phi_mean - phi_range)) mm² (below every initial permeability)",
+    "porosity_ceiling": "None or in (phi_mean + phi_range, 1) (above every initial porosity)",
 }
 
 @dataclass(frozen=True)
@@ -164,6 +168,9 @@ class Parameters:
     permeability_floor : smooth lower bound k_f of the permeability, mm² (None = the paper's Kozeny–Carman law,
         k = 0 where the pores close; see :func:`solver.physics.permeability_floor`).  Omitted from
         :meth:`to_dict` when None.
+    porosity_ceiling : onset φ_c of a smooth upper bound 1 of the porosity, - (None = the paper's linear law, which
+        exceeds 1 in dilated cracks; see :func:`solver.physics.porosity_ceiling`).  Omitted from :meth:`to_dict`
+        when None.
     """
 
     eta_o: float = 0.29
@@ -199,6 +206,7 @@ class Parameters:
     crack_permeability: float = 1.0
     porosity_floor: float | None = None
     permeability_floor: float | None = None
+    porosity_ceiling: float | None = None
 
     def __post_init__(self):
         _coerce_and_check(self)
@@ -353,10 +361,10 @@ _FLOAT_FIELDS = (
     "mu_i", "mu_o", "cell_height", "r_inner", "r_outer", "bead_diameter", "phi_mean",
     "phi_range", "volumetric_coupling", "korteweg_factor", "outer_compliance", "crack_permeability",
 )
-_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta", "porosity_floor", "permeability_floor")
+_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta", "porosity_floor", "permeability_floor", "porosity_ceiling")
 # fields added after runs were stored: left out of to_dict() at None, so the parameter dicts (and the run keys
 # made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("porosity_floor", "permeability_floor")
+_OMIT_WHEN_NONE = ("porosity_floor", "permeability_floor", "porosity_ceiling")
 _CHOICES = (("porosity_field", POROSITY_FIELDS), ("mu_outer_bc", MU_OUTER_BCS), ("ch_mobility", CH_MOBILITIES),
             ("outer_saturation_bc", OUTER_SATURATION_BCS))
 CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
@@ -442,6 +450,9 @@ def _coerce_and_check(p: Parameters) -> None:
         if not 0.0 < p.permeability_floor < k_min:
             _fail("permeability_floor", p.permeability_floor, f"None or in (0, k(phi_mean - phi_range) = {k_min:.6g}) mm² "
                                                               "(below every initial permeability)")
+    if p.porosity_ceiling is not None and not p.phi_mean + p.phi_range < p.porosity_ceiling < 1.0:
+        _fail("porosity_ceiling", p.porosity_ceiling, f"None or in (phi_mean + phi_range = {p.phi_mean + p.phi_range:.6g}, 1) "
+                                                      "(above every initial porosity)")
     bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
     if not p.l_d <= bound * (1.0 + 1e-12):
         _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")

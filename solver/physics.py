@@ -13,14 +13,18 @@ from .ad import Dual
 
 
 # ---------------------------------------------------------------- porosity
-def porosity(phi0, eps_v, p, K_s: float, floor: float | None = None):
+def porosity(phi0, eps_v, p, K_s: float, floor: float | None = None, ceiling: float | None = None):
     """φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p / K_s  (Eq. summary_equations_3), bounded below by
-    :func:`porosity_floor` when ``floor`` is given (the ``porosity_floor`` parameter; None: the paper's law).
+    :func:`porosity_floor` when ``floor`` is given (the ``porosity_floor`` parameter) and above by
+    :func:`porosity_ceiling` when ``ceiling`` is given (the ``porosity_ceiling`` parameter); None: the paper's
+    law, unbounded both ways.
 
     ``phi0`` per element (dimensionless), ``eps_v`` volumetric strain, ``p`` kPa, ``K_s`` kPa.
     """
     phi = phi0 + (1.0 - phi0) * eps_v + (1.0 - phi0) * p / K_s
-    return phi if floor is None else porosity_floor(phi, floor)
+    if floor is not None:
+        phi = porosity_floor(phi, floor)
+    return phi if ceiling is None else porosity_ceiling(phi, ceiling)
 
 
 def porosity_floor(phi, floor: float):
@@ -32,6 +36,27 @@ def porosity_floor(phi, floor: float):
     and the pore space stiffens.  Value and slope match at φ_f (C¹), so Newton keeps its convergence.
     """
     return smooth_floor(phi, floor)
+
+
+def porosity_ceiling(phi, onset: float):
+    """Smooth upper bound 1 of the porosity from the onset φ_c < 1: φ for φ <= φ_c, and above it
+    1 − (1 − φ_c)² / (2 (1 − φ_c) − (1 − φ)), which rises to 1 as the linear value goes to +∞.
+
+    The linear law of Eq. summary_equations_3 has no upper bound: in the dilated cracks it exceeds 1 (up to 2.3
+    in the h = 1 boundary runs), so the crack stores more fluid than the open gap holds (φ S, φ ε̇_v) and the
+    Korteweg force divides by that φ.  A volume fraction is at most 1: this is :func:`smooth_floor` mirrored
+    about 1 (applied to 1 − φ with the floor 1 − φ_c), value and slope continuous at φ_c.  Above the
+    Kozeny–Carman cap porosity φ* the permeability is k_max whatever φ, so the bound changes the storage and the
+    Korteweg term, not the flow.  Not the paper's model (which states no bound): an option.  Exactly φ at and
+    below the onset (written out rather than through smooth_floor, whose 1 − (1 − φ) would round φ).
+    """
+    delta = 1.0 - onset
+    above = ad.value(phi) > onset
+    if isinstance(phi, Dual):
+        safe = ad.where(above, phi, onset)
+        return ad.where(above, 1.0 - delta * delta / (2.0 * delta - (1.0 - safe)), phi)
+    safe = np.where(above, phi, onset)  # the unused branch stays finite where φ <= 1 − 2δ
+    return np.where(above, 1.0 - delta * delta / (2.0 * delta - (1.0 - safe)), phi)
 
 
 def smooth_floor(x, floor: float):
