@@ -1,4 +1,5 @@
-"""The wall probes (campaigns/wall_seal_h2.toml, wall_open_h2.toml): per run, the quantities their headers read.
+"""The wall and ceiling probes (campaigns/wall_seal_h2.toml, wall_open_h2.toml, porosity_ceiling_h2.toml): per run,
+the quantities their headers read.
 
 For each finished run of the campaign store: from the time series, the crack (``open_tip_radius - r_inner``, mm)
 at its largest and at the judged time, the time of the largest, p_inj (kPa) at 1, 2 s and at the end, and the
@@ -70,18 +71,20 @@ def run_summary(run_dir: Path) -> dict:
     ts = pd.read_csv(run_dir / "timeseries.csv")
     t_judged = (rec.get("classification") or {}).get("t_classified") or float(ts["t"].iloc[-1])
     return {"key": run_dir.name, "porosity_floor": p["porosity_floor"], "permeability_floor": p.get("permeability_floor"),
+            "porosity_ceiling": p.get("porosity_ceiling"),
             "label": (rec.get("classification") or {}).get("regime"),
             **series_row(ts, p["r_inner"], float(t_judged)), "rings": ring_profiles(run_dir, p["r_outer"])}
 
 
 def _markdown(runs: list[dict]) -> str:
-    cols = ["porosity_floor", "permeability_floor", "label", "t_judged", "crack_longest", "t_longest", "crack_judged", "p_inj_1s",
+    cols = ["porosity_floor", "permeability_floor", "porosity_ceiling", "label", "t_judged", "crack_longest", "t_longest", "crack_judged", "p_inj_1s",
             "p_inj_2s", "p_inj_end", "outflow_frac_1s", "outflow_frac_2s", "outflow_frac_end"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols) + " |"
               for r in runs]
     for r in runs:
-        lines += ["", f"Rings, porosity floor {r['porosity_floor']}, permeability floor {r['permeability_floor']} mm² "
+        lines += ["", f"Rings, porosity floor {r['porosity_floor']}, permeability floor {r['permeability_floor']} mm², "
+                  f"porosity ceiling {r['porosity_ceiling']} "
                   "(p kPa, phi -; ring means at r mm):", ""]
         keys = ["t", "phi_min_wall"] + [k for k in r["rings"][0] if k.startswith("p@")] + \
             [k for k in r["rings"][0] if k.startswith("phi@")]
@@ -101,7 +104,7 @@ def main(argv=None) -> int:
         rec = d / "record.json"
         if not d.name.startswith(".") and rec.is_file() and json.loads(rec.read_text()).get("status") == "ok":
             runs.append(run_summary(d))
-    runs.sort(key=lambda r: (r["porosity_floor"], r["permeability_floor"] or 0.0))
+    runs.sort(key=lambda r: (r["porosity_floor"], r["permeability_floor"] or 0.0, r["porosity_ceiling"] or 0.0))
     a.out.write_text(json.dumps(runs, indent=1))
     if a.md:
         a.md.write_text(_markdown(runs))
