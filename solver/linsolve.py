@@ -6,13 +6,16 @@
   directly (``spsolve`` silently switches to UMFPACK when installed).  The
   rows are first equilibrated (each divided by its largest entry: the block
   rows of momentum, mass and chemical potential differ by orders of
-  magnitude), then factorized with the minimum-degree ordering on AᵀA+A,
-  symmetric mode and a diagonal pivot threshold of 0.1.  On the coupled
-  Jacobian this cut the fill 14x and the factorization time 40x against
-  SuperLU's defaults (h = 4 mm: 3.9 s -> 0.07 s).  Threshold pivoting is
-  kept (0.1, not 0), and every solve is checked: if the relative residual
-  of a solve exceeds 1e-8 the matrix is refactorized with full partial
-  pivoting (COLAMD, threshold 1) and the solve repeated.
+  magnitude), then factorized with the COLAMD column ordering, symmetric
+  mode and a diagonal pivot threshold of 0.1.  COLAMD rather than minimum
+  degree on AᵀA+A: with the threshold pivoting of the
+  coupled Jacobian the minimum-degree fill grows as the run goes on (h = 2 mm:
+  6.7 million entries at t = 0.2 s, 12.8 million at t = 1 s, against 8.3 and
+  9.0 million with COLAMD), so the reference case at h = 2 mm to 1 s
+  factorizes in 55 s against 107 s (results/bench/README.md, sixth round).
+  Threshold pivoting is kept (0.1, not 0), and every solve is checked: if
+  the relative residual of a solve exceeds 1e-8 the matrix is refactorized
+  with full partial pivoting (COLAMD, threshold 1) and the solve repeated.
 * ``"pypardiso"`` (optional extra ``fast``): MKL PARDISO, picked by
   ``"auto"`` when importable.  Measured on the coupled Jacobian (7 fields):
   h = 2 mm (18,494 unknowns) 0.13 s against SuperLU's 0.41 s, h = 1 mm
@@ -162,7 +165,7 @@ class _SuperLU(_Factors):
         self._factorize()
 
     def _factorize(self):
-        self.lu = self._splu("MMD_AT_PLUS_A", 0.1, dict(SymmetricMode=True))
+        self.lu = self._splu("COLAMD", 0.1, dict(SymmetricMode=True))
         self.safe = False
         self.trusted = False  # the first solve passed its check without a fallback: later solves are not checked
 
