@@ -8,11 +8,9 @@
   rows of momentum, mass and chemical potential differ by orders of
   magnitude), then factorized with the COLAMD column ordering, symmetric
   mode and a diagonal pivot threshold of 0.1.  COLAMD rather than minimum
-  degree on AᵀA+A: with the threshold pivoting of the
-  coupled Jacobian the minimum-degree fill grows as the run goes on (h = 2 mm:
-  6.7 million entries at t = 0.2 s, 12.8 million at t = 1 s, against 8.3 and
-  9.0 million with COLAMD), so the reference case at h = 2 mm to 1 s
-  factorizes in 55 s against 107 s (results/bench/README.md, sixth round).
+  degree on AᵀA+A: with the threshold pivoting of the coupled Jacobian the
+  minimum-degree fill grows as the run goes on and COLAMD's does not
+  (results/bench/README.md, sixth round).
   Threshold pivoting is kept (0.1, not 0), and every solve is checked: if
   the relative residual of a solve exceeds 1e-8 the matrix is refactorized
   with full partial pivoting (COLAMD, threshold 1) and the solve repeated.
@@ -61,7 +59,6 @@ STATS = {"factorizations": 0}
 PRECISIONS = ("double", "single")
 #: the largest relative residual ||A x - b|| / ||b|| accepted from a solve with single-precision factors: the
 #: forcing term of the inexact Newton iteration, 300x below the contraction the Jacobian reuse accepts (0.3).
-#: The first solves of the reference run's factors fall below it (results/bench/README.md, sixth round).
 SINGLE_FORCING = 1e-3
 
 
@@ -114,7 +111,7 @@ def resolve(kind: str, n: int | None = None) -> str:
 def resolve_precision(precision: str | None, kind: str) -> str:
     """The factors' precision for the resolved backend ``kind``: ``precision`` when given, else (None) "single"
     with PARDISO and "double" with SuperLU (whose single-precision factorization is slower than its double
-    one on the coupled Jacobian: 14.2 s against 3.9 s at h = 2 mm)."""
+    one on the coupled Jacobian; results/bench/README.md, sixth round)."""
     if precision is None:
         return "single" if kind == "pypardiso" else "double"
     if precision not in PRECISIONS:

@@ -438,7 +438,7 @@ def _element_matrices(disc: Discretization) -> np.ndarray:
     """The element-matrix buffer (M, nf, nf, 3, 3) of ``disc``, made once and reused (its chunks are zeroed by
     :func:`residual_and_jacobian` before each use): at h = 1 mm it holds 37 MB, above the allocator's
     largest heap block (32 MB), so a new array at every assembly would be a fresh memory mapping whose pages
-    are faulted in one by one (a third of the element work).  Used only inside :func:`residual_and_jacobian`
+    are faulted in one by one.  Used only inside :func:`residual_and_jacobian`
     (the Jacobian it returns has its own data)."""
     shape = (len(disc.triangles), disc.n_fields, disc.n_fields, 3, 3)
     Ke = disc.workspace.get("element_matrices")

@@ -80,7 +80,7 @@ class RunOptions:
         checked to a relative residual of ``solver.linsolve.SINGLE_FORCING`` = 1e-3, refined in mixed precision
         or refactorized in double when they miss it; ``solver.linsolve``).  The converged state meets the same
         tests as with double factors.  None (default): "single" with PARDISO, whose single-precision
-        factorization and substitution take 0.63x and 0.53x the double ones at h = 1 mm, and "double" with
+        factorization and substitution are the faster (results/bench/README.md, sixth round), and "double" with
         SuperLU.  Omitted from :meth:`to_dict` when None, as h_inner.
     jacobian_reuse : keep a factorized Jacobian (over Newton iterations, stagger iterations and
         time steps of equal dt) while the Newton updates contract by at least this factor per

@@ -42,9 +42,9 @@ def porosity_ceiling(phi, onset: float):
     """Smooth upper bound 1 of the porosity from the onset φ_c < 1: φ for φ <= φ_c, and above it
     1 − (1 − φ_c)² / (2 (1 − φ_c) − (1 − φ)), which rises to 1 as the linear value goes to +∞.
 
-    The linear law of Eq. summary_equations_3 has no upper bound: in the dilated cracks it exceeds 1 (up to 2.3
-    in the h = 1 boundary runs), so the crack stores more fluid than the open gap holds (φ S, φ ε̇_v) and the
-    Korteweg force divides by that φ.  A volume fraction is at most 1: this is :func:`smooth_floor` mirrored
+    The linear law of Eq. summary_equations_3 has no upper bound: in the dilated cracks it exceeds 1
+    (results/porosity_ceiling_h2/README.md), so the crack stores more fluid than the open gap holds (φ S, φ ε̇_v)
+    and the Korteweg force divides by that φ.  A volume fraction is at most 1: this is :func:`smooth_floor` mirrored
     about 1 (applied to 1 − φ with the floor 1 − φ_c), value and slope continuous at φ_c.  Above the
     Kozeny–Carman cap porosity φ* the permeability is k_max whatever φ, so the bound changes the storage and the
     Korteweg term, not the flow.  Not the paper's model (which states no bound): an option.  Exactly φ at and
@@ -55,7 +55,7 @@ def porosity_ceiling(phi, onset: float):
     if isinstance(phi, Dual):
         safe = ad.where(above, phi, onset)
         return ad.where(above, 1.0 - delta * delta / (2.0 * delta - (1.0 - safe)), phi)
-    safe = np.where(above, phi, onset)  # the unused branch stays finite where φ <= 1 − 2δ
+    safe = np.where(above, phi, onset)  # the unused branch, at the onset, stays finite where 2δ − (1 − φ) = 0
     return np.where(above, 1.0 - delta * delta / (2.0 * delta - (1.0 - safe)), phi)
 
 
