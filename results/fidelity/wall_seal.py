@@ -1,8 +1,9 @@
-"""The wall and ceiling probes (campaigns/wall_seal_h2.toml, wall_open_h2.toml, porosity_ceiling_h2.toml): per run,
-the quantities their headers read.
+"""The closing probes (campaigns/wall_seal_h2.toml, wall_open_h2.toml, porosity_ceiling_h2.toml,
+wall_compliance_h2.toml, damage_viscosity_closure_h2.toml): per run, the quantities their headers read.
 
 For each finished run of the campaign store: from the time series, the crack (``open_tip_radius - r_inner``, mm)
-at its largest and at the judged time, the time of the largest, p_inj (kPa) at 1, 2 s and at the end, and the
+at its largest and at the judged time, the time of the largest, the largest nodal damage (-) at those two times,
+p_inj (kPa) at 1, 2 s and at the end, and the
 outflow through r_o as a fraction of the injected volume at 1, 2 s and at the end; from each snapshot, the
 pressure (kPa) and the porosity (-) averaged over rings at the radii RADII and r_o - WALL (mm), and the smallest
 porosity within 2 mm of r_o.  Units: mm, s, kPa.
@@ -35,7 +36,8 @@ def series_row(ts: pd.DataFrame, r_i: float, t_judged: float) -> dict:
     i = crack[upto].idxmax()
     out_frac = ts["outflow_volume"] / ts["injected_volume"].where(ts["injected_volume"] > 0)
     row = {"t_judged": t_judged, "crack_longest": float(crack[i]), "t_longest": float(ts.loc[i, "t"]),
-           "crack_judged": float(crack[upto].iloc[-1])}
+           "crack_judged": float(crack[upto].iloc[-1]),
+           "max_damage_longest": float(ts.loc[i, "max_damage"]), "max_damage_judged": float(ts["max_damage"][upto].iloc[-1])}
     for t in (1.0, 2.0):
         row[f"p_inj_{t:g}s"] = _at(ts, "p_inj", t)
         row[f"outflow_frac_{t:g}s"] = float(np.interp(t, ts["t"], out_frac.fillna(0.0)))
@@ -71,13 +73,14 @@ def run_summary(run_dir: Path) -> dict:
     ts = pd.read_csv(run_dir / "timeseries.csv")
     t_judged = (rec.get("classification") or {}).get("t_classified") or float(ts["t"].iloc[-1])
     return {"key": run_dir.name, "porosity_floor": p["porosity_floor"], "permeability_floor": p.get("permeability_floor"),
-            "porosity_ceiling": p.get("porosity_ceiling"),
+            "porosity_ceiling": p.get("porosity_ceiling"), "beta": p.get("beta"),
+            "outer_compliance": p.get("outer_compliance"),
             "label": (rec.get("classification") or {}).get("regime"),
             **series_row(ts, p["r_inner"], float(t_judged)), "rings": ring_profiles(run_dir, p["r_outer"])}
 
 
 def _markdown(runs: list[dict]) -> str:
-    cols = ["porosity_floor", "permeability_floor", "porosity_ceiling", "label", "t_judged", "crack_longest", "t_longest", "crack_judged", "p_inj_1s",
+    cols = ["porosity_floor", "permeability_floor", "porosity_ceiling", "beta", "outer_compliance", "label", "t_judged", "crack_longest", "t_longest", "crack_judged", "max_damage_longest", "max_damage_judged", "p_inj_1s",
             "p_inj_2s", "p_inj_end", "outflow_frac_1s", "outflow_frac_2s", "outflow_frac_end"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols) + " |"
@@ -104,7 +107,8 @@ def main(argv=None) -> int:
         rec = d / "record.json"
         if not d.name.startswith(".") and rec.is_file() and json.loads(rec.read_text()).get("status") == "ok":
             runs.append(run_summary(d))
-    runs.sort(key=lambda r: (r["porosity_floor"], r["permeability_floor"] or 0.0, r["porosity_ceiling"] or 0.0))
+    runs.sort(key=lambda r: (r["porosity_floor"], r["permeability_floor"] or 0.0, r["porosity_ceiling"] or 0.0,
+                             r["outer_compliance"] or 0.0, r["beta"] or 0.0))
     a.out.write_text(json.dumps(runs, indent=1))
     if a.md:
         a.md.write_text(_markdown(runs))
