@@ -95,7 +95,9 @@ Definitions
     of / along a crack).
 Rules
   1. fracturing iff crack_length > min_crack_length (L_min, default max(2 mm, 2 h)):
-     the two regimes of the Ca*-C diagram (porous invasion / fracturing).
+     the two regimes of the Ca*-C diagram (porous invasion / fracturing).  crack_length is
+     the classified snapshot's (crack_record = "snapshot"), or the longest the run made up
+     to it (crack_record = "longest").
   2. Not fracturing: viscous_fingering iff n_fingers >= min_fingers (default 2),
      otherwise uniform_invasion.
   3. Fracturing: non_invasive_fracturing iff the invasion reach outside the cracks is
@@ -109,6 +111,10 @@ Rules
 
 
 # --------------------------------------------------------------------------- options
+CRACK_RECORDS = ("snapshot", "longest")
+HISTORY_PHI_OPEN = 0.99  # the level of the time series' open_tip_radius (solver.metrics.open_tip_radius)
+
+
 @dataclass(frozen=True)
 class ClassifierOptions:
     """Thresholds of the classifier (lengths in mm). ``None`` = default derived from h.
@@ -127,6 +133,12 @@ class ClassifierOptions:
         (default l_S/2 + l_d).
     alignment_tol_deg: angular tolerance of a crack-aligned invasion lobe (deg).
     n_theta: number of angular bins of r(theta).
+    crack_record: which crack rule 1 reads.  "snapshot" (default, the paper's Sec. 3.6): the crack of the
+        classified snapshot.  "longest": the longest crack the run made up to the classified time, the larger of
+        the snapshot's crack and the time series' open_tip_radius - r_inner over the accepted steps at
+        t <= t_classified (``classify_run`` only; needs phi_open = 0.99, the level of that time-series column).
+        The experiment's cracks are broken cement bonds and stay; the model's dilated crack zones can close
+        elastically after about 2 s, so a label read on the snapshot depends on when it is read.
     """
 
     phi_open: float = 0.99
@@ -143,6 +155,7 @@ class ClassifierOptions:
     confined_distance: float | None = None
     alignment_tol_deg: float = 15.0
     n_theta: int = 720
+    crack_record: str = "snapshot"
 
     def __post_init__(self) -> None:
         _check_range("phi_open", self.phi_open, 0.0, 1.0, lo_open=True)
@@ -159,6 +172,11 @@ class ClassifierOptions:
         _check_range("alignment_tol_deg", self.alignment_tol_deg, 0.0, 180.0)
         if not isinstance(self.n_theta, (int, np.integer)) or not 16 <= self.n_theta <= 100_000:
             raise ValueError(f"n_theta={self.n_theta!r}: must be an integer in [16, 100000]")
+        if self.crack_record not in CRACK_RECORDS:
+            raise ValueError(f"crack_record={self.crack_record!r}: must be one of {CRACK_RECORDS}")
+        if self.crack_record == "longest" and self.phi_open != HISTORY_PHI_OPEN:
+            raise ValueError(f"crack_record='longest' with phi_open={self.phi_open!r}: the time series records "
+                             f"the open region at phi_open = {HISTORY_PHI_OPEN} only")
 
     def resolved(self, h: float) -> dict[str, float]:
         """Numerical thresholds for a mesh of median edge length ``h`` (mm)."""
@@ -528,7 +546,8 @@ def _fingers(theta: np.ndarray, r: np.ndarray, prominence: float) -> np.ndarray:
 
 # --------------------------------------------------------------------------- classifier
 def _classify_images(raster: MeshRaster, S_img: np.ndarray, phi_img: np.ndarray,
-                     r_inner: float, r_outer: float, opts: ClassifierOptions) -> Classification:
+                     r_inner: float, r_outer: float, opts: ClassifierOptions,
+                     longest: float = 0.0) -> Classification:
     th = opts.resolved(raster.h)
     px = raster.pixel
     px2 = px * px
@@ -556,6 +575,8 @@ def _classify_images(raster: MeshRaster, S_img: np.ndarray, phi_img: np.ndarray,
         crack_length = max(0.0, tip_r - r_inner)
     else:
         tip_r, crack_length = float(r_inner), 0.0
+    if longest > crack_length:  # crack_record = "longest": an earlier, longer crack (mm)
+        tip_r, crack_length = float(r_inner) + longest, longest
     fracturing = crack_length > th["min_crack_length"]
 
     # ---- crack branches: h-maxima of (r - r_inner) over the crack pixels
@@ -665,7 +686,8 @@ def _check_radii(r_inner: float, r_outer: float) -> tuple[float, float]:
 def classify_fields(points: Any, triangles: Any, S: Any, phi: Any, r_inner: float = 5.0,
                     r_outer: float = 53.0, *, options: ClassifierOptions | None = None,
                     raster: MeshRaster | None = None, centre: tuple[float, float] | None = None,
-                    phi_location: str | None = None, **thresholds: Any) -> Classification:
+                    phi_location: str | None = None, longest_crack: float = 0.0,
+                    **thresholds: Any) -> Classification:
     """Classify one snapshot into a flow regime.
 
     points (N, 2) mm; triangles (M, 3) node indices; S (N,) nodal saturation of the
@@ -673,7 +695,9 @@ def classify_fields(points: Any, triangles: Any, S: Any, phi: Any, r_inner: floa
     forces 'node' or 'element'); r_inner, r_outer: annulus radii (mm).
     Thresholds: keyword arguments of ``ClassifierOptions`` (e.g. ``min_crack_length=3.0``)
     or ``options=ClassifierOptions(...)``. ``raster`` reuses a ``build_raster`` result;
-    ``centre`` is the annulus centre (default: centroid of the mesh).
+    ``centre`` is the annulus centre (default: centroid of the mesh).  ``longest_crack`` (mm): the longest
+    crack of the run up to this snapshot, which rule 1 reads when it exceeds the snapshot's (crack_record =
+    "longest"; ``classify_run`` passes it from the time series).
     Returns a frozen ``Classification``.
 
     """
@@ -687,7 +711,9 @@ def classify_fields(points: Any, triangles: Any, S: Any, phi: Any, r_inner: floa
                          f"triangles, got {len(p)}/{len(t)}")
     S_img = _field_image(raster, S, "S", "node")
     phi_img = _field_image(raster, phi, "phi", phi_location)
-    return _classify_images(raster, S_img, phi_img, r_inner, r_outer, opts)
+    if not (isinstance(longest_crack, (int, float)) and math.isfinite(longest_crack) and longest_crack >= 0.0):
+        raise ValueError(f"longest_crack={longest_crack!r}: must be a finite length >= 0 (mm)")
+    return _classify_images(raster, S_img, phi_img, r_inner, r_outer, opts, float(longest_crack))
 
 
 classify_fields.__doc__ = (classify_fields.__doc__ or "") + "\n" + REGIME_RULES
@@ -854,5 +880,24 @@ def classify_run(run_dir: str | Path, at: Any = "last", *, r_inner: float | None
     with np.load(f) as z:
         S = np.asarray(z["S"], float)
         phi = np.asarray(z["phi"], float)
-    c = classify_fields(points, tris, S, phi, ri, ro, options=opts)
+    longest = longest_open_crack(run_dir, t, ri) if opts.crack_record == "longest" else 0.0
+    c = classify_fields(points, tris, S, phi, ri, ro, options=opts, longest_crack=longest)
     return RunClassification(c, float(t))
+
+
+def longest_open_crack(run_dir: str | Path, t: float, r_inner: float) -> float:
+    """The longest crack (mm) of a run up to time t (s): the largest open_tip_radius - r_inner of its
+    ``timeseries.csv`` over the accepted steps at t' <= t (0 while no open region reaches beyond the cavity).
+    open_tip_radius is the largest radius of the phi >= 0.99 region connected to the inlet (solver.metrics)."""
+    f = Path(run_dir) / "timeseries.csv"
+    if not f.is_file():
+        raise FileNotFoundError(f"{f}: crack_record='longest' reads the run's time series, which is missing")
+    import pandas as pd
+
+    ts = pd.read_csv(f)
+    missing = {"t", "open_tip_radius"} - set(ts.columns)
+    if missing:
+        raise ValueError(f"{f}: crack_record='longest' needs the columns {sorted(missing)}")
+    upto = ts["open_tip_radius"][ts["t"] <= float(t) * (1.0 + 1e-9)].to_numpy(float)
+    upto = upto[np.isfinite(upto)]
+    return max(float(upto.max()) - float(r_inner), 0.0) if upto.size else 0.0

@@ -169,6 +169,8 @@ def _timeseries_metrics(ts) -> dict:
     for c in ("front_radius_mean", "front_radius_max", "mean_damage", "open_tip_radius"):
         if c in cols:
             put(f"{c}_final", last[c])
+    if "open_tip_radius" in cols:  # the longest open crack of the run (crack_closure: cracks can close)
+        put("open_tip_radius_max", ts["open_tip_radius"].max())
     if "max_hoop_stress" in cols:
         put("max_hoop_stress_max", ts["max_hoop_stress"].max())
     if "mass_error" in cols:

@@ -398,3 +398,50 @@ def test_raster_reuse():
     area_ras = ras.inside.sum() * ras.pixel**2
     perimeter = 2 * np.pi * (RI + RO)
     assert abs(area_ras - area_mesh) <= perimeter * ras.pixel
+
+
+# --------------------------------------------------------------------------- crack_record = "longest"
+@pytest.fixture()
+def closing_run(tmp_path):
+    """A run whose crack closed: the snapshots hold a 3 mm slot, the time series an open region that reached
+    r_inner + 9 mm at t = 1.2 s and r_inner + 20 mm at t = 2.5 s, after the last snapshot (2.0 s)."""
+    d = tmp_path / "run"
+    (d / "snapshots").mkdir(parents=True)
+    p, t = ring_annulus(2.0)
+    np.savez(d / "snapshots" / "mesh.npz", points=p, triangles=t)
+    (d / "params.toml").write_text("r_inner = 5.0\nr_outer = 53.0\n")
+    phi = background_phi(t)
+    phi[slot_mask(centroids(p, t), [0.3], [3.0])] = 1.0
+    for i, tt in enumerate((0.5, 1.0, 2.0)):
+        np.savez(d / "snapshots" / f"snap_{i:05d}.npz", t=tt, S=front_S(p, fingers_R(20.0 + 10 * i, 0.0, 0)), phi=phi)
+    ts = [(0.25, RI), (0.5, RI + 2.0), (1.0, RI + 7.0), (1.2, RI + 9.0), (2.0, RI + 4.0), (2.5, RI + 20.0)]
+    (d / "timeseries.csv").write_text("t,p_inj,open_tip_radius\n" + "".join(f"{a},1.0,{b}\n" for a, b in ts))
+    return d
+
+
+def test_longest_crack_record(closing_run):
+    snap = classify_run(closing_run, min_crack_length=4.0).classification
+    assert not snap.fracturing and snap.crack_length <= 4.0  # the 3 mm slot at the last snapshot
+    c, t = classify_run(closing_run, min_crack_length=4.0, crack_record="longest")
+    # the largest open_tip_radius - r_inner at t <= 2.0 s is the 9 mm of t = 1.2 s, not the 20 mm after it
+    assert t == 2.0 and c.fracturing and c.crack_length == pytest.approx(9.0, abs=1e-12)
+    assert c.crack_tip_radius == pytest.approx(RI + 9.0, abs=1e-12)
+    assert classify_run(closing_run, at=1.0, crack_record="longest").classification.crack_length == pytest.approx(7.0)
+    # at 0.5 s the history's 2 mm is shorter than the snapshot's slot: the snapshot's crack is read
+    early = classify_run(closing_run, at=0.5, crack_record="longest").classification
+    assert early.crack_length == pytest.approx(classify_run(closing_run, at=0.5).classification.crack_length)
+    # a crack longer than L_min either way: the label does not depend on the record
+    assert classify_run(closing_run, min_crack_length=2.0, crack_record="longest").classification.fracturing
+
+
+def test_longest_crack_record_bad_input(closing_run):
+    with pytest.raises(ValueError, match="crack_record='sometimes'"):
+        ClassifierOptions(crack_record="sometimes")
+    with pytest.raises(ValueError, match="phi_open=0.95"):
+        ClassifierOptions(crack_record="longest", phi_open=0.95)
+    p, t = ring_annulus(2.0)
+    with pytest.raises(ValueError, match="longest_crack=-1"):
+        classify_fields(p, t, np.zeros(len(p)), background_phi(t), longest_crack=-1.0)
+    (closing_run / "timeseries.csv").unlink()
+    with pytest.raises(FileNotFoundError, match="timeseries.csv"):
+        classify_run(closing_run, crack_record="longest")
