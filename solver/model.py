@@ -204,7 +204,7 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     """Freeze the previous state ``U_n`` (N, nf) and the damage iterate ``d`` (N,)."""
     tri = disc.triangles
     q = fem.STRANG3
-    grads = np.einsum("mai,maf->mfi", disc.geom.grads, U_n[tri][:, :, :P + 1])
+    grads = fem.field_gradients(disc.geom.grads, U_n[tri][:, :, :P + 1])
     ev_n = grads[:, UX, 0] + grads[:, UY, 1]
     p_n = fem.at_quadrature(U_n[:, P], tri, q)
     S_n = fem.at_quadrature(U_n[:, S], tri, q)
@@ -483,7 +483,7 @@ def korteweg_force(disc: Discretization, U: np.ndarray, kappa: float) -> np.ndar
     The same expression the residual uses, (∇·G) G + (∇G) G, here at the centroid.
     """
     tri = disc.triangles
-    gradG = np.einsum("mai,maf->mfi", disc.geom.grads, U[tri][:, :, GX:GY + 1])  # (M, 2 comps, 2 dirs)
+    gradG = fem.field_gradients(disc.geom.grads, U[tri][:, :, GX:GY + 1])  # (M, 2 comps, 2 dirs)
     G = U[tri][:, :, GX:GY + 1].mean(axis=1)
     divG = gradG[:, 0, 0] + gradG[:, 1, 1]
     return kappa * (divG[:, None] * G + np.einsum("mij,mj->mi", gradG, G))
@@ -492,7 +492,7 @@ def korteweg_force(disc: Discretization, U: np.ndarray, kappa: float) -> np.ndar
 def project_gradient(disc: Discretization, S_nodal: np.ndarray) -> np.ndarray:
     """Lumped L2 projection Π∇S (N, 2) of a nodal field: the solution of the G equations for given S."""
     tri = disc.triangles
-    g = np.einsum("mai,ma->mi", disc.geom.grads, S_nodal[tri])
+    g = fem.element_gradient(S_nodal, tri, disc.geom)
     w = np.repeat(disc.geom.areas / 3.0, 3)
     out = np.empty((disc.n_nodes, 2))
     for c in range(2):
@@ -504,7 +504,7 @@ def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray) -
     """Post-processed element fields at the centroid: φ, ε_v, hoop stress (σ'_θθ, kPa), k (mm²), |w_1| (mm/s),
     ψ_A (kPa), Cahn–Hilliard mobility M (mm²/(kPa·s)), from the same :func:`constitutive` as the residual."""
     tri = disc.triangles
-    gradU = np.einsum("mai,maf->mfi", disc.geom.grads, U[tri])
+    gradU = fem.field_gradients(disc.geom.grads, U[tri])
     cen = U[tri].mean(axis=1)
     exx, eyy = gradU[:, UX, 0], gradU[:, UY, 1]
     exy = 0.5 * (gradU[:, UX, 1] + gradU[:, UY, 0])

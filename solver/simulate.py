@@ -186,7 +186,7 @@ class Simulation:
     def active_energy(self, U: np.ndarray) -> np.ndarray:
         """Nodal (lumped-projected) active strain energy ψ_A (kPa) of displacement U."""
         tri = self.disc.triangles
-        g = np.einsum("mai,maf->mfi", self.disc.geom.grads, U[tri][:, :, :2])
+        g = fem.field_gradients(self.disc.geom.grads, U[tri][:, :, :2])
         exx, eyy, exy = g[:, UX, 0], g[:, UY, 1], 0.5 * (g[:, UX, 1] + g[:, UY, 0])
         _, _, psi = physics.spectral_split(exx, eyy, exy, self.params.lame_lambda, self.params.lame_mu)
         return fem.nodal_average(psi, tri, self.disc.geom.areas, self.disc.n_nodes)
