@@ -545,100 +545,109 @@ def _fingers(theta: np.ndarray, r: np.ndarray, prominence: float) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- classifier
+class _Cracks(NamedTuple):
+    """The open components kept as cracks: label image, per-component keep flag and largest radius (mm)."""
+
+    lab: np.ndarray
+    keep: np.ndarray
+    rmax: np.ndarray
+    mask: np.ndarray
+
+
+def _cracks(raster: MeshRaster, phi_img: np.ndarray, r_inner: float, phi_open: float, min_area: float,
+            inner_tol: float) -> _Cracks:
+    """Open components (phi >= phi_open, 8-connected) of at least ``min_area`` (mm²) that come within
+    ``inner_tol`` (mm) of the cavity."""
+    lab, nlab = ndi.label(raster.inside & (phi_img >= phi_open), structure=_EIGHT)
+    if not nlab:
+        return _Cracks(lab, np.zeros(0, bool), np.zeros(0), np.zeros(lab.shape, bool))
+    idx = np.arange(1, nlab + 1)
+    area = np.bincount(lab.ravel(), minlength=nlab + 1)[1:] * raster.pixel**2
+    rmin = np.asarray(ndi.minimum(raster.r, lab, idx))
+    rmax = np.asarray(ndi.maximum(raster.r, lab, idx))
+    keep = (area >= min_area) & (rmin <= r_inner + inner_tol)
+    return _Cracks(lab, keep, rmax, np.concatenate([[False], keep])[lab])
+
+
+def _branch_tips(raster: MeshRaster, cracks: _Cracks, r_inner: float, min_branch_length: float,
+                 min_crack_length: float) -> list[float]:
+    """Angles (rad) of the crack-branch tips: h-maxima of (r - r_inner) over the crack pixels, plus the tip of
+    every crack longer than ``min_crack_length`` (mm) that has none (a crack longer than L_min counts once)."""
+    if not cracks.mask.any():
+        return []
+    from skimage.morphology import h_maxima
+
+    rr = raster.r
+    hm = h_maxima(np.where(cracks.mask, rr - r_inner, 0.0), min_branch_length).astype(bool) & cracks.mask
+    hl, nh = ndi.label(hm, structure=_EIGHT)
+    tip_angles: list[float] = []
+    counted = set()
+    if nh:
+        rows, cols = np.nonzero(hl)
+        lbl = hl[rows, cols]
+        cnt = np.bincount(lbl, minlength=nh + 1)[1:]
+        cy = np.bincount(lbl, raster.y[rows], minlength=nh + 1)[1:] / cnt - raster.centre[1]
+        cx = np.bincount(lbl, raster.x[cols], minlength=nh + 1)[1:] / cnt - raster.centre[0]
+        tip_angles = [float(a) for a in np.arctan2(cy, cx)]
+        counted = set(np.unique(cracks.lab[hm]).tolist())
+    for comp in np.flatnonzero(cracks.keep) + 1:
+        if comp not in counted and cracks.rmax[comp - 1] - r_inner > min_crack_length:
+            j = np.argmax(np.where(cracks.lab == comp, rr, -np.inf))
+            tip_angles.append(float(raster.theta.ravel()[j]))
+    return tip_angles
+
+
+def _invasion_reach(raster: MeshRaster, sources: np.ndarray, invaded: np.ndarray,
+                    confined_distance: float) -> tuple[float, float]:
+    """Largest distance (mm) of an invaded pixel to a source (cavity or crack), and the invaded fraction farther
+    than ``confined_distance`` (mm)."""
+    if not invaded.any():
+        return 0.0, 0.0
+    dist = ndi.distance_transform_edt(~sources, sampling=raster.pixel)
+    d_inv = dist[invaded & ~sources]
+    reach = float(d_inv.max()) if d_inv.size else 0.0
+    return reach, float(np.count_nonzero(d_inv > confined_distance) / np.count_nonzero(invaded))
+
+
+def _regime(fracturing: bool, n_fingers: int, n_unexplained: int, reach: float, th: Mapping[str, float]) -> str:
+    """Rules 1-3 of ``REGIME_RULES``."""
+    if not fracturing:
+        return "viscous_fingering" if n_fingers >= th["min_fingers"] else "uniform_invasion"
+    if reach <= th["confined_distance"]:
+        return "non_invasive_fracturing"
+    return "fracturing_fingering" if n_unexplained >= th["min_fingers"] else "invasive_fracturing"
+
+
 def _classify_images(raster: MeshRaster, S_img: np.ndarray, phi_img: np.ndarray,
                      r_inner: float, r_outer: float, opts: ClassifierOptions,
                      longest: float = 0.0) -> Classification:
     th = opts.resolved(raster.h)
-    px = raster.pixel
-    px2 = px * px
-    inside = raster.inside
-    rr = raster.r
-
-    # ---- cracks: open components connected to the cavity, large enough
-    open_mask = inside & (phi_img >= opts.phi_open)
-    lab, nlab = ndi.label(open_mask, structure=_EIGHT)
+    px2 = raster.pixel**2
     min_area = opts.min_open_area if opts.min_open_area is not None else 3.0 * raster.element_area
-    if nlab:
-        idx = np.arange(1, nlab + 1)
-        area = np.bincount(lab.ravel(), minlength=nlab + 1)[1:] * px2
-        rmin = np.asarray(ndi.minimum(rr, lab, idx))
-        rmax = np.asarray(ndi.maximum(rr, lab, idx))
-        keep = (area >= min_area) & (rmin <= r_inner + th["inner_tol"])
-        lut = np.concatenate([[False], keep])
-        crack = lut[lab]
-    else:
-        keep = np.zeros(0, bool)
-        rmax = np.zeros(0)
-        crack = np.zeros_like(open_mask)
-    if crack.any():
-        tip_r = float(rr[crack].max())
-        crack_length = max(0.0, tip_r - r_inner)
-    else:
-        tip_r, crack_length = float(r_inner), 0.0
+    cracks = _cracks(raster, phi_img, r_inner, opts.phi_open, min_area, th["inner_tol"])
+    crack = cracks.mask
+    tip_r = float(raster.r[crack].max()) if crack.any() else float(r_inner)
+    crack_length = max(0.0, tip_r - r_inner)
     if longest > crack_length:  # crack_record = "longest": an earlier, longer crack (mm)
         tip_r, crack_length = float(r_inner) + longest, longest
     fracturing = crack_length > th["min_crack_length"]
+    tip_angles = _branch_tips(raster, cracks, r_inner, th["min_branch_length"], th["min_crack_length"])
 
-    # ---- crack branches: h-maxima of (r - r_inner) over the crack pixels
-    tip_angles: list[float] = []
-    if crack.any():
-        from skimage.morphology import h_maxima
-
-        f = np.where(crack, rr - r_inner, 0.0)
-        hm = h_maxima(f, th["min_branch_length"]).astype(bool) & crack
-        hl, nh = ndi.label(hm, structure=_EIGHT)
-        counted_components = set()
-        if nh:
-            rows, cols = np.nonzero(hl)
-            lbl = hl[rows, cols]
-            cnt = np.bincount(lbl, minlength=nh + 1)[1:]
-            cy = np.bincount(lbl, raster.y[rows], minlength=nh + 1)[1:] / cnt - raster.centre[1]
-            cx = np.bincount(lbl, raster.x[cols], minlength=nh + 1)[1:] / cnt - raster.centre[0]
-            tip_angles = [float(a) for a in np.arctan2(cy, cx)]
-            counted_components = set(np.unique(lab[hm]).tolist())
-        # a crack longer than L_min counts at least once
-        for comp in np.flatnonzero(keep) + 1:
-            if comp in counted_components:
-                continue
-            if rmax[comp - 1] - r_inner > th["min_crack_length"]:
-                sel = lab == comp
-                j = np.argmax(np.where(sel, rr, -np.inf))
-                tip_angles.append(float(raster.theta.ravel()[j]))
-    n_cracks = len(tip_angles)
-
-    # ---- front and fingers
     theta_b, r_env, main, cavity = _front(raster, S_img, r_inner, r_outer, opts.s_front, opts.n_theta)
     ipk = _fingers(theta_b, r_env, th["finger_prominence"])
     finger_angles, finger_radii = theta_b[ipk], r_env[ipk]
-
-    # ---- invasion outside the cracks
-    sources = cavity | crack
-    invaded = main & inside
-    if invaded.any():
-        dist = ndi.distance_transform_edt(~sources, sampling=px)
-        d_inv = dist[invaded & ~sources]
-        reach = float(d_inv.max()) if d_inv.size else 0.0
-        outside_fraction = float(np.count_nonzero(d_inv > th["confined_distance"]) / np.count_nonzero(invaded))
-    else:
-        reach, outside_fraction = 0.0, 0.0
-
-    # ---- explained fingers (invasion lobes along cracks): near a crack-tip direction
+    invaded = main & raster.inside
+    reach, outside_fraction = _invasion_reach(raster, cavity | crack, invaded, th["confined_distance"])
+    # explained fingers (invasion lobes along cracks): near a crack-tip direction
     if finger_angles.size and tip_angles:
         dmin = _circ_dist(finger_angles, np.asarray(tip_angles)).min(axis=1)
         n_unexplained = int(np.count_nonzero(dmin > math.radians(th["alignment_tol_deg"])))
     else:
         n_unexplained = int(finger_angles.size)
+    regime = _regime(fracturing, int(finger_angles.size), n_unexplained, reach, th)
 
-    # ---- rules
-    if not fracturing:
-        regime = "viscous_fingering" if finger_angles.size >= th["min_fingers"] else "uniform_invasion"
-    elif reach <= th["confined_distance"]:
-        regime = "non_invasive_fracturing"
-    elif n_unexplained >= th["min_fingers"]:
-        regime = "fracturing_fingering"
-    else:
-        regime = "invasive_fracturing"
-
+    n_cracks = len(tip_angles)
+    px = raster.pixel
     th = dict(th, pixel=px, min_open_area=min_area, finger_prominence=th["finger_prominence"])
     return Classification(
         crack_tip_radius=tip_r,
