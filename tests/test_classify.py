@@ -445,3 +445,16 @@ def test_longest_crack_record_bad_input(closing_run):
     (closing_run / "timeseries.csv").unlink()
     with pytest.raises(FileNotFoundError, match="timeseries.csv"):
         classify_run(closing_run, crack_record="longest")
+
+
+def test_run_metrics_keep_the_longest_open_crack():
+    """The campaign table's open_tip_radius_max is the largest open_tip_radius of the run, _final the last one."""
+    import pandas as pd
+
+    from sweep.scheduler import _timeseries_metrics
+
+    ts = pd.DataFrame({"t": [0.5, 1.0, 2.0, 2.5], "p_inj": [1.0, 2.0, 3.0, 2.5],
+                       "open_tip_radius": [RI, RI + 9.0, RI + 4.0, RI + 3.0]})
+    m = _timeseries_metrics(ts)
+    assert m["open_tip_radius_max"] == RI + 9.0 and m["open_tip_radius_final"] == RI + 3.0
+    assert m["p_inj_max"] == 3.0 and m["n_steps"] == 4
