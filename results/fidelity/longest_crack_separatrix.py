@@ -28,6 +28,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from sweep.classify import longest_open_crack
 from sweep.threshold_sensitivity import ThresholdGrid, separatrix_grid, to_markdown
 
 
@@ -51,7 +52,7 @@ def longest_from_snapshots(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
 
 def longest_from_steps(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
     """``L@0.99`` (mm) per run key: the largest ``open_tip_radius - r_inner`` over the accepted steps at
-    t <= the judged time (0 while no open region reaches beyond the cavity), and the time it was reached (s)."""
+    t <= the judged time (``sweep.classify.longest_open_crack``), and the time it was reached (s)."""
     rows = {}
     for key, run in table.iterrows():
         rd = folder / "runs" / key
@@ -60,9 +61,8 @@ def longest_from_steps(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
         r_i = float(params.get("parameters", params)["r_inner"])
         t_judged = float(run["t_classified"]) if pd.notna(run.get("t_classified")) else float(ts["t"].iloc[-1])
         upto = ts[ts["t"] <= t_judged * (1 + 1e-9)]
-        i = upto["open_tip_radius"].idxmax()
-        rows[key] = {"L@0.99": max(float(upto.loc[i, "open_tip_radius"]) - r_i, 0.0),
-                     "t_longest": float(upto.loc[i, "t"]), "t_judged": t_judged}
+        rows[key] = {"L@0.99": longest_open_crack(rd, t_judged, r_i),
+                     "t_longest": float(upto.loc[upto["open_tip_radius"].idxmax(), "t"]), "t_judged": t_judged}
     return pd.DataFrame.from_dict(rows, orient="index")
 
 
