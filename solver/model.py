@@ -77,6 +77,16 @@ class Discretization:
     def n_nodes(self) -> int:
         return len(self.points)
 
+    @property
+    def projection_dofs(self) -> np.ndarray | None:
+        """Unknowns of the projected gradient G (None without the Korteweg terms).  Their equations are
+        local (vertex quadrature), so their Jacobian block is the diagonal lumped mass: a solver may
+        eliminate them (solver.linsolve, ``condense``)."""
+        if self.n_fields != 7:
+            return None
+        nodes = np.arange(self.n_nodes) * self.n_fields
+        return np.sort(np.concatenate([nodes + GX, nodes + GY]))
+
 
 def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galerkin",
                          pressure_stabilization: float | None = None) -> Discretization:

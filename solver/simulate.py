@@ -119,7 +119,8 @@ class Simulation:
                 x, x_back, self.lu, prev = x_back, None, None, None  # stale Jacobian diverged: back off, refresh
                 continue
             if need_j:
-                self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind, self.precision), data.dt, True
+                self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind, self.precision,
+                                                                 condense=disc.projection_dofs), data.dt, True
                 if accel:
                     accel.reset()
             dx = self.lu.solve(-R)

@@ -111,12 +111,12 @@ def _newton_iteration(h: float, backends) -> dict:
             out["backends"][kind] = {"skipped": "SuperLU above 150,000 unknowns takes minutes and GBs; measured only below"}
             continue
         t0 = time.perf_counter()
-        f = linsolve.factorize(J, kind)
+        f = linsolve.factorize(J, kind, condense=disc.projection_dofs)
         t_first = time.perf_counter() - t0
         # a second factorization of the same pattern: what every Newton iteration after the first pays
         # (PARDISO reuses its symbolic analysis; SuperLU redoes everything)
         t0 = time.perf_counter()
-        f = linsolve.factorize(J, kind)
+        f = linsolve.factorize(J, kind, condense=disc.projection_dofs)
         t_fac = time.perf_counter() - t0
         t0 = time.perf_counter()
         f.solve(R)
