@@ -26,7 +26,7 @@
   The first solve with new factors is checked as for SuperLU; a poor one (PARDISO perturbs tiny
   pivots) is improved by iterative refinement with the same factors.
 
-Static condensation (``factorize(..., condense=g)``, SuperLU only): unknowns g whose diagonal block A_gg is
+Static condensation (``factorize(..., condense=g)``, SuperLU only): unknowns g whose block A_gg is
 diagonal, as the lumped gradient projection G = Π∇S is (solver/model.py), are eliminated before the
 factorization, and SuperLU factorizes the Schur complement K = A_rr − A_rg A_gg⁻¹ A_gr of the other unknowns r:
 
