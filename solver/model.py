@@ -68,6 +68,7 @@ class Discretization:
     lumped_mass: np.ndarray  # (N,) mm²
     inner_length: float  # mm
     upwind_length: np.ndarray | None = None  # (M,) mm, h_e/2 with transport = "upwind"; None: Galerkin
+    supg_length: np.ndarray | None = None  # (M,) mm, h_e = √(2 A_e) with transport = "supg"; None: no SUPG term
     stab_tau: np.ndarray | None = None  # (M,) mm²/kPa, pressure stabilization τ_e; None: plain Galerkin
     chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
     # arrays reused by every assembly (by name; see _element_matrices)
@@ -92,8 +93,9 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
                          pressure_stabilization: float | None = None) -> Discretization:
     """Assemble the mesh-dependent operators for ``params`` (units mm, s, kPa).
 
-    ``transport``: "galerkin" (mobilities at the point's saturation) or "upwind" (mobilities at the
-    saturation shifted upstream by half the element size, see :func:`upwind_saturation`).
+    ``transport``: "galerkin" (mobilities at the point's saturation), "upwind" (mobilities at the
+    saturation shifted upstream by half the element size, see :func:`upwind_saturation`) or "supg" (the
+    Galerkin form plus :func:`supg_flux`).
     ``pressure_stabilization``: factor s of :func:`pressure_stabilization_tau` (None or 0: none).
     """
     if transport not in TRANSPORTS:
@@ -165,6 +167,7 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
         inject=inject, dirichlet=asm.dirichlet_rows(dofs), dirichlet_values=values,
         lumped_mass=lumped, inner_length=float(L.sum()), chunks=fem.element_chunks(len(tri)),
         upwind_length=0.5 * np.sqrt(2.0 * geom.areas) if transport == "upwind" else None,
+        supg_length=np.sqrt(2.0 * geom.areas) if transport == "supg" else None,
         stab_tau=pressure_stabilization_tau(pts, tri, params, phi0, pressure_stabilization),
     )
 
@@ -201,13 +204,14 @@ class StepData:
     tau: np.ndarray | None = None  # pressure stabilization τ_e per element (M,), mm²/kPa (None: none)
     px_n: np.ndarray | None = None  # previous pressure gradient per element (M,), kPa/mm (with tau)
     py_n: np.ndarray | None = None
+    supg_h: np.ndarray | None = None  # element size h_e per element (M,), mm, with transport = "supg"
 
     def take(self, sl: slice) -> "StepData":
         """The same data restricted to the elements of ``sl`` (views, no copies)."""
         cut = lambda a: None if a is None else a[sl]
         return StepData(dt=self.dt, d_q=self.d_q[sl], phi_n=self.phi_n[sl], S_n=self.S_n[sl], ev_n=self.ev_n[sl],
                         up_x=cut(self.up_x), up_y=cut(self.up_y), tau=cut(self.tau), px_n=cut(self.px_n),
-                        py_n=cut(self.py_n))
+                        py_n=cut(self.py_n), supg_h=cut(self.supg_h))
 
 
 def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: float) -> StepData:
@@ -223,7 +227,7 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     up_x, up_y = upwind_shift(disc, grads[:, P]) if disc.upwind_length is not None else (None, None)
     stab = {} if disc.stab_tau is None else {"tau": disc.stab_tau, "px_n": grads[:, P, 0], "py_n": grads[:, P, 1]}
     return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n, up_x=up_x, up_y=up_y,
-                    **stab)
+                    supg_h=disc.supg_length, **stab)
 
 
 def upwind_shift(disc: Discretization, grad_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -258,6 +262,8 @@ class Constitutive:
     wx: object
     wy: object
     M: object
+    yx: object = None  # the Darcy drive ∇p + φ⁻¹ κ ∇·(∇S⊗∇S), kPa/mm (filled by darcy_fluxes)
+    yy: object = None
 
 
 def upwind_saturation(Sat, Sx, Sy, up_x, up_y):
@@ -268,6 +274,28 @@ def upwind_saturation(Sat, Sx, Sy, up_x, up_y):
     it tends to S as h -> 0.
     """
     return Sat + up_x * Sx + up_y * Sy
+
+
+def supg_flux(c: Constitutive, params, Sat, Sx, Sy, accumulation, h_e, dt: float):
+    """The SUPG term of the invading-fluid balance as a flux (mm/s) tested with ∇r: τ v R (Brooks and Hughes 1982).
+
+    The balance ∂(φS)/∂t + c_v φ S ε̇_v + ∇·w_1 − ∇·(M∇μ) = 0 transports S with the velocity
+    v = (∂λ_1/∂S)(−Y)/φ (mm/s, Y = c.yx, c.yy the Darcy drive), since ∇·w_1 = φ v·∇S + ... within an element.
+    R = accumulation + φ v·∇S (1/s) is its strong residual on a P1 element: ``accumulation`` is the time and
+    volumetric-coupling part; the Cahn–Hilliard flux's divergence (second derivatives of μ) and the ∇k, ∇φ parts
+    of ∇·w_1 are zero or left out.  Tested with τ (v·∇r), τ = [(2/Δt)² + (2|v|/h_e)²]^(−1/2) (s; the transient
+    form of Tezduyar and Osawa 2000), it adds diffusion τ v⊗v along the flow only where R ≠ 0, so it vanishes
+    for the exact solution (consistent) and tends to zero as h_e -> 0.  Being a flux in divergence form, it
+    keeps the discrete volume balance.  ``h_e`` (mm) per element, shaped to broadcast against the points.
+    """
+    slope = physics.invading_permeability_slope(Sat, params.viscosity_ratio)
+    dlam = c.k * slope / params.eta_w
+    vx, vy = -dlam * c.yx / c.phi, -dlam * c.yy / c.phi
+    root = ad.sqrt if isinstance(vx, Dual) else np.sqrt
+    rate = 2.0 * root(vx * vx + vy * vy + 1e-24) / h_e  # 2|v|/h_e, 1/s (smooth at v = 0)
+    tau = 1.0 / root((2.0 / dt) ** 2 + rate * rate)
+    res = accumulation + c.phi * (vx * Sx + vy * Sy)
+    return tau * vx * res, tau * vy * res
 
 
 def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -> Constitutive:
@@ -312,6 +340,7 @@ def darcy_fluxes(c: Constitutive, px, py, force=None) -> Constitutive:
     if force is not None:
         Yx = Yx + force[0] / c.phi
         Yy = Yy + force[1] / c.phi
+    c.yx, c.yy = Yx, Yy
     c.w1x, c.w1y = -c.lam1 * Yx, -c.lam1 * Yy
     lam = c.lam1 + c.lam2
     c.wx, c.wy = -lam * Yx, -lam * Yy
@@ -359,11 +388,15 @@ def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields:
         frac = c.lam1 / (c.lam1 + c.lam2 + 1e-300)
         fx, fy = fx + sx, fy + sy
         f1x, f1y = f1x + frac * sx, f1y + frac * sy
+    invading = (phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev
+    if data.supg_h is not None:
+        sx, sy = supg_flux(c, params, Sat, Sx, Sy, invading, data.supg_h[:, None], dt)
+        f1x, f1y = f1x + sx, f1y + sy
     return [
         [None, c.sxx, c.sxy],
         [None, c.sxy, c.syy],
         [(phi - data.phi_n) / dt + cv * phi * dev, fx, fy],
-        [(phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev, f1x, f1y],
+        [invading, f1x, f1y],
         [mu - c_mu * physics.double_well_prime(Sat), -c_grad * Sx, -c_grad * Sy],
     ]
 

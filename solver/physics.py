@@ -144,6 +144,14 @@ def relative_permeabilities(S, M: float):
     return kr1, kr2
 
 
+def invading_permeability_slope(S, M: float):
+    """dk_r1/dS of :func:`relative_permeabilities` (-), 3S² + (1.5/M)(1 − 3S²), at S clipped to [0, 1]: continuous
+    in S (outside [0, 1] it keeps its value at the bound).  The speed of the saturation's convective transport is
+    proportional to it."""
+    Sc = ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
+    return 3.0 * Sc * Sc + (1.5 / M) * (1.0 - 3.0 * Sc * Sc)
+
+
 # ---------------------------------------------------------------- Cahn–Hilliard
 def harmonic_viscosity(eta_o: float, eta_w: float) -> float:
     """η̄ = 2 η_o η_w / (η_o + η_w), kPa·s: the harmonic mean of Cogswell and Szulczewski (Sec. 2.8)."""

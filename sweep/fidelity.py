@@ -33,6 +33,7 @@ _REAL_RATE = {"w_i": round(EXPERIMENT_W_I, 3)}
 _OIL = {"ch_mobility": "oil"}
 _DEFENDING = {"outer_saturation_bc": "defending_outflow", "mu_outer_bc": "zero_flux"}
 _UPWIND = {"transport": "upwind"}
+_SUPG = {"transport": "supg"}
 _GRADED = {"h_outer": 0.25}  # mm: the boundary layer at the drained outer wall resolved
 
 #: Hypotheses of the study: parameter changes from the paper's model (Sec. 3.5 defaults) and run-option
@@ -47,6 +48,8 @@ VARIANTS: dict[str, tuple[dict, dict]] = {
     "e_kbar_mean_k": ({"kbar": 0.0046}, {}),
     "c_upwind": ({}, _UPWIND),
     "ac_oil_upwind": (_OIL, _UPWIND),
+    "c_supg": ({}, _SUPG),
+    "ac_oil_supg": (_OIL, _SUPG),
     "dc_defending_upwind": (_DEFENDING, _UPWIND),
     "adc_oil_defending_upwind": ({**_OIL, **_DEFENDING}, _UPWIND),
     "f_graded": ({}, _GRADED),

@@ -25,16 +25,19 @@ def _state(disc, rng):
     not kernels.numba_available(), reason="numba not installed"))])
 @pytest.mark.parametrize("changes,stab", [({}, None), ({"korteweg_factor": 0.0}, None),
                                           ({"crack_permeability": 0.5, "outer_compliance": 0.1, "volumetric_coupling": 0.0}, None),
-                                          ({}, 1.0)])
+                                          ({}, 1.0), ({"transport": "supg"}, None)])
 def test_taylor_remainder_is_second_order(changes, stab, backend, monkeypatch):
     """|R(U + εV) − R(U) − ε J V| must fall as ε²: halving the slope test over three decades.
 
     Run with the numpy element kernels and the compiled ones (solver.kernels), with and without the
-    pressure stabilization (``RunOptions.pressure_stabilization``)."""
+    pressure stabilization (``RunOptions.pressure_stabilization``), and with the SUPG transport."""
     monkeypatch.setenv("DCHFRAC_KERNELS", backend)
+    changes = dict(changes)  # the parametrized dict is shared by both backends
+    transport = changes.pop("transport", "galerkin")
     p = Parameters(**changes)
     mesh = annulus_mesh(h=4.0)
-    disc = build_discretization(mesh, p, random_porosity(mesh, seed=3), pressure_stabilization=stab)
+    disc = build_discretization(mesh, p, random_porosity(mesh, seed=3), transport=transport,
+                                pressure_stabilization=stab)
     rng = np.random.default_rng(1)
     U = _state(disc, rng)
     d = np.clip(0.5 * rng.random(disc.n_nodes), 0, 1)
