@@ -14,6 +14,9 @@ solver ada0fb1caa3269e8) are estimated against all six.  Estimates outside [37.3
 the linear model.  Units: β in kPa·s; observables kPa, mm.
 
     python results/discrepancy/long_bias/leave_one_out.py      # writes leave_one_out.json beside it
+
+Each condition with curves in curves/ is studied alone, and all of them together (one vector; the realization
+covariance per condition × observable, its correlation time pooled over conditions as in the workflow).
 """
 import json
 from pathlib import Path
@@ -31,22 +34,37 @@ B_HI, B_LO = 60.0, 37.3
 DATA_SEEDS = (11, 12)  # the twins' data meshes (dt_max = 0.005 s)
 
 
+#: the twins' conditions (w_i, mm/s) and the suffix of their curve files in curves/ (w50's files have none)
+CONDITIONS = {"w50": "", "w35": "_w35", "w65": "_w65", "w42": "_w42"}
+
+
 def _vec(curves: dict) -> np.ndarray:
     return np.concatenate([np.asarray(curves[o], float) for o in OBS])
 
 
-def _load():
-    hi = json.loads((HERE / "curves" / "beta60.json").read_text())
-    lo = json.loads((HERE / "curves" / "beta37.3.json").read_text())
-    data = {f"data_seed{k}": _vec(json.loads((HERE / "curves" / f"data_seed{k}_beta60.json").read_text())["data"])
-            for k in DATA_SEEDS}
-    seeds = sorted(hi)
-    return np.array([_vec(hi[s]) for s in seeds]), np.array([_vec(lo[s]) for s in seeds]), data, seeds
+def _read(name: str) -> dict:
+    return json.loads((HERE / "curves" / name).read_text())
 
 
-def _layout() -> CurveLayout:
-    n = TIMES.size
-    return CurveLayout(series=np.repeat(np.arange(len(OBS)), n), obs=np.repeat(np.array(OBS), n), t=np.tile(TIMES, len(OBS)))
+def _load(conditions=("w50",)):
+    """(hi (6, n), lo (6, n), {data name: (n,)}, seeds) over ``conditions``, each condition's three observables
+    in turn (n = 120 per condition)."""
+    hi, lo, data = [], [], {f"data_seed{k}": [] for k in DATA_SEEDS}
+    for c in conditions:
+        suf = CONDITIONS[c]
+        h, l = _read(f"beta60{suf}.json"), _read(f"beta37.3{suf}.json")
+        seeds = sorted(h)
+        hi.append(np.array([_vec(h[s]) for s in seeds]))
+        lo.append(np.array([_vec(l[s]) for s in seeds]))
+        for k in DATA_SEEDS:
+            data[f"data_seed{k}"].append(_vec(_read(f"data_seed{k}_beta60{suf}.json")["data"]))
+    return np.hstack(hi), np.hstack(lo), {k: np.concatenate(v) for k, v in data.items()}, seeds
+
+
+def _layout(n_conditions: int = 1) -> CurveLayout:
+    n, k = TIMES.size, len(OBS) * n_conditions
+    obs = np.tile(np.repeat(np.array(OBS), n), n_conditions)
+    return CurveLayout(series=np.repeat(np.arange(k), n), obs=obs, t=np.tile(TIMES, k))
 
 
 def gls_beta(y, hi, lo, sigma, cov=None, rows=None):
@@ -59,11 +77,11 @@ def gls_beta(y, hi, lo, sigma, cov=None, rows=None):
     return B_HI - (B_HI - B_LO) * alpha, (B_HI - B_LO) / np.sqrt(info)
 
 
-def study() -> dict:
-    hi, lo, data, seeds = _load()
-    layout, n = _layout(), TIMES.size
-    sigma = np.concatenate([np.full(n, NOISE[o]) for o in OBS])
-    subsets = {"all": np.arange(hi.shape[1]), "crack_length": np.arange(2 * n, 3 * n)}
+def study(conditions=("w50",)) -> dict:
+    hi, lo, data, seeds = _load(conditions)
+    layout, n = _layout(len(conditions)), TIMES.size
+    sigma = np.tile(np.concatenate([np.full(n, NOISE[o]) for o in OBS]), len(conditions))
+    subsets = {"all": np.arange(hi.shape[1]), "crack_length": np.flatnonzero(layout.obs == "crack_length")}
     out = {}
     for name, rows in subsets.items():
         for model in ("noise_only", "realization_covariance"):
@@ -86,8 +104,12 @@ def study() -> dict:
 
 
 if __name__ == "__main__":
-    res = study()
+    available = [c for c in CONDITIONS if all((HERE / "curves" / f).exists() for f in
+                 (f"beta60{CONDITIONS[c]}.json", f"beta37.3{CONDITIONS[c]}.json"))]
+    res = {c: study((c,)) for c in available}
+    if len(available) > 1:
+        res["+".join(available)] = study(tuple(available))
     (HERE / "leave_one_out.json").write_text(json.dumps(res, indent=1) + "\n")
-    for k, v in res.items():
+    for k, v in ((f"{c} {m}", r) for c, rc in res.items() for m, r in rc.items()):
         print(f"{k}: LOO β mean {v['loo_beta_mean']:.1f}, sd {v['loo_beta_sd']:.1f}, median se {v['loo_median_se']:.2f}, "
               f"rms z {v['loo_rms_z']:.1f}; " + ", ".join(f"{e['data']} {e['beta']:.1f}±{e['se']:.1f}" for e in v["estimates"]))
