@@ -190,6 +190,21 @@ def test_relative_permeabilities(M):
 
 
 # ---------------------------------------------------------------- porosity, double well
+@pytest.mark.parametrize("M", [5.0, 2.9e5])
+def test_invading_permeability_slope_is_the_derivative_of_k_r1(M):
+    """The SUPG transport speed's factor: dk_r1/dS on (0, 1) (central differences, O(ε²) = 1e-12), its value
+    at the bound outside [0, 1], and the same values and derivative through Duals."""
+    S = np.linspace(0.01, 0.99, 50)
+    eps = 1e-6
+    fd = (physics.relative_permeabilities(S + eps, M)[0] - physics.relative_permeabilities(S - eps, M)[0]) / (2 * eps)
+    assert np.allclose(physics.invading_permeability_slope(S, M), fd, rtol=0, atol=1e-8)
+    out = physics.invading_permeability_slope(np.array([-0.2, 0.0, 1.0, 1.3]), M)
+    assert np.allclose(out, [1.5 / M, 1.5 / M, 3.0 - 3.0 / M, 3.0 - 3.0 / M], rtol=1e-14)
+    d = physics.invading_permeability_slope(Dual.variables([S])[0], M)
+    assert np.allclose(d.v, physics.invading_permeability_slope(S, M), rtol=1e-14)
+    assert np.allclose(d.dd[..., 0], 6.0 * S * (1.0 - 1.5 / M), rtol=1e-12)
+
+
 def test_porosity_law():
     phi0, ev, p, Ks = 0.4, 0.01, 50.0, 1600.0
     assert physics.porosity(phi0, ev, p, Ks) == pytest.approx(0.4 + 0.6 * 0.01 + 0.6 * 50 / 1600, rel=1e-15)
