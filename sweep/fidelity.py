@@ -55,6 +55,7 @@ VARIANTS: dict[str, tuple[dict, dict]] = {
     "f_graded": ({}, _GRADED),
     "fg_real_rate_graded": (_REAL_RATE, _GRADED),
     "fd_mu_zero_flux_graded": ({"mu_outer_bc": "zero_flux"}, _GRADED),
+    "fc_supg_graded": ({}, {**_GRADED, **_SUPG}),
     "g_real_rate": (_REAL_RATE, {}),
     "g_real_rate_mu_zero_flux": ({**_REAL_RATE, "mu_outer_bc": "zero_flux"}, {}),
     "g_real_rate_defending_upwind": ({**_REAL_RATE, **_DEFENDING}, _UPWIND),

@@ -182,3 +182,14 @@ def test_the_reference_experiment_is_valid_measured_data():
     m = load_measured(Path(__file__).resolve().parents[1] / "results" / "fidelity" / "experiment")
     assert set(m.curves["observable"]) == {"p_inj", "front_radius_branches", "crack_length"}
     assert m.regimes == {"reference": (2.0, "invasive_fracturing")}
+
+
+def test_every_fidelity_variant_is_a_valid_model():
+    """Each screening variant (sweep.fidelity.VARIANTS) passes the parameter and run-option validation, so a
+    misspelt option fails here and not after a campaign has started."""
+    from sweep.fidelity import VARIANTS
+
+    for name, (changes, opts) in VARIANTS.items():
+        Parameters(**changes)
+        RunOptions(h=2.0, **opts)
+    assert {"c_supg", "ac_oil_supg", "fc_supg_graded"} <= set(VARIANTS)
