@@ -282,11 +282,12 @@ def supg_flux(c: Constitutive, params, Sat, Sx, Sy, accumulation, h_e, dt: float
     The balance ∂(φS)/∂t + c_v φ S ε̇_v + ∇·w_1 − ∇·(M∇μ) = 0 transports S with the velocity
     v = (∂λ_1/∂S)(−Y)/φ (mm/s, Y = c.yx, c.yy the Darcy drive), since ∇·w_1 = φ v·∇S + ... within an element.
     R = accumulation + φ v·∇S (1/s) is its strong residual on a P1 element: ``accumulation`` is the time and
-    volumetric-coupling part; the Cahn–Hilliard flux's divergence (second derivatives of μ) and the ∇k, ∇φ parts
-    of ∇·w_1 are zero or left out.  Tested with τ (v·∇r), τ = [(2/Δt)² + (2|v|/h_e)²]^(−1/2) (s; the transient
-    form of Tezduyar and Osawa 2000), it adds diffusion τ v⊗v along the flow only where R ≠ 0, so it vanishes
-    for the exact solution (consistent) and tends to zero as h_e -> 0.  Being a flux in divergence form, it
-    keeps the discrete volume balance.  ``h_e`` (mm) per element, shaped to broadcast against the points.
+    volumetric-coupling part; the Cahn–Hilliard flux's divergence (second derivatives of μ, zero on P1) and the
+    ∇k, ∇φ parts of ∇·w_1 are left out.  Tested with τ (v·∇r), τ = [(2/Δt)² + (2|v|/h_e)²]^(−1/2) (s; the
+    transient form of Tezduyar and Osawa 2000), it adds diffusion τ v⊗v along the flow only where R ≠ 0.  R
+    vanishes for the exact solution up to the parts left out, so the term is consistent to O(h_e) and tends to
+    zero as h_e -> 0.  Being a flux in divergence form, it keeps the discrete volume balance.  ``h_e`` (mm) per
+    element, shaped to broadcast against the points.
     """
     slope = physics.invading_permeability_slope(Sat, params.viscosity_ratio)
     dlam = c.k * slope / params.eta_w

@@ -91,8 +91,9 @@ class RunOptions:
         form, the paper's Sec. 3.1) or "upwind" (phase mobilities at the saturation shifted upstream by
         half the element size, ``solver.model.upwind_saturation``: first-order streamline upwinding) or
         "supg" (the Galerkin form plus the streamline-upwind/Petrov–Galerkin term of Brooks and Hughes
-        (1982), ``solver.model.supg_flux``: consistent, it adds diffusion only along the flow and only where
-        the strong residual of the saturation equation is not zero).
+        (1982), ``solver.model.supg_flux``: it adds diffusion only along the flow and only where the strong
+        residual of the saturation equation is not zero; that residual leaves out the ∇k, ∇φ parts of ∇·w_1, so
+        the term is consistent to O(h)).
     pressure_stabilization : factor s >= 0 on the pressure stabilization of the equal-order P1 / P1 pair
         (``solver.model.pressure_stabilization_tau``): the total mass balance gains
         τ_e ∫ ∇q·∇(p − p_n)/Δt with τ_e = s b (1 − φ0) h_e² / (4 (λ + 2μ)) (mm²/kPa), the term of
