@@ -107,8 +107,10 @@ if __name__ == "__main__":
     available = [c for c in CONDITIONS if all((HERE / "curves" / f).exists() for f in
                  (f"beta60{CONDITIONS[c]}.json", f"beta37.3{CONDITIONS[c]}.json"))]
     res = {c: study((c,)) for c in available}
-    if len(available) > 1:
-        res["+".join(available)] = study(tuple(available))
+    training = tuple(c for c in ("w50", "w35", "w65") if c in available)  # the twins' training conditions
+    for combo in dict.fromkeys([training, tuple(available)]):
+        if len(combo) > 1:
+            res["+".join(combo)] = study(combo)
     (HERE / "leave_one_out.json").write_text(json.dumps(res, indent=1) + "\n")
     for k, v in ((f"{c} {m}", r) for c, rc in res.items() for m, r in rc.items()):
         print(f"{k}: LOO β mean {v['loo_beta_mean']:.1f}, sd {v['loo_beta_sd']:.1f}, median se {v['loo_median_se']:.2f}, "
