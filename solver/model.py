@@ -89,6 +89,56 @@ class Discretization:
         return np.sort(np.concatenate([nodes + GX, nodes + GY]))
 
 
+def _boundary_couplings(pts, tri, inner_e, outer_e, params, nf: int):
+    """The constant boundary couplings (rows, cols, values) and the inner edges' lengths L (mm): the injection
+    pressure's load on the skeleton ∫_Γi p n·v, and the outer spring ∫_Γo u·v / c_o when c_o > 0 (mm/kPa)."""
+    L, nrm = fem.outward_normals(pts, inner_e, tri)
+    loc = np.array([[2.0, 1.0], [1.0, 2.0]]) / 6.0  # ∫ N_a N_b ds / L
+    rows, cols, vals = [], [], []
+    for a in range(2):
+        for b in range(2):
+            w = L * loc[a, b]
+            for c in range(2):  # velocity component of the test function
+                rows.append(nf * inner_e[:, a] + c)
+                cols.append(nf * inner_e[:, b] + P)
+                vals.append(w * nrm[:, c])
+    if params.outer_compliance > 0:
+        Lo, _ = fem.edge_geometry(pts, outer_e)
+        for a in range(2):
+            for b in range(2):
+                for c in range(2):
+                    rows.append(nf * outer_e[:, a] + c)
+                    cols.append(nf * outer_e[:, b] + c)
+                    vals.append(Lo * loc[a, b] / params.outer_compliance)
+    rows, cols, vals = (np.concatenate(x) for x in (rows, cols, vals))
+    return rows, cols, vals, L
+
+
+def _dirichlet_conditions(inner_n, outer_n, params, nf: int):
+    """The Dirichlet unknowns (sorted) and their values (Sec. 3.4): S = 1 and μ = μ_i on r_i; p = 0 on r_o, and
+    S = 0, μ = μ_o and u = 0 there as the options choose."""
+    dofs, values = [], []
+
+    def fix(nodes, field, value):
+        dofs.append(nf * nodes + field)
+        values.append(np.full(len(nodes), float(value)))
+
+    fix(inner_n, S, 1.0)
+    fix(inner_n, MU, params.mu_i)
+    fix(outer_n, P, 0.0)
+    if params.outer_saturation_bc == "dirichlet":
+        fix(outer_n, S, 0.0)
+    if params.mu_outer_bc == "dirichlet":
+        fix(outer_n, MU, params.mu_o)
+    if params.outer_compliance == 0:
+        fix(outer_n, UX, 0.0)
+        fix(outer_n, UY, 0.0)
+    dofs = np.concatenate(dofs)
+    values = np.concatenate(values)
+    order = np.argsort(dofs)
+    return dofs[order], values[order]
+
+
 def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galerkin",
                          pressure_stabilization: float | None = None) -> Discretization:
     """Assemble the mesh-dependent operators for ``params`` (units mm, s, kPa).
@@ -110,53 +160,13 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
     inner_n = np.unique(inner_e)
     outer_n = np.unique(outer_e)
 
-    # constant boundary couplings: ∫_Γi p n·v and the outer spring ∫_Γo u·v / c_o
-    L, nrm = fem.outward_normals(pts, inner_e, tri)
-    loc = np.array([[2.0, 1.0], [1.0, 2.0]]) / 6.0  # ∫ N_a N_b ds / L
-    rows, cols, vals = [], [], []
-    for a in range(2):
-        for b in range(2):
-            w = L * loc[a, b]
-            for c in range(2):  # velocity component of the test function
-                rows.append(nf * inner_e[:, a] + c)
-                cols.append(nf * inner_e[:, b] + P)
-                vals.append(w * nrm[:, c])
-    if params.outer_compliance > 0:
-        Lo, _ = fem.edge_geometry(pts, outer_e)
-        for a in range(2):
-            for b in range(2):
-                for c in range(2):
-                    rows.append(nf * outer_e[:, a] + c)
-                    cols.append(nf * outer_e[:, b] + c)
-                    vals.append(Lo * loc[a, b] / params.outer_compliance)
-    rows, cols, vals = (np.concatenate(x) for x in (rows, cols, vals))
+    rows, cols, vals, L = _boundary_couplings(pts, tri, inner_e, outer_e, params, nf)
     op = sp.csr_matrix((vals, (rows, cols)), shape=(asm.ndof, asm.ndof))
     slots = asm.slots(rows, cols)
 
     inject = np.zeros(asm.ndof)
     inject[P::nf] = -fem.edge_load(pts, inner_e, n, params.w_i)
-
-    # Dirichlet conditions (Sec. 3.4)
-    dofs, values = [], []
-
-    def fix(nodes, field, value):
-        dofs.append(nf * nodes + field)
-        values.append(np.full(len(nodes), float(value)))
-
-    fix(inner_n, S, 1.0)
-    fix(inner_n, MU, params.mu_i)
-    fix(outer_n, P, 0.0)
-    if params.outer_saturation_bc == "dirichlet":
-        fix(outer_n, S, 0.0)
-    if params.mu_outer_bc == "dirichlet":
-        fix(outer_n, MU, params.mu_o)
-    if params.outer_compliance == 0:
-        fix(outer_n, UX, 0.0)
-        fix(outer_n, UY, 0.0)
-    dofs = np.concatenate(dofs)
-    values = np.concatenate(values)
-    order = np.argsort(dofs)
-    dofs, values = dofs[order], values[order]
+    dofs, values = _dirichlet_conditions(inner_n, outer_n, params, nf)
     lumped = np.bincount(tri.ravel(), weights=np.repeat(geom.areas / 3, 3), minlength=n)
     slots, inverse = np.unique(slots, return_inverse=True)  # one value per slot: J.data[slots] += vals
     vals = np.bincount(inverse.ravel(), weights=vals, minlength=len(slots))
