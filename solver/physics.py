@@ -129,6 +129,12 @@ def permeability_floor(k, floor: float):
     return smooth_floor(k, floor)
 
 
+def _saturation_in_bounds(S):
+    """S clipped to [0, 1] (derivative zero outside): the saturation the relative-permeability and degenerate
+    mobility laws see (Duals, arrays or traced symbols)."""
+    return ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
+
+
 def relative_permeabilities(S, M: float):
     """Fourar–Lenormand k_r1(S), k_r2(1 − S) (Eq. relative_permeabilities).
 
@@ -137,7 +143,7 @@ def relative_permeabilities(S, M: float):
     overshoots its bounds by a few percent near the interface, and outside
     [0, 1] the cubic laws turn negative, which would give negative mobility.
     """
-    Sc = ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
+    Sc = _saturation_in_bounds(S)
     S2 = 1.0 - Sc
     kr1 = Sc**3 + (1.5 / M) * Sc * (1.0 - Sc) * (1.0 + Sc)
     kr2 = 0.5 * S2 * S2 * (3.0 - S2)
@@ -148,7 +154,7 @@ def invading_permeability_slope(S, M: float):
     """dk_r1/dS of :func:`relative_permeabilities` (-), 3S² + (1.5/M)(1 − 3S²), at S clipped to [0, 1]: continuous
     in S (outside [0, 1] it keeps its value at the bound).  The speed of the saturation's convective transport is
     proportional to it."""
-    Sc = ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
+    Sc = _saturation_in_bounds(S)
     return 3.0 * Sc * Sc + (1.5 / M) * (1.0 - 3.0 * Sc * Sc)
 
 
@@ -178,7 +184,7 @@ def ch_mobility(k, S, eta_o: float, eta_w: float, law: str = "harmonic"):
     if law == "oil":
         return k / eta_o
     if law == "degenerate":
-        Sc = ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
+        Sc = _saturation_in_bounds(S)
         return 4.0 * Sc * (1.0 - Sc) * k / harmonic_viscosity(eta_o, eta_w)
     raise ValueError(f"ch_mobility law {law!r}: allowed 'harmonic', 'oil', 'degenerate'")
 
