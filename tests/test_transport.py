@@ -193,3 +193,38 @@ def test_every_fidelity_variant_is_a_valid_model():
         Parameters(**changes)
         RunOptions(h=2.0, **opts)
     assert {"c_supg", "ac_oil_supg", "fc_supg_graded"} <= set(VARIANTS)
+
+
+def test_water_placement_against_analytic_volumes():
+    """sweep.fidelity.water_placement on an annulus (r_i = 5, r_o = 53 mm, h = 1 mm) with uniform φ = 0.3:
+    a disk of water S = 1 for r <= 20 mm and a separate ring S = 1 for 45 <= r <= 50 mm.  Analytic: the
+    volume φ π ((20² − 5²) + (50² − 45²)), the connected fraction (20² − 5²)/((20² − 5²) + (50² − 45²)), the
+    outer-band fraction (r > 43 mm) the ring's share, and r50 from the cumulative volume.  A P1 step is
+    smeared over one element row at each edge of the water, so volumes hold to 2 h × circumference and radii
+    to h."""
+    from solver.mesh import annulus_mesh
+    from sweep.fidelity import water_placement
+
+    h, phi = 1.0, 0.3
+    m = annulus_mesh(5.0, 53.0, h)
+    r = np.hypot(m.points[:, 0], m.points[:, 1])
+    Snod = ((r <= 20.0) | ((r >= 45.0) & (r <= 50.0))).astype(float)
+    snap = {"S": Snod, "phi": np.full(len(m.triangles), phi)}
+    out = water_placement(snap, m.points, m.triangles, 5.0, 53.0)
+    disk, ring = 20.0 ** 2 - 5.0 ** 2, 50.0 ** 2 - 45.0 ** 2
+    vol = phi * math.pi * (disk + ring)
+    smear = phi * 2 * h * 2 * math.pi * (20.0 + 45.0 + 50.0)
+    assert abs(out["invading_volume"] - vol) < smear
+    assert abs(out["connected_frac"] - disk / (disk + ring)) < smear / vol
+    assert abs(out["outer_band_frac"] - ring / (disk + ring)) < smear / vol
+    # r50: half the water, (disk + ring)/2 = 2,600 mm²/π, lies past the disk (375): inside the ring at
+    # r² = 45² + (disk + ring)/2 − disk
+    r50 = math.sqrt(45.0 ** 2 + (disk + ring) / 2 - disk)
+    assert abs(out["r50"] - r50) < h
+    # with the ring gone every drop is connected to the inlet and none is in the outer band
+    snap["S"] = (r <= 20.0).astype(float)
+    out = water_placement(snap, m.points, m.triangles, 5.0, 53.0)
+    # (the elements of the edge row hold part of the water and are not wholly invaded: one row, h 2π 20 mm²)
+    assert out["connected_frac"] > 1.0 - h * 2 * math.pi * 20.0 / (math.pi * disk)
+    assert out["outer_band_frac"] == 0.0
+    assert abs(out["r90"] - math.sqrt(5.0 ** 2 + 0.9 * disk)) < h
