@@ -228,16 +228,29 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     """Freeze the previous state ``U_n`` (N, nf) and the damage iterate ``d`` (N,)."""
     tri = disc.triangles
     q = fem.STRANG3
-    grads = fem.field_gradients(disc.geom.grads, U_n[tri][:, :, :P + 1])
-    ev_n = grads[:, UX, 0] + grads[:, UY, 1]
-    p_n = fem.at_quadrature(U_n[:, P], tri, q)
+    grads, ev_n, phi_n = _porosity_state(disc, params, U_n)
     S_n = fem.at_quadrature(U_n[:, S], tri, q)
-    phi_n = physics.porosity(disc.phi0[:, None], ev_n[:, None], p_n, params.K_s, params.porosity_floor,
-                             params.porosity_ceiling)
     up_x, up_y = upwind_shift(disc, grads[:, P]) if disc.upwind_length is not None else (None, None)
     stab = {} if disc.stab_tau is None else {"tau": disc.stab_tau, "px_n": grads[:, P, 0], "py_n": grads[:, P, 1]}
     return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n, up_x=up_x, up_y=up_y,
                     supg_h=disc.supg_length, **stab)
+
+
+def _porosity_state(disc: Discretization, params, U: np.ndarray):
+    """The gradients of (u_x, u_y, p) per element, ε_v per element and φ at the Strang points of a state U."""
+    grads = fem.field_gradients(disc.geom.grads, U[disc.triangles][:, :, :P + 1])
+    ev = grads[:, UX, 0] + grads[:, UY, 1]
+    p_q = fem.at_quadrature(U[:, P], disc.triangles, fem.STRANG3)
+    phi = physics.porosity(disc.phi0[:, None], ev[:, None], p_q, params.K_s, params.porosity_floor,
+                           params.porosity_ceiling)
+    return grads, ev, phi
+
+
+def porosity_state(disc: Discretization, params, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ε_v per element (-) and φ at the Strang points (M, 3) of a state U (N, nf): the porosity the step's
+    storage term sees (Eq. summary_equations_3), for the volume balances of the time series."""
+    _, ev, phi = _porosity_state(disc, params, U)
+    return ev, phi
 
 
 def upwind_shift(disc: Discretization, grad_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -554,26 +567,37 @@ def project_gradient(disc: Discretization, S_nodal: np.ndarray) -> np.ndarray:
     return out
 
 
-def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray) -> dict:
-    """Post-processed element fields at the centroid: φ, ε_v, hoop stress (σ'_θθ, kPa), k (mm²), |w_1| (mm/s),
-    ψ_A (kPa), Cahn–Hilliard mobility M (mm²/(kPa·s)), from the same :func:`constitutive` as the residual."""
-    tri = disc.triangles
-    gradU = fem.field_gradients(disc.geom.grads, U[tri])
-    cen = U[tri].mean(axis=1)
+def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray, fluxes: bool = True) -> dict:
+    """Post-processed element fields at the centroid: φ, ε_v, hoop stress (σ'_θθ, kPa), k (mm²), ψ_A (kPa),
+    Cahn–Hilliard mobility M (mm²/(kPa·s)) and, with ``fluxes``, |w_1| (mm/s), all from the same
+    :func:`constitutive` as the residual.  ``fluxes=False`` skips the Korteweg force and the Darcy fluxes (the
+    per-step measures of the time series read φ and the hoop stress only)."""
+    Ue = U[disc.triangles]  # (M, 3, nf), gathered once
+    gradU = fem.field_gradients(disc.geom.grads, Ue)
+    cen = (Ue[:, 0] + Ue[:, 1] + Ue[:, 2]) / 3.0
     exx, eyy = gradU[:, UX, 0], gradU[:, UY, 1]
     exy = 0.5 * (gradU[:, UX, 1] + gradU[:, UY, 0])
+    dt = d[disc.triangles]
     c = constitutive(params, disc.phi0, exx, eyy, exy, cen[:, P], cen[:, S], gradU[:, S, 0], gradU[:, S, 1],
-                     physics.degradation(d[tri].mean(axis=1), params.m))
-    force = None
-    if disc.n_fields == 7:
-        f = korteweg_force(disc, U, params.kappa * params.korteweg_factor)
-        force = (f[:, 0], f[:, 1])
-    darcy_fluxes(c, gradU[:, P, 0], gradU[:, P, 1], force)
-    # effective hoop stress σ'_θθ = (σ + b p I)_θθ
-    sxx, syy = c.sxx + params.biot * cen[:, P], c.syy + params.biot * cen[:, P]
-    xc = disc.points[tri].mean(axis=1)
-    th = np.arctan2(xc[:, 1], xc[:, 0])
-    cs, sn = np.cos(th), np.sin(th)
-    hoop = sxx * sn * sn + syy * cs * cs - 2 * c.sxy * sn * cs
-    return {"phi": c.phi, "eps_v": exx + eyy, "hoop_stress": hoop, "k": c.k, "w1_mag": np.hypot(c.w1x, c.w1y),
-            "psi_a": c.psi_a, "ch_mobility": c.M}
+                     physics.degradation((dt[:, 0] + dt[:, 1] + dt[:, 2]) / 3.0, params.m))
+    out = {"phi": c.phi, "eps_v": exx + eyy, "hoop_stress": _hoop_stress(disc, params, c, cen[:, P]), "k": c.k,
+           "psi_a": c.psi_a, "ch_mobility": c.M}
+    if fluxes:
+        force = None
+        if disc.n_fields == 7:
+            f = korteweg_force(disc, U, params.kappa * params.korteweg_factor)
+            force = (f[:, 0], f[:, 1])
+        darcy_fluxes(c, gradU[:, P, 0], gradU[:, P, 1], force)
+        out["w1_mag"] = np.hypot(c.w1x, c.w1y)
+    return out
+
+
+def _hoop_stress(disc: Discretization, params, c: Constitutive, p_cen: np.ndarray) -> np.ndarray:
+    """Effective hoop stress σ'_θθ = (σ + b p I)_θθ (kPa) at the element centroids, θ the centroid's angle."""
+    x = disc.points[disc.triangles]
+    xc, yc = (x[:, 0, 0] + x[:, 1, 0] + x[:, 2, 0]) / 3.0, (x[:, 0, 1] + x[:, 1, 1] + x[:, 2, 1]) / 3.0
+    r = np.hypot(xc, yc)
+    cs = np.divide(xc, r, out=np.ones_like(r), where=r > 0)  # θ = 0 at the origin, as arctan2
+    sn = np.divide(yc, r, out=np.zeros_like(r), where=r > 0)
+    sxx, syy = c.sxx + params.biot * p_cen, c.syy + params.biot * p_cen
+    return sxx * sn * sn + syy * cs * cs - 2 * c.sxy * sn * cs

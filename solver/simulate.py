@@ -24,7 +24,8 @@ import pandas as pd
 
 from . import damage, fem, linsolve, metrics, physics, profiling
 from .anderson import Anderson
-from .model import MU, P, S, UX, UY, build_discretization, element_fields, residual_and_jacobian, step_data
+from .model import (MU, P, S, UX, UY, build_discretization, element_fields, porosity_state, residual_and_jacobian,
+                    step_data)
 from .options import RunOptions, check_run_inputs
 from .output import RunWriter
 from .profiling import phase
@@ -361,7 +362,7 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
     pending = o.frame_times()
     dt = o.dt0
     cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0}
-    V0 = _stored_volume(sim, sim.U)
+    V0 = _stored_volume(sim, porosity_state(sim.disc, sim.params, sim.U)[1])
     warned_layer = False
     prof = profiling.active()
     with phase("output"):
@@ -386,9 +387,10 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
                                   + (f"; physical limit: {limit}" if limit else ""))
             continue
         with phase("metrics"):
-            _accumulate_balances(sim, U, info["data"], dt_try, cum)
+            ev, phi_q = porosity_state(sim.disc, sim.params, U)  # the new state's porosity, read twice below
+            _accumulate_balances(sim, U, info["data"], dt_try, cum, ev, phi_q)
             sim.commit(U, d, dt_try)
-            row = _row(sim, dt_try, info, cum, V0)
+            row = _row(sim, dt_try, info, cum, V0, _stored_volume(sim, phi_q))
         rows.append(row)
         _count_step(prof, info)
         if row["outer_layer_area"] > 0 and not warned_layer:
@@ -426,7 +428,7 @@ def physical_limit(sim: Simulation, node: int | None) -> str | None:
     if node is None:
         return None
     disc = sim.disc
-    phi = element_fields(disc, sim.params, sim.U, sim.d)["phi"]
+    phi = element_fields(disc, sim.params, sim.U, sim.d, fluxes=False)["phi"]
     around = np.any(disc.triangles == node, axis=1)
     if not around.any():
         return None
@@ -473,10 +475,11 @@ def _count_step(prof, info: dict) -> None:
     prof.count("stagger_iterations", info["stagger_its"])
 
 
-def _accumulate_balances(sim, U, data, dt: float, cum: dict) -> None:
+def _accumulate_balances(sim, U, data, dt: float, cum: dict, ev: np.ndarray, phi_q: np.ndarray) -> None:
     """Add the step's injected, outflow, source and water volumes (mm²) to ``cum``.
 
-    From the unconstrained residual at the converged state U: its Dirichlet rows are the reactions.
+    From the unconstrained residual at the converged state U: its Dirichlet rows are the reactions.  ``ev``,
+    ``phi_q``: U's volumetric strain and porosity (:func:`solver.model.porosity_state`).
     """
     disc, p = sim.disc, sim.params
     R, _ = residual_and_jacobian(disc, p, U, data, need_jacobian=False)
@@ -484,32 +487,29 @@ def _accumulate_balances(sim, U, data, dt: float, cum: dict) -> None:
     Rp, Rs = R[P::nf], R[S::nf]
     cum["inj"] += dt * p.w_i * disc.inner_length
     cum["out"] += -dt * Rp[disc.outer_nodes].sum()
-    cum["src"] += dt * _source(sim, U, data)
+    cum["src"] += dt * _source(sim, data, ev, phi_q)
     cum["w_in"] += dt * Rs[disc.inner_nodes].sum()
     cum["w_out"] += -dt * Rs[disc.outer_nodes].sum()
 
 
-def _stored_volume(sim, U) -> float:
-    """∫ φ dx at the Strang points (mm² per unit cell height)."""
-    disc = sim.disc
-    data = step_data(disc, sim.params, U, sim.d, 1.0)
-    return float(np.sum(disc.geom.areas * data.phi_n.mean(axis=1)))
+def _stored_volume(sim, phi_q: np.ndarray) -> float:
+    """∫ φ dx (mm² per unit cell height) from φ at the Strang points (equal weights)."""
+    return float(np.sum(sim.disc.geom.areas * phi_q.mean(axis=1)))
 
 
-def _source(sim, U, data) -> float:
-    """c_v ∫ φ ε̇_v dx: the second-order volume source of the total mass balance (mm²/s)."""
-    disc, p = sim.disc, sim.params
-    nxt = step_data(disc, p, U, sim.d, data.dt)
-    dev = (nxt.ev_n - data.ev_n) / data.dt
-    return float(p.volumetric_coupling * np.sum(disc.geom.areas * nxt.phi_n.mean(axis=1) * dev))
+def _source(sim, data, ev: np.ndarray, phi_q: np.ndarray) -> float:
+    """c_v ∫ φ ε̇_v dx: the second-order volume source of the total mass balance (mm²/s), from the step's
+    frozen data and the new state's ε_v and φ."""
+    dev = (ev - data.ev_n) / data.dt
+    return float(sim.params.volumetric_coupling * np.sum(sim.disc.geom.areas * phi_q.mean(axis=1) * dev))
 
 
-def _row(sim, dt, info, cum, V0) -> dict:
+def _row(sim, dt, info, cum, V0, V) -> dict:
+    """The time series' row of the committed state: V is its stored volume (mm², :func:`_stored_volume`)."""
     disc, p, U, d = sim.disc, sim.params, sim.U, sim.d
-    ef = element_fields(disc, p, U, d)
+    ef = element_fields(disc, p, U, d, fluxes=False)
     Sn = U[:, S]
     fm, fx, fb = metrics.front_measures(disc.points, Sn, sim.edges, disc.inner_nodes)
-    V = _stored_volume(sim, U)
     err = abs(cum["inj"] - (V - V0 + cum["src"] + cum["out"])) / max(cum["inj"], 1e-300)
     area = disc.geom.areas
     d_el = d[disc.triangles].mean(axis=1)
