@@ -254,7 +254,9 @@ TABLE_COLUMNS = (
     ("stored_2", "stored 2 s (mm²)"), ("grain_2", "(1-φ0)∫p/K_s 2 s (mm²)"), ("p_inj_1", "p_inj 1 s"),
     ("p_inj_2", "p_inj 2 s"), ("front_radius_mean_2", "front mean 2 s"),
     ("front_radius_branches_2", "front 3 branches 2 s"), ("open_tip_radius_2", "crack tip radius 2 s"),
-    ("mean_damage_2", "mean damage 2 s"), ("dlnp_dlneta", "d ln p_inj/d ln η_o 1 s"),
+    ("mean_damage_2", "mean damage 2 s"), ("r50_2", "r50 of the water 2 s"), ("r90_2", "r90 of the water 2 s"),
+    ("outer_band_frac_2", "water in the outer 10 mm 2 s"), ("connected_frac_2", "water connected to the inlet 2 s"),
+    ("dlnp_dlneta", "d ln p_inj/d ln η_o 1 s"),
     ("max_mass_error", "max mass error"), ("wall_s", "wall (s)"),
 )
 
@@ -275,7 +277,8 @@ def summary_table(rows: dict) -> pd.DataFrame:
     """One row per variant with :data:`TABLE_COLUMNS`."""
     out = {}
     for n, r in rows.items():
-        r = dict(r, grain_2=r.get("budget_2", {}).get("grain_compressibility"))
+        r = dict(r, grain_2=r.get("budget_2", {}).get("grain_compressibility"),
+                 **{f"{k}_2": v for k, v in r.get("placement_2", {}).items()})
         out[n] = {h: r.get(k) for k, h in TABLE_COLUMNS}
     return pd.DataFrame(out).T
 
