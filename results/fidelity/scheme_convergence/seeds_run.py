@@ -1,0 +1,15 @@
+"""Mesh-seed realizations of the wall-graded runs (Galerkin f_graded, SUPG fc_supg_graded) at h = 2 mm."""
+import sys
+from pathlib import Path
+from solver import Parameters, RunOptions, simulate
+from sweep.fidelity import VARIANTS, SNAPSHOT_TIMES
+out = Path("/work/runs/fid_seeds_h2")
+for seed in (1, 2, 3):
+    for name in ("f_graded", "fc_supg_graded"):
+        changes, opts = VARIANTS[name]
+        d = out / f"{name}_seed{seed}"
+        if (d / "timeseries.csv").exists():
+            continue
+        simulate(Parameters(**changes), RunOptions(h=2.0, t_end=2.0, snapshot_times=list(SNAPSHOT_TIMES),
+                 write_xdmf=False, mesh_seed=seed, **opts), out_dir=d)
+        print(name, seed, "done", flush=True)
