@@ -1,9 +1,12 @@
-"""Mesh-seed realizations of the wall-graded runs (Galerkin f_graded, SUPG fc_supg_graded) at h = 2 mm."""
+"""Mesh-seed realizations of the wall-graded runs (Galerkin f_graded, SUPG fc_supg_graded) at h = 2 mm to 2 s.
+
+    python results/fidelity/scheme_convergence/seeds_run.py RUNS_ROOT/fid_seeds_h2
+"""
 import sys
 from pathlib import Path
 from solver import Parameters, RunOptions, simulate
 from sweep.fidelity import VARIANTS, SNAPSHOT_TIMES
-out = Path("/work/runs/fid_seeds_h2")
+out = Path(sys.argv[1])
 for seed in (1, 2, 3):
     for name in ("f_graded", "fc_supg_graded"):
         changes, opts = VARIANTS[name]
