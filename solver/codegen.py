@@ -500,10 +500,26 @@ def generate(tr: Tracer, groups: list, jacobian: bool, name: str) -> str:
     added to): read-modify-write of ~250 entries made the LLVM optimization 4x slower (21 s against 5 s); the
     other entries are left alone (structural zeros of zeroed output arrays).
     """
+    src, contrib = _contributions(tr, groups, jacobian)
+    acc = _accumulators(src, contrib, len(groups))
+    final = _final_writes(acc["res"], acc["blocks"])
+    data_args = [f"D_{nm}" for nm, _ in tr.data_names]
+    args = ["U", "tri", "G", "area", "C"] + [f"{x}_{g}" for g in range(len(groups)) for x in ("bary", "w")]
+    args += data_args + ["Fe"] + (["Ke"] if jacobian else [])
+    body = list(src.pro) + _moment_statements(len(groups)) + ["for e in range(tri.shape[0]):"]
+    body += [_IND + line for line in _element_statements(src, acc, final, len(groups))]
+    return "\n".join(["@_jit", f"def {name}({', '.join(args)}):"] + [_IND + line for line in body]) + "\n"
+
+
+_IND = "    "
+
+
+def _contributions(tr: Tracer, groups: list, jacobian: bool) -> tuple["_Source", list]:
+    """The coefficients to contract, ``(group, node, I, k, f, l)`` with f = None for the residual and (f, l) the
+    slot of a derivative for the Jacobian, and the source with the statements of every node they reach."""
     outs = [c for F, _ in groups for row in F for c in row if c is not None]
     D = derivatives(tr, outs) if jacobian else {}
     src = _Source(tr, len(groups))
-    # contributions: (group, coefficient node, I, k, f, l); f = None for the residual
     contrib = []
     for g, (F, off) in enumerate(groups):
         for i, row in enumerate(F):
@@ -514,14 +530,19 @@ def generate(tr: Tracer, groups: list, jacobian: bool, name: str) -> str:
                 for s, d in sorted(D.get(c.id, {}).items()):
                     contrib.append((g, d, off + i, k, s // 3, s % 3))
     src.emit_nodes(_reachable([c[1] for c in contrib]))
+    return src, contrib
 
-    # accumulators and their updates, per contribution
-    acc_init, upd_elem, upd_pts, blocks, res = [], [], [[] for _ in groups], {}, {}
+
+def _accumulators(src: "_Source", contrib: list, n_groups: int) -> dict:
+    """The scalar accumulators and their updates, per contribution: ``init`` (names, in first-use order),
+    ``elem`` (element-constant updates), ``pts`` (per rule, point updates), ``res`` (I -> k's of the residual)
+    and ``blocks`` ((I, f) -> (k, l)'s of the Jacobian)."""
+    acc = {"init": [], "elem": [], "pts": [[] for _ in range(n_groups)], "blocks": {}, "res": {}}
     for g, d, I, k, f, l in contrib:
         x = src.name(d)
         point = d.level == 2
         wq, wn, wnn = ("wq", "wn{}", "wnn{}{}") if point else (f"mw{g}", f"mn{g}_{{}}", f"mnn{g}_{{}}{{}}")
-        out = upd_pts[g] if point else upd_elem
+        out = acc["pts"][g] if point else acc["elem"]
         if f is None:  # residual
             if k == 0:
                 names = [f"r{I}_0_{a}" for a in range(3)]
@@ -529,9 +550,8 @@ def generate(tr: Tracer, groups: list, jacobian: bool, name: str) -> str:
             else:
                 names = [f"r{I}_{k}"]
                 out.append(f"{names[0]} += {x} * {wq}")
-            res.setdefault(I, set()).add(k)
+            acc["res"].setdefault(I, set()).add(k)
         else:
-            key = (I, f, k, l)
             if k == 0 and l == 0:
                 names = [f"A{I}_{f}_{a}{b}" for a, b in _SYM6]
                 out += [f"{nm} += {x} * {wnn.format(a, b)}" for (a, b), nm in zip(_SYM6, names)]
@@ -541,11 +561,15 @@ def generate(tr: Tracer, groups: list, jacobian: bool, name: str) -> str:
             else:
                 names = [f"S{I}_{f}_{k}{l}"]
                 out.append(f"{names[0]} += {x} * {wq}")
-            blocks.setdefault((I, f), set()).add((k, l))
+            acc["blocks"].setdefault((I, f), set()).add((k, l))
         for nm in names:
-            if nm not in acc_init:
-                acc_init.append(nm)
+            if nm not in acc["init"]:
+                acc["init"].append(nm)
+    return acc
 
+
+def _final_writes(res: dict, blocks: dict) -> list:
+    """The statements writing each non-zero row of Fe and block of Ke once from the accumulators."""
     final = []
     for I, ks in sorted(res.items()):
         for a in range(3):
@@ -564,42 +588,42 @@ def generate(tr: Tracer, groups: list, jacobian: bool, name: str) -> str:
                     else:
                         t.append(f"S{I}_{f}_{k}{l} * (g{a}{k - 1} * g{b}{l - 1})")
                 final.append(f"Ke[e, {I}, {f}, {a}, {b}] = {' + '.join(t)}")
+    return final
 
-    data_args = [f"D_{nm}" for nm, _ in tr.data_names]
-    args = ["U", "tri", "G", "area", "C"] + [f"{x}_{g}" for g in range(len(groups)) for x in ("bary", "w")]
-    args += data_args + ["Fe"] + (["Ke"] if jacobian else [])
-    ind = "    "
-    L = ["@_jit",
-         f"def {name}({', '.join(args)}):"]
-    body = list(src.pro)
-    for g in range(len(groups)):
-        # quadrature moments of rule g: Σ_q w_q, Σ_q w_q N_a, Σ_q w_q N_a N_b (element-constant coefficients)
-        body += [f"qm{g} = np.zeros(10)", f"for q in range(w_{g}.shape[0]):",
-                 f"{ind}qm{g}[0] += w_{g}[q]"]
-        body += [f"{ind}qm{g}[{1 + a}] += w_{g}[q] * bary_{g}[q, {a}]" for a in range(3)]
-        body += [f"{ind}qm{g}[{4 + j}] += w_{g}[q] * bary_{g}[q, {a}] * bary_{g}[q, {b}]" for j, (a, b) in enumerate(_SYM6)]
-    body.append("for e in range(tri.shape[0]):")
+
+def _moment_statements(n_groups: int) -> list:
+    """Quadrature moments of each rule g: Σ_q w_q, Σ_q w_q N_a, Σ_q w_q N_a N_b (for the element-constant
+    coefficients), computed once per kernel call."""
+    body = []
+    for g in range(n_groups):
+        body += [f"qm{g} = np.zeros(10)", f"for q in range(w_{g}.shape[0]):", f"{_IND}qm{g}[0] += w_{g}[q]"]
+        body += [f"{_IND}qm{g}[{1 + a}] += w_{g}[q] * bary_{g}[q, {a}]" for a in range(3)]
+        body += [f"{_IND}qm{g}[{4 + j}] += w_{g}[q] * bary_{g}[q, {a}] * bary_{g}[q, {b}]" for j, (a, b) in enumerate(_SYM6)]
+    return body
+
+
+def _element_statements(src: "_Source", acc: dict, final: list, n_groups: int) -> list:
+    """The body of the loop over elements: gather, element-constant nodes and updates, each rule's point loop,
+    and the final writes."""
     E = [f"t{a} = tri[e, {a}]" for a in range(3)]
     E += [f"u{a}_{f} = U[t{a}, {f}]" for f in sorted(src.fields) for a in range(3)]
     E += [f"g{a}{i} = G[e, {a}, {i}]" for a in range(3) for i in range(2)]
     E.append("ar = area[e]")
-    for g in range(len(groups)):
+    for g in range(n_groups):
         E += [f"mw{g} = ar * qm{g}[0]"] + [f"mn{g}_{a} = ar * qm{g}[{1 + a}]" for a in range(3)]
         E += [f"mnn{g}_{a}{b} = ar * qm{g}[{4 + j}]" for j, (a, b) in enumerate(_SYM6)]
     E += src.elem
-    E += [f"{nm} = 0.0" for nm in acc_init]
-    E += upd_elem
-    for g in range(len(groups)):
-        if not src.pts[g] and not upd_pts[g]:
+    E += [f"{nm} = 0.0" for nm in acc["init"]]
+    E += acc["elem"]
+    for g in range(n_groups):
+        if not src.pts[g] and not acc["pts"][g]:
             continue
         Q = [f"n{a} = bary_{g}[q, {a}]" for a in range(3)]
         Q += [f"wq = w_{g}[q] * ar"] + [f"wn{a} = wq * n{a}" for a in range(3)]
         Q += [f"wnn{a}{b} = wn{a} * n{b}" for a, b in _SYM6]
-        Q += src.pts[g] + upd_pts[g]
-        E += [f"for q in range(w_{g}.shape[0]):"] + [ind + s for s in Q]
-    E += final
-    body += [ind + s for s in E]
-    return "\n".join(L + [ind + s for s in body]) + "\n"
+        Q += src.pts[g] + acc["pts"][g]
+        E += [f"for q in range(w_{g}.shape[0]):"] + [_IND + line for line in Q]
+    return E + final
 
 
 # ---------------------------------------------------------------- kernels: build, cache, call
