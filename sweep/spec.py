@@ -443,29 +443,63 @@ def _spec_from_dict(d, source, max_runs) -> CampaignSpec:
         _fail("name", f"name={name!r} must be a plain folder name: letters, digits, '_', '.', '-', "
                       "starting with a letter, digit or '_'")
     pfields, ofields = parameter_fields(), option_fields()
-    run = d.get("run", {})
-    if not isinstance(run, dict):
-        _fail("run", f"expected a table, got {run!r}")
+    run = _table(d, "run", {})
     _check_run(run)
     limit = run.get("max_runs", DEFAULT_MAX_RUNS) if max_runs is None else _check_max_runs("--max-runs", max_runs)
     top = _parse_block("<top>", {k: d[k] for k in ("base", "options", "axes", "mode", "zip") if k in d},
                        pfields, ofields, label="", limit=limit)
-    blocks_raw = d.get("blocks")
+    blocks = _parse_blocks(d.get("blocks"), top, pfields, ofields, limit)
+    derived = _table(d, "derived", {})
+    _check_derived(derived, top, blocks, pfields)
+    sampler = _sampler(d)
+    classify = _table(d, "classify", {})
+    _check_classify(classify)
+    diagrams = d.get("diagrams", [])
+    if not isinstance(diagrams, list) or not all(isinstance(g, dict) for g in diagrams):
+        _fail("diagrams", f"expected an array of tables, got {diagrams!r}")
+    for i, g in enumerate(diagrams):
+        _check_diagram(f"diagrams[{i}]", g, pfields, ofields)
+    size = sum(grid_size(b) for b in blocks)
+    if size > limit:
+        _too_many("axes" if d.get("blocks") is None else "blocks", size, limit)
+    spec = CampaignSpec(
+        name=name, description=str(d.get("description", "")), paper=str(d.get("paper", "")),
+        params=dict(top.params), options=dict(top.options), derived=dict(derived), blocks=blocks,
+        sampler=sampler, classify=dict(classify), diagrams=tuple(diagrams), run=dict(run), source=source,
+    )
+    from sweep.sampler import validate_points
+
+    validate_points(spec)
+    return spec
+
+
+def _table(d: Mapping, key: str, default: dict) -> dict:
+    """The sub-table ``key`` of the spec (``default`` when absent); anything else than a table is refused."""
+    t = d.get(key, default)
+    if not isinstance(t, dict):
+        _fail(key, f"expected a table, got {t!r}")
+    return t
+
+
+def _parse_blocks(blocks_raw, top, pfields, ofields, limit: int) -> tuple:
+    """The ``[[blocks]]`` of the spec, or the top-level block alone; labels distinct, no top-level axes beside them."""
     if blocks_raw is None:
-        blocks = (top,)
-    else:
-        if not isinstance(blocks_raw, list) or not blocks_raw:
-            _fail("blocks", f"expected a non-empty array of tables, got {blocks_raw!r}")
-        if top.axes:
-            _fail("axes", "top-level axes and [[blocks]] cannot be combined: put the axes in the blocks")
-        blocks = tuple(_parse_block(f"blocks[{i}]", b if isinstance(b, dict) else _fail(f"blocks[{i}]", "expected a table"),
-                                    pfields, ofields, label=str(i), limit=limit) for i, b in enumerate(blocks_raw))
-        labels = [b.label for b in blocks]
-        if len(set(labels)) != len(labels):
-            _fail("blocks", f"block labels must be distinct, got {labels}")
-    derived = d.get("derived", {})
-    if not isinstance(derived, dict):
-        _fail("derived", f"expected a table, got {derived!r}")
+        return (top,)
+    if not isinstance(blocks_raw, list) or not blocks_raw:
+        _fail("blocks", f"expected a non-empty array of tables, got {blocks_raw!r}")
+    if top.axes:
+        _fail("axes", "top-level axes and [[blocks]] cannot be combined: put the axes in the blocks")
+    blocks = tuple(_parse_block(f"blocks[{i}]", b if isinstance(b, dict) else _fail(f"blocks[{i}]", "expected a table"),
+                                pfields, ofields, label=str(i), limit=limit) for i, b in enumerate(blocks_raw))
+    labels = [b.label for b in blocks]
+    if len(set(labels)) != len(labels):
+        _fail("blocks", f"block labels must be distinct, got {labels}")
+    return blocks
+
+
+def _check_derived(derived: dict, top, blocks: tuple, pfields) -> None:
+    """Each derived parameter: a known parameter, an expression of parameters that are not derived themselves,
+    neither set nor swept anywhere else."""
     for k, expr in derived.items():
         if k not in pfields:
             _fail(f"derived.{k}", f"unknown parameter {k!r}; allowed: {sorted(pfields)}")
@@ -482,36 +516,17 @@ def _spec_from_dict(d, source, max_runs) -> CampaignSpec:
             _fail(f"derived.{k}", f"{expr!r} uses another derived parameter {sorted(names & set(derived))}")
         if k in top.params or any(k == a.name for b in blocks for a in b.axes) or any(k in b.params for b in blocks):
             _fail(f"derived.{k}", f"{k!r} is derived and also set or swept")
-    sampler = d.get("sampler", {"kind": "grid"})
-    if not isinstance(sampler, dict):
-        _fail("sampler", f"expected a table, got {sampler!r}")
-    sampler = {"kind": "grid", **sampler}
+
+
+def _sampler(d: Mapping) -> dict:
+    """The ``[sampler]`` table with its kind (default "grid"), the kind's settings checked by the sampler."""
     from sweep.sampler import SAMPLERS
 
+    sampler = {"kind": "grid", **_table(d, "sampler", {"kind": "grid"})}
     if sampler["kind"] not in SAMPLERS:
         _fail("sampler.kind", f"kind={sampler['kind']!r} not allowed: one of {sorted(SAMPLERS)}")
     SAMPLERS[sampler["kind"]].check_settings({k: v for k, v in sampler.items() if k != "kind"})
-    classify = d.get("classify", {})
-    if not isinstance(classify, dict):
-        _fail("classify", f"expected a table, got {classify!r}")
-    _check_classify(classify)
-    diagrams = d.get("diagrams", [])
-    if not isinstance(diagrams, list) or not all(isinstance(g, dict) for g in diagrams):
-        _fail("diagrams", f"expected an array of tables, got {diagrams!r}")
-    for i, g in enumerate(diagrams):
-        _check_diagram(f"diagrams[{i}]", g, pfields, ofields)
-    size = sum(grid_size(b) for b in blocks)
-    if size > limit:
-        _too_many("axes" if blocks_raw is None else "blocks", size, limit)
-    spec = CampaignSpec(
-        name=name, description=str(d.get("description", "")), paper=str(d.get("paper", "")),
-        params=dict(top.params), options=dict(top.options), derived=dict(derived), blocks=blocks,
-        sampler=sampler, classify=dict(classify), diagrams=tuple(diagrams), run=dict(run), source=source,
-    )
-    from sweep.sampler import validate_points
-
-    validate_points(spec)
-    return spec
+    return sampler
 
 
 def _check_classify(classify: dict) -> None:
