@@ -484,30 +484,38 @@ def assemble_forms(F, geom: Geometry, quad: Quadrature, need_jacobian: bool = Tr
             if compiled:
                 terms.append((i, k, c.dd, c.idx))
                 continue
-            fields, D = _field_derivatives(c, M, nq)  # only the fields F_ik depends on
-            if not fields:
-                continue
-            nfc = len(fields)
-            Ki = Ke[:, i]  # a view (M, nf, 3 a, 3 b)
-            cols = slice(fields[0], fields[-1] + 1) if fields[-1] - fields[0] + 1 == nfc else fields
-            # ∂F_ik/∂U_jb at point q = D_j0 N_b(q) + D_j1 ∂N_b/∂x + D_j2 ∂N_b/∂y, summed over the (few)
-            # points with explicit broadcasts: no batched 3 x 3 products (slow in numpy) and no BLAS calls
-            # with an inner dimension of 3 (multithreaded BLAS made those 2x slower on a busy machine)
-            WD = wq[:, None, :, None] * D.transpose(0, 2, 1, 3)  # (M, nfc, nq, 3 slots)
-            Gb = G.transpose(0, 2, 1)[:, None]  # (M, 1, 2, 3 b)
-            if k == 0:
-                # Σ_q w N_a N_b D_j0 + Σ_l (Σ_q w N_a D_jl) ∂N_b/∂x_l
-                A = sum(WD[:, :, q, 0, None, None] * bary_pairs[q] for q in range(nq))  # (M, nfc, 3 a, 3 b)
-                H1 = sum(WD[:, :, q, 1, None] * bary[q] for q in range(nq))  # (M, nfc, 3 a)
-                H2 = sum(WD[:, :, q, 2, None] * bary[q] for q in range(nq))
-                A += H1[..., None] * Gb[:, :, 0, None, :] + H2[..., None] * Gb[:, :, 1, None, :]
-                Ki[:, cols] += A
-            else:
-                # ∂N_a/∂x_k Σ_q w (D_j0 N_b + D_j1 ∂N_b/∂x + D_j2 ∂N_b/∂y)
-                Tq = sum(WD[:, :, q, 0, None] * bary[q] for q in range(nq))  # (M, nfc, 3 b)
-                s = WD[:, :, :, 1:].sum(axis=2)  # (M, nfc, 2)
-                Tq += s[:, :, 0, None] * Gb[:, :, 0] + s[:, :, 1, None] * Gb[:, :, 1]
-                Ki[:, cols] += G[:, None, :, None, k - 1] * Tq[:, :, None, :]
+            _add_jacobian_term(Ke[:, i], c, k, wq, bary, bary_pairs, G)
     if need_jacobian and compiled:
         kernels.forms_jacobian(Ke, wq, bary, G, terms)
     return Fe, Ke
+
+
+def _add_jacobian_term(Ki: np.ndarray, c: Dual, k: int, wq: np.ndarray, bary: np.ndarray, bary_pairs: np.ndarray,
+                       G: np.ndarray) -> None:
+    """Add the Jacobian of one coefficient F_ik (a Dual over the points) to ``Ki`` (M, nf, 3 a, 3 b), the
+    equation's view of Ke: the numpy path of :func:`assemble_forms` (the compiled kernel takes every term in one
+    pass)."""
+    M, nq = wq.shape
+    fields, D = _field_derivatives(c, M, nq)  # only the fields F_ik depends on
+    if not fields:
+        return
+    nfc = len(fields)
+    cols = slice(fields[0], fields[-1] + 1) if fields[-1] - fields[0] + 1 == nfc else fields
+    # ∂F_ik/∂U_jb at point q = D_j0 N_b(q) + D_j1 ∂N_b/∂x + D_j2 ∂N_b/∂y, summed over the (few)
+    # points with explicit broadcasts: no batched 3 x 3 products (slow in numpy) and no BLAS calls
+    # with an inner dimension of 3 (multithreaded BLAS made those 2x slower on a busy machine)
+    WD = wq[:, None, :, None] * D.transpose(0, 2, 1, 3)  # (M, nfc, nq, 3 slots)
+    Gb = G.transpose(0, 2, 1)[:, None]  # (M, 1, 2, 3 b)
+    if k == 0:
+        # Σ_q w N_a N_b D_j0 + Σ_l (Σ_q w N_a D_jl) ∂N_b/∂x_l
+        A = sum(WD[:, :, q, 0, None, None] * bary_pairs[q] for q in range(nq))  # (M, nfc, 3 a, 3 b)
+        H1 = sum(WD[:, :, q, 1, None] * bary[q] for q in range(nq))  # (M, nfc, 3 a)
+        H2 = sum(WD[:, :, q, 2, None] * bary[q] for q in range(nq))
+        A += H1[..., None] * Gb[:, :, 0, None, :] + H2[..., None] * Gb[:, :, 1, None, :]
+        Ki[:, cols] += A
+    else:
+        # ∂N_a/∂x_k Σ_q w (D_j0 N_b + D_j1 ∂N_b/∂x + D_j2 ∂N_b/∂y)
+        Tq = sum(WD[:, :, q, 0, None] * bary[q] for q in range(nq))  # (M, nfc, 3 b)
+        s = WD[:, :, :, 1:].sum(axis=2)  # (M, nfc, 2)
+        Tq += s[:, :, 0, None] * Gb[:, :, 0] + s[:, :, 1, None] * Gb[:, :, 1]
+        Ki[:, cols] += G[:, None, :, None, k - 1] * Tq[:, :, None, :]
