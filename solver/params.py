@@ -388,7 +388,26 @@ def _as_float(name, v) -> float:
 
 
 def _coerce_and_check(p: Parameters) -> None:
-    # types first: numbers become plain floats (so the serialization round trip is exact)
+    """Coerce the types, then check the ranges of the elastic, fluid and geometric parameters and of the
+    fracture and constitutive-option parameters (each failure names the parameter, its value and what is
+    allowed)."""
+    _coerce_types(p)
+    _check_bulk_ranges(p)
+    _check_fracture_and_options(p)
+
+
+def _gt(p: Parameters, name: str, lo: float) -> None:
+    if not getattr(p, name) > lo:
+        _fail(name, getattr(p, name), f"> {lo}")
+
+
+def _ge(p: Parameters, name: str, lo: float) -> None:
+    if not getattr(p, name) >= lo:
+        _fail(name, getattr(p, name), f">= {lo}")
+
+
+def _coerce_types(p: Parameters) -> None:
+    """Numbers become plain floats (so the serialization round trip is exact), the seed an int; choices checked."""
     for name in _FLOAT_FIELDS:
         object.__setattr__(p, name, _as_float(name, getattr(p, name)))
     for name in _OPTIONAL_FLOAT_FIELDS:
@@ -403,20 +422,16 @@ def _coerce_and_check(p: Parameters) -> None:
         if getattr(p, name) not in allowed:
             _fail(name, getattr(p, name), f"one of {allowed}")
 
-    def gt(name, lo):
-        if not getattr(p, name) > lo:
-            _fail(name, getattr(p, name), f"> {lo}")
 
-    def ge(name, lo):
-        if not getattr(p, name) >= lo:
-            _fail(name, getattr(p, name), f">= {lo}")
-
+def _check_bulk_ranges(p: Parameters) -> None:
+    """Positive moduli, viscosities and lengths; Poisson's ratio, K_s above the drained bulk modulus, the annulus
+    and the initial porosity range."""
     for name in ("eta_o", "eta_w", "kbar", "E", "l_S", "l_d", "cell_height", "bead_diameter", "r_inner"):
-        gt(name, 0.0)
+        _gt(p, name, 0.0)
     for name in ("w_i", "gamma", "volumetric_coupling", "korteweg_factor", "outer_compliance",
                  "crack_permeability", "phi_range", "mu_i", "mu_o"):
-        ge(name, 0.0)
-    ge("seed", 0)
+        _ge(p, name, 0.0)
+    _ge(p, "seed", 0)
     if not (-1.0 < p.nu < 0.5):
         _fail("nu", p.nu, "the open interval (-1, 0.5)")
     K = _bulk(p.E, p.nu)
@@ -430,16 +445,20 @@ def _coerce_and_check(p: Parameters) -> None:
         _fail("phi_range", p.phi_range,
               f"< min(phi_mean, 1 - phi_mean) = {min(p.phi_mean, 1 - p.phi_mean):.6g} "
               "(phi_mean ± phi_range inside (0, 1))")
-    # fracture parameters and their laws of C
+
+
+def _check_fracture_and_options(p: Parameters) -> None:
+    """The fracture parameters and their laws of C, the optional porosity and permeability bounds, and the
+    nucleation length bound (Eq. fracture_upper_bound)."""
     if p.psi_c is None:
-        gt("cement", 0.0)  # psi_c = 0.0015 C^2 would vanish
+        _gt(p, "cement", 0.0)  # psi_c = 0.0015 C^2 would vanish
     else:
-        ge("cement", 0.0)
+        _ge(p, "cement", 0.0)
     for name in ("Gc", "psi_c"):
         if getattr(p, name) is not None:
-            gt(name, 0.0)
+            _gt(p, name, 0.0)
     if p.beta is not None:
-        ge("beta", 0.0)
+        _ge(p, "beta", 0.0)
     if p.porosity_floor is not None and not 0.0 < p.porosity_floor < p.phi_mean - p.phi_range:
         _fail("porosity_floor", p.porosity_floor, f"None or in (0, phi_mean - phi_range = {p.phi_mean - p.phi_range:.6g}) "
                                                   "(below every initial porosity)")
