@@ -228,7 +228,7 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     """Freeze the previous state ``U_n`` (N, nf) and the damage iterate ``d`` (N,)."""
     tri = disc.triangles
     q = fem.STRANG3
-    grads, ev_n, phi_n = _porosity_state(disc, params, U_n)
+    grads, ev_n, phi_n = porosity_state(disc, params, U_n)
     S_n = fem.at_quadrature(U_n[:, S], tri, q)
     up_x, up_y = upwind_shift(disc, grads[:, P]) if disc.upwind_length is not None else (None, None)
     stab = {} if disc.stab_tau is None else {"tau": disc.stab_tau, "px_n": grads[:, P, 0], "py_n": grads[:, P, 1]}
@@ -236,21 +236,16 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
                     supg_h=disc.supg_length, **stab)
 
 
-def _porosity_state(disc: Discretization, params, U: np.ndarray):
-    """The gradients of (u_x, u_y, p) per element, ε_v per element and φ at the Strang points of a state U."""
+def porosity_state(disc: Discretization, params, U: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Of a state U (N, nf): the gradients of (u_x, u_y, p) per element (M, 3, 2), ε_v per element (-) and φ at
+    the Strang points (M, 3), the porosity the storage term sees (Eq. summary_equations_3); read by
+    :func:`step_data` and by the volume balances of the time series."""
     grads = fem.field_gradients(disc.geom.grads, U[disc.triangles][:, :, :P + 1])
     ev = grads[:, UX, 0] + grads[:, UY, 1]
     p_q = fem.at_quadrature(U[:, P], disc.triangles, fem.STRANG3)
     phi = physics.porosity(disc.phi0[:, None], ev[:, None], p_q, params.K_s, params.porosity_floor,
                            params.porosity_ceiling)
     return grads, ev, phi
-
-
-def porosity_state(disc: Discretization, params, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """ε_v per element (-) and φ at the Strang points (M, 3) of a state U (N, nf): the porosity the step's
-    storage term sees (Eq. summary_equations_3), for the volume balances of the time series."""
-    _, ev, phi = _porosity_state(disc, params, U)
-    return ev, phi
 
 
 def upwind_shift(disc: Discretization, grad_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -577,9 +572,9 @@ def element_fields(disc: Discretization, params, U: np.ndarray, d: np.ndarray, f
     cen = (Ue[:, 0] + Ue[:, 1] + Ue[:, 2]) / 3.0
     exx, eyy = gradU[:, UX, 0], gradU[:, UY, 1]
     exy = 0.5 * (gradU[:, UX, 1] + gradU[:, UY, 0])
-    dt = d[disc.triangles]
+    de = d[disc.triangles]
     c = constitutive(params, disc.phi0, exx, eyy, exy, cen[:, P], cen[:, S], gradU[:, S, 0], gradU[:, S, 1],
-                     physics.degradation((dt[:, 0] + dt[:, 1] + dt[:, 2]) / 3.0, params.m))
+                     physics.degradation((de[:, 0] + de[:, 1] + de[:, 2]) / 3.0, params.m))
     out = {"phi": c.phi, "eps_v": exx + eyy, "hoop_stress": _hoop_stress(disc, params, c, cen[:, P]), "k": c.k,
            "psi_a": c.psi_a, "ch_mobility": c.M}
     if fluxes:

@@ -362,7 +362,7 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
     pending = o.frame_times()
     dt = o.dt0
     cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0}
-    V0 = _stored_volume(sim, porosity_state(sim.disc, sim.params, sim.U)[1])
+    V0 = _stored_volume(sim, porosity_state(sim.disc, sim.params, sim.U)[2])
     warned_layer = False
     prof = profiling.active()
     with phase("output"):
@@ -387,7 +387,7 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
                                   + (f"; physical limit: {limit}" if limit else ""))
             continue
         with phase("metrics"):
-            ev, phi_q = porosity_state(sim.disc, sim.params, U)  # the new state's porosity, read twice below
+            _, ev, phi_q = porosity_state(sim.disc, sim.params, U)  # the new state's porosity, read twice below
             _accumulate_balances(sim, U, info["data"], dt_try, cum, ev, phi_q)
             sim.commit(U, d, dt_try)
             row = _row(sim, dt_try, info, cum, V0, _stored_volume(sim, phi_q))
