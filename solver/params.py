@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, fields, replace as _dc_replace
+from dataclasses import dataclass, field, fields, replace as _dc_replace
 from numbers import Integral, Real
 from pathlib import Path
 
@@ -44,169 +44,101 @@ MU_OUTER_BCS = ("dirichlet", "zero_flux")
 CH_MOBILITIES = ("harmonic", "oil", "degenerate")
 OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow")
 
-_FIELD_DOCS = {
-    "eta_o": "defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 300 kcSt = 0.29 kPa·s)",
-    "eta_w": "invading (water) viscosity η_w = η_1, kPa·s (Table A: 1e-6)",
-    "kbar": "Kozeny–Carman coefficient k̄, mm² (Eq. permeability; Sec. 3.5: 0.0015)",
-    "cement": "cement volume ratio C, percent (Table A: [0, 3]; reference 1.2)",
-    "w_i": "inner-boundary Darcy velocity of the invading fluid w_i, mm/s (Table A: 50)",
-    "E": "Young's modulus of the granular pack, kPa (Table A: 331)",
-    "nu": "Poisson ratio of the granular pack, - (Table A: 0.2)",
-    "K_s": "bulk modulus of the solid grains, kPa (Table A: 1600; Biot b = 1 - K/K_s)",
-    "gamma": "surface tension γ between the fluids, kPa·mm (Table A: 0.03; Eq. fluid_free_energy)",
-    "l_S": "regularization length of the saturation phase field l_S, mm (Table A: 4)",
-    "l_d": "regularization length of the damage phase field l_d, mm (Table A: 4; Eq. crack_density_function)",
-    "mu_i": "Dirichlet chemical potential μ_i on the inner boundary, kPa (Table A: 0.006)",
-    "mu_o": "Dirichlet chemical potential μ_o on the outer boundary, kPa (Table A: 0.02)",
-    "Gc": "fracture toughness G_c, kPa·mm; None -> (0.26 C + 1)² (Eq. Gc)",
-    "psi_c": "nucleation energy ψ_c, kPa; None -> 0.0015 C² (Eq. psic)",
-    "beta": "damage viscosity β, kPa·s; None -> 65.7 √C (Sec. 3.6; Eq. fracture_equation)",
-    "cell_height": "Hele–Shaw gap h, mm (Table A: 1.96; k_max = h²/12)",
-    "r_inner": "inner radius of the annulus r_i, mm (Sec. 3.5: 5)",
-    "r_outer": "outer radius of the annulus r_o, mm (Table A: 53)",
-    "bead_diameter": "bead diameter δ, mm (Table A: 2; enters Ca*)",
-    "phi_mean": "mean initial porosity φ̄ = 1 - packing fraction, - (Table A: 0.40)",
-    "phi_range": "half-width of the uniform random initial porosity, - (Sec. 3.3: values in [0.2, 0.6])",
-    "seed": "seed of the random initial porosity (numpy default_rng), int >= 0",
-    "porosity_field": f"initial porosity field, one of {POROSITY_FIELDS} (Sec. 3.3)",
-    "mu_outer_bc": f"outer boundary condition on μ, one of {MU_OUTER_BCS} (Sec. 3.3: Dirichlet μ_o; Dong: zero flux)",
-    "ch_mobility": f"Cahn–Hilliard mobility law, one of {CH_MOBILITIES}: k/η̄ (paper, Eq. M = k/η̄), k/η_o, "
-                   "or 4S(1 − S) k/η̄ (degenerate)",
-    "outer_saturation_bc": f"outer condition on the invading phase, one of {OUTER_SATURATION_BCS}: S = 0 (paper, "
-                           "Sec. 3.4) or no invading flux (only the defending fluid leaves)",
-    "volumetric_coupling": "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)",
-    "korteweg_factor": "factor on κ in the Korteweg terms of Eq. summary_equations_secondary (1 paper, 0 off)",
-    "outer_compliance": "compliance of a spring on the outer boundary, mm/kPa (0 = rigid u = 0, the paper)",
-    "crack_permeability": "blend s: k = k(φ0) + s (min(k(φ), k_max) - k(φ0)) (1 paper, 0 frozen at k(φ0))",
-    "porosity_floor": "smooth lower bound φ_f of the porosity law, - (None: the paper's unbounded linear law; "
-                      "below φ_f, φ = φ_f²/(2φ_f − φ_lin), solver.physics.porosity_floor)",
-    "permeability_floor": "smooth lower bound k_f of the permeability, mm² (None: the paper's Kozeny–Carman law, "
-                          "k = 0 at closed pores; below k_f, k = k_f²/(2k_f − k_KC), solver.physics.permeability_floor)",
-    "porosity_ceiling": "onset φ_c of a smooth upper bound 1 of the porosity law, - (None: the paper's unbounded "
-                        "linear law, φ > 1 in dilated cracks; above φ_c, φ = 1 − (1−φ_c)²/(2(1−φ_c) − (1−φ_lin)), "
-                        "solver.physics.porosity_ceiling)",
-}
+def _param(default, unit: str, allowed: str, doc: str, choices: tuple = ()):
+    """A parameter's one declaration: its default, unit (mm, s, kPa system; "-" dimensionless, "" for labels and
+    seeds), allowed values as text (a bare "> 0" / ">= 0", optionally after "None or ", is enforced from here;
+    the relations between parameters are checked by :func:`_check_relations`), meaning with its paper
+    reference, and the choices of a text parameter."""
+    return field(default=default, metadata={"unit": unit, "allowed": allowed, "doc": doc, "choices": tuple(choices)})
 
-
-# unit of every parameter ("-": dimensionless; "" for labels and seeds): the one declaration that
-# `dchfrac params`, the campaign column dictionary and the figures' axis labels read
-_UNITS = {
-    "eta_o": "kPa·s", "eta_w": "kPa·s", "kbar": "mm²", "cement": "%", "w_i": "mm/s", "E": "kPa", "nu": "-",
-    "K_s": "kPa", "gamma": "kPa·mm", "l_S": "mm", "l_d": "mm", "mu_i": "kPa", "mu_o": "kPa", "Gc": "kPa·mm",
-    "psi_c": "kPa", "beta": "kPa·s", "cell_height": "mm", "r_inner": "mm", "r_outer": "mm", "bead_diameter": "mm",
-    "phi_mean": "-", "phi_range": "-", "seed": "", "porosity_field": "", "mu_outer_bc": "", "ch_mobility": "", "outer_saturation_bc": "",
-    "volumetric_coupling": "-", "korteweg_factor": "-", "outer_compliance": "mm/kPa", "crack_permeability": "-",
-    "porosity_floor": "-", "permeability_floor": "mm²", "porosity_ceiling": "-",
-}
-
-# allowed values of every parameter, as `_coerce_and_check` enforces them (tests/test_params.py holds the
-# two together: a value just outside each simple bound "> 0" / ">= 0" is rejected, one just inside accepted)
-_ALLOWED = {
-    **{n: "> 0" for n in ("eta_o", "eta_w", "kbar", "E", "cell_height", "bead_diameter", "r_inner")},
-    **{n: ">= 0" for n in ("w_i", "gamma", "volumetric_coupling", "korteweg_factor", "outer_compliance",
-                           "crack_permeability", "mu_i", "mu_o")},
-    "cement": ">= 0 (> 0 when psi_c follows its law 0.0015 C²)",
-    "nu": "(-1, 0.5)",
-    "K_s": "> K = E/(3(1 - 2 nu))",
-    "l_S": "> 0",
-    "l_d": "> 0 and <= 3 G_c/(8 psi_c) (m >= 1)",
-    "Gc": "None or > 0",
-    "psi_c": "None or > 0",
-    "beta": "None or >= 0",
-    "r_outer": "> r_inner",
-    "phi_mean": "(0, 1)",
-    "phi_range": ">= 0 and phi_mean ± phi_range inside (0, 1)",
-    "seed": "integer >= 0",
-    "porosity_field": f"one of {POROSITY_FIELDS}",
-    "mu_outer_bc": f"one of {MU_OUTER_BCS}",
-    "ch_mobility": f"one of {CH_MOBILITIES}",
-    "outer_saturation_bc": f"one of {OUTER_SATURATION_BCS}",
-    "porosity_floor": "None or in (0, phi_mean - phi_range) (below every initial porosity)",
-    "permeability_floor": "None or in (0, k(phi_mean - phi_range)) mm² (below every initial permeability)",
-    "porosity_ceiling": "None or in (phi_mean + phi_range, 1) (above every initial porosity)",
-}
 
 @dataclass(frozen=True)
 class Parameters:
     """All model parameters, units mm, s, kPa; defaults = the paper's reference experiment.
 
-    Attributes
-    ----------
-    eta_o : defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 0.29).
-    eta_w : invading (water) viscosity η_w = η_1, kPa·s (Table A: 1e-6).
-    kbar : Kozeny–Carman coefficient k̄, mm² (Eq. permeability; 0.0015).
-    cement : cement volume ratio C, percent (reference 1.2).
-    w_i : inner-boundary Darcy velocity of the invading fluid, mm/s (50), >= 0.
-    E : Young's modulus, kPa (331).
-    nu : Poisson ratio (0.2).
-    K_s : grain bulk modulus, kPa (1600); Biot coefficient b = 1 - K/K_s.
-    gamma : surface tension γ, kPa·mm (0.03; Eq. fluid_free_energy).
-    l_S : saturation regularization length, mm (4).
-    l_d : damage regularization length, mm (4; Eq. crack_density_function).
-    mu_i, mu_o : Dirichlet chemical potentials on the inner / outer circle, kPa (0.006, 0.02).
-    Gc : fracture toughness, kPa·mm, None -> (0.26 C + 1)² (Eq. Gc).
-    psi_c : nucleation energy, kPa, None -> 0.0015 C² (Eq. psic).
-    beta : damage viscosity, kPa·s, None -> 65.7 √C (Eq. fracture_equation, Sec. 3.6).
-    cell_height : Hele–Shaw gap, mm (1.96); k_max = cell_height²/12.
-    r_inner, r_outer : annulus radii, mm (5, 53).
-    bead_diameter : bead diameter δ, mm (2).
-    phi_mean, phi_range : initial porosity mean and half-width of its uniform range (0.4, 0.2).
-    seed : RNG seed of the random initial porosity (0).
-    porosity_field : "random" | "pockets" | "constant".
-    mu_outer_bc : "dirichlet" (paper) | "zero_flux" (Dong).
-    ch_mobility : Cahn–Hilliard mobility law (see :func:`solver.physics.ch_mobility`): "harmonic" (paper,
-        M = k/η̄), "oil" (M = k/η_o) or "degenerate" (M = 4S(1 − S) k/η̄), mm²/(kPa·s).
-    outer_saturation_bc : "dirichlet" (paper: S = 0 on r_o, the invading fluid may leave) or
-        "defending_outflow" (no invading flux through r_o: only the defending fluid leaves).
-    volumetric_coupling : factor on φ S ε̇_v and φ ε̇_v (1; off 0).
-    korteweg_factor : factor on κ in the Korteweg terms (1; off 0).
-    outer_compliance : outer spring compliance, mm/kPa (0 = rigid, the paper).
-    crack_permeability : permeability blend s (1 = paper; 0 = k frozen at k(φ0)).
-    porosity_floor : smooth lower bound φ_f of the porosity, - (None = the paper's linear law, which reaches
-        φ <= 0 under compaction; see :func:`solver.physics.porosity_floor`).  Omitted from :meth:`to_dict`
-        when None, so the run keys of runs made before it existed do not change.
-    permeability_floor : smooth lower bound k_f of the permeability, mm² (None = the paper's Kozeny–Carman law,
-        k = 0 where the pores close; see :func:`solver.physics.permeability_floor`).  Omitted from
-        :meth:`to_dict` when None.
-    porosity_ceiling : onset φ_c of a smooth upper bound 1 of the porosity, - (None = the paper's linear law, which
-        exceeds 1 in dilated cracks; see :func:`solver.physics.porosity_ceiling`).  Omitted from :meth:`to_dict`
-        when None.
+    Each field below is declared once with its default, unit, allowed values and meaning (:func:`_param`);
+    ``dchfrac params`` prints them as a table (:func:`parameter_table`), and the attribute list that follows
+    is generated from the same declarations.
     """
 
-    eta_o: float = 0.29
-    eta_w: float = 1e-6
-    kbar: float = 0.0015
-    cement: float = 1.2
-    w_i: float = 50.0
-    E: float = 331.0
-    nu: float = 0.2
-    K_s: float = 1600.0
-    gamma: float = 0.03
-    l_S: float = 4.0
-    l_d: float = 4.0
-    mu_i: float = 0.006
-    mu_o: float = 0.02
-    Gc: float | None = None
-    psi_c: float | None = None
-    beta: float | None = None
-    cell_height: float = 1.96
-    r_inner: float = 5.0
-    r_outer: float = 53.0
-    bead_diameter: float = 2.0
-    phi_mean: float = 0.4
-    phi_range: float = 0.2
-    seed: int = 0
-    porosity_field: str = "random"
-    mu_outer_bc: str = "dirichlet"
-    ch_mobility: str = "harmonic"
-    outer_saturation_bc: str = "dirichlet"
-    volumetric_coupling: float = 1.0
-    korteweg_factor: float = 1.0
-    outer_compliance: float = 0.0
-    crack_permeability: float = 1.0
-    porosity_floor: float | None = None
-    permeability_floor: float | None = None
-    porosity_ceiling: float | None = None
+    eta_o: float = _param(0.29, "kPa·s", "> 0",
+        "defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 300 kcSt = 0.29 kPa·s)")
+    eta_w: float = _param(1e-6, "kPa·s", "> 0",
+        "invading (water) viscosity η_w = η_1, kPa·s (Table A: 1e-6)")
+    kbar: float = _param(0.0015, "mm²", "> 0",
+        "Kozeny–Carman coefficient k̄, mm² (Eq. permeability; Sec. 3.5: 0.0015)")
+    cement: float = _param(1.2, "%", ">= 0 (> 0 when psi_c follows its law 0.0015 C²)",
+        "cement volume ratio C, percent (Table A: [0, 3]; reference 1.2)")
+    w_i: float = _param(50.0, "mm/s", ">= 0",
+        "inner-boundary Darcy velocity of the invading fluid w_i, mm/s (Table A: 50)")
+    E: float = _param(331.0, "kPa", "> 0",
+        "Young's modulus of the granular pack, kPa (Table A: 331)")
+    nu: float = _param(0.2, "-", "(-1, 0.5)",
+        "Poisson ratio of the granular pack, - (Table A: 0.2)")
+    K_s: float = _param(1600.0, "kPa", "> K = E/(3(1 - 2 nu))",
+        "bulk modulus of the solid grains, kPa (Table A: 1600; Biot b = 1 - K/K_s)")
+    gamma: float = _param(0.03, "kPa·mm", ">= 0",
+        "surface tension γ between the fluids, kPa·mm (Table A: 0.03; Eq. fluid_free_energy)")
+    l_S: float = _param(4.0, "mm", "> 0",
+        "regularization length of the saturation phase field l_S, mm (Table A: 4)")
+    l_d: float = _param(4.0, "mm", "> 0 and <= 3 G_c/(8 psi_c) (m >= 1)",
+        "regularization length of the damage phase field l_d, mm (Table A: 4; Eq. crack_density_function)")
+    mu_i: float = _param(0.006, "kPa", ">= 0",
+        "Dirichlet chemical potential μ_i on the inner boundary, kPa (Table A: 0.006)")
+    mu_o: float = _param(0.02, "kPa", ">= 0",
+        "Dirichlet chemical potential μ_o on the outer boundary, kPa (Table A: 0.02)")
+    Gc: float | None = _param(None, "kPa·mm", "None or > 0",
+        "fracture toughness G_c, kPa·mm; None -> (0.26 C + 1)² (Eq. Gc)")
+    psi_c: float | None = _param(None, "kPa", "None or > 0",
+        "nucleation energy ψ_c, kPa; None -> 0.0015 C² (Eq. psic)")
+    beta: float | None = _param(None, "kPa·s", "None or >= 0",
+        "damage viscosity β, kPa·s; None -> 65.7 √C (Sec. 3.6; Eq. fracture_equation)")
+    cell_height: float = _param(1.96, "mm", "> 0",
+        "Hele–Shaw gap h, mm (Table A: 1.96; k_max = h²/12)")
+    r_inner: float = _param(5.0, "mm", "> 0",
+        "inner radius of the annulus r_i, mm (Sec. 3.5: 5)")
+    r_outer: float = _param(53.0, "mm", "> r_inner",
+        "outer radius of the annulus r_o, mm (Table A: 53)")
+    bead_diameter: float = _param(2.0, "mm", "> 0",
+        "bead diameter δ, mm (Table A: 2; enters Ca*)")
+    phi_mean: float = _param(0.4, "-", "(0, 1)",
+        "mean initial porosity φ̄ = 1 - packing fraction, - (Table A: 0.40)")
+    phi_range: float = _param(0.2, "-", ">= 0 and phi_mean ± phi_range inside (0, 1)",
+        "half-width of the uniform random initial porosity, - (Sec. 3.3: values in [0.2, 0.6])")
+    seed: int = _param(0, "", "integer >= 0",
+        "seed of the random initial porosity (numpy default_rng), int >= 0")
+    porosity_field: str = _param("random", "", f"one of {POROSITY_FIELDS}",
+        f"initial porosity field, one of {POROSITY_FIELDS} (Sec. 3.3)", choices=POROSITY_FIELDS)
+    mu_outer_bc: str = _param("dirichlet", "", f"one of {MU_OUTER_BCS}",
+        f"outer boundary condition on μ, one of {MU_OUTER_BCS} (Sec. 3.3: Dirichlet μ_o; Dong: zero flux)",
+        choices=MU_OUTER_BCS)
+    ch_mobility: str = _param("harmonic", "", f"one of {CH_MOBILITIES}",
+        f"Cahn–Hilliard mobility law, one of {CH_MOBILITIES}: k/η̄ (paper, Eq. M = k/η̄), k/η_o, or 4S(1 − S) "
+        "k/η̄ (degenerate)", choices=CH_MOBILITIES)
+    outer_saturation_bc: str = _param("dirichlet", "", f"one of {OUTER_SATURATION_BCS}",
+        f"outer condition on the invading phase, one of {OUTER_SATURATION_BCS}: S = 0 (paper, Sec. 3.4) or no "
+        "invading flux (only the defending fluid leaves)", choices=OUTER_SATURATION_BCS)
+    volumetric_coupling: float = _param(1.0, "-", ">= 0",
+        "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)")
+    korteweg_factor: float = _param(1.0, "-", ">= 0",
+        "factor on κ in the Korteweg terms of Eq. summary_equations_secondary (1 paper, 0 off)")
+    outer_compliance: float = _param(0.0, "mm/kPa", ">= 0",
+        "compliance of a spring on the outer boundary, mm/kPa (0 = rigid u = 0, the paper)")
+    crack_permeability: float = _param(1.0, "-", ">= 0",
+        "blend s: k = k(φ0) + s (min(k(φ), k_max) - k(φ0)) (1 paper, 0 frozen at k(φ0))")
+    porosity_floor: float | None = _param(None, "-",
+        "None or in (0, phi_mean - phi_range) (below every initial porosity)",
+        "smooth lower bound φ_f of the porosity law, - (None: the paper's unbounded linear law; below φ_f, φ "
+        "= φ_f²/(2φ_f − φ_lin), solver.physics.porosity_floor)")
+    permeability_floor: float | None = _param(None, "mm²",
+        "None or in (0, k(phi_mean - phi_range)) mm² (below every initial permeability)",
+        "smooth lower bound k_f of the permeability, mm² (None: the paper's Kozeny–Carman law, k = 0 at "
+        "closed pores; below k_f, k = k_f²/(2k_f − k_KC), solver.physics.permeability_floor)")
+    porosity_ceiling: float | None = _param(None, "-",
+        "None or in (phi_mean + phi_range, 1) (above every initial porosity)",
+        "onset φ_c of a smooth upper bound 1 of the porosity law, - (None: the paper's unbounded linear law, "
+        "φ > 1 in dilated cracks; above φ_c, φ = 1 − (1−φ_c)²/(2(1−φ_c) − (1−φ_lin)), "
+        "solver.physics.porosity_ceiling)")
 
     def __post_init__(self):
         _coerce_and_check(self)
@@ -353,20 +285,27 @@ class Parameters:
         return cls.from_dict(json.loads(text_or_path))
 
 
+# the declarations read back: units (`dchfrac params`, the campaign column dictionary, the figures' axis
+# labels), meanings, allowed values (tests/test_params.py checks each simple bound against the validation)
+_FIELD_DOCS = {f.name: f.metadata["doc"] for f in fields(Parameters)}
+_UNITS = {f.name: f.metadata["unit"] for f in fields(Parameters)}
+_ALLOWED = {f.name: f.metadata["allowed"] for f in fields(Parameters)}
+Parameters.__doc__ += "\n    Attributes\n    ----------\n" + "".join(
+    f"    {f.name} : {f.metadata['doc']} Default {f.default!r}; allowed {f.metadata['allowed']}.\n"
+    for f in fields(Parameters))
+
 # ---------------------------------------------------------------------------
 # validation
 # ---------------------------------------------------------------------------
-_FLOAT_FIELDS = (
-    "eta_o", "eta_w", "kbar", "cement", "w_i", "E", "nu", "K_s", "gamma", "l_S", "l_d",
-    "mu_i", "mu_o", "cell_height", "r_inner", "r_outer", "bead_diameter", "phi_mean",
-    "phi_range", "volumetric_coupling", "korteweg_factor", "outer_compliance", "crack_permeability",
-)
-_OPTIONAL_FLOAT_FIELDS = ("Gc", "psi_c", "beta", "porosity_floor", "permeability_floor", "porosity_ceiling")
+_FLOAT_FIELDS = tuple(f.name for f in fields(Parameters) if f.type == "float")
+_OPTIONAL_FLOAT_FIELDS = tuple(f.name for f in fields(Parameters) if f.type == "float | None")
+#: the simple bounds declared as "> 0" / ">= 0" (after "None or " for optional fields): name -> (bound, strict)
+_SIMPLE_BOUNDS = {f.name: (0.0, f.metadata["allowed"].endswith("> 0")) for f in fields(Parameters)
+                  if f.metadata["allowed"].removeprefix("None or ") in ("> 0", ">= 0")}
 # fields added after runs were stored: left out of to_dict() at None, so the parameter dicts (and the run keys
 # made from them) of older runs do not change
 _OMIT_WHEN_NONE = ("porosity_floor", "permeability_floor", "porosity_ceiling")
-_CHOICES = (("porosity_field", POROSITY_FIELDS), ("mu_outer_bc", MU_OUTER_BCS), ("ch_mobility", CH_MOBILITIES),
-            ("outer_saturation_bc", OUTER_SATURATION_BCS))
+_CHOICES = tuple((f.name, f.metadata["choices"]) for f in fields(Parameters) if f.metadata["choices"])
 CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
 
 
@@ -388,22 +327,14 @@ def _as_float(name, v) -> float:
 
 
 def _coerce_and_check(p: Parameters) -> None:
-    """Coerce the types, then check the ranges of the elastic, fluid and geometric parameters and of the
-    fracture and constitutive-option parameters (each failure names the parameter, its value and what is
-    allowed)."""
+    """Coerce the types, then check every declared simple bound and the relations between parameters (each
+    failure names the parameter, its value and what is allowed)."""
     _coerce_types(p)
-    _check_bulk_ranges(p)
-    _check_fracture_and_options(p)
-
-
-def _gt(p: Parameters, name: str, lo: float) -> None:
-    if not getattr(p, name) > lo:
-        _fail(name, getattr(p, name), f"> {lo}")
-
-
-def _ge(p: Parameters, name: str, lo: float) -> None:
-    if not getattr(p, name) >= lo:
-        _fail(name, getattr(p, name), f">= {lo}")
+    for name, (lo, strict) in _SIMPLE_BOUNDS.items():
+        v = getattr(p, name)
+        if v is not None and not (v > lo if strict else v >= lo):
+            _fail(name, v, f"{'>' if strict else '>='} {lo}")
+    _check_relations(p)
 
 
 def _coerce_types(p: Parameters) -> None:
@@ -415,7 +346,7 @@ def _coerce_types(p: Parameters) -> None:
         if v is not None:
             object.__setattr__(p, name, _as_float(name, v))
     s = p.seed
-    if isinstance(s, (bool, np.bool_)) or not isinstance(s, Integral):
+    if isinstance(s, (bool, np.bool_)) or not isinstance(s, Integral) or s < 0:
         _fail("seed", s, "an integer >= 0")
     object.__setattr__(p, "seed", int(s))
     for name, allowed in _CHOICES:
@@ -423,15 +354,14 @@ def _coerce_types(p: Parameters) -> None:
             _fail(name, getattr(p, name), f"one of {allowed}")
 
 
-def _check_bulk_ranges(p: Parameters) -> None:
-    """Positive moduli, viscosities and lengths; Poisson's ratio, K_s above the drained bulk modulus, the annulus
-    and the initial porosity range."""
-    for name in ("eta_o", "eta_w", "kbar", "E", "l_S", "l_d", "cell_height", "bead_diameter", "r_inner"):
-        _gt(p, name, 0.0)
-    for name in ("w_i", "gamma", "volumetric_coupling", "korteweg_factor", "outer_compliance",
-                 "crack_permeability", "phi_range", "mu_i", "mu_o"):
-        _ge(p, name, 0.0)
-    _ge(p, "seed", 0)
+def _check_relations(p: Parameters) -> None:
+    """The allowed values that are not a simple bound: intervals, and bounds set by other parameters."""
+    if not p.l_d > 0.0:
+        _fail("l_d", p.l_d, "> 0.0")
+    if not p.phi_range >= 0.0:
+        _fail("phi_range", p.phi_range, ">= 0.0")
+    if not p.cement >= 0.0 or (p.psi_c is None and not p.cement > 0.0):  # psi_c = 0.0015 C^2 would vanish
+        _fail("cement", p.cement, "> 0.0" if p.psi_c is None else ">= 0.0")
     if not (-1.0 < p.nu < 0.5):
         _fail("nu", p.nu, "the open interval (-1, 0.5)")
     K = _bulk(p.E, p.nu)
@@ -445,20 +375,14 @@ def _check_bulk_ranges(p: Parameters) -> None:
         _fail("phi_range", p.phi_range,
               f"< min(phi_mean, 1 - phi_mean) = {min(p.phi_mean, 1 - p.phi_mean):.6g} "
               "(phi_mean ± phi_range inside (0, 1))")
+    _check_porosity_bounds(p)
+    bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
+    if not p.l_d <= bound * (1.0 + 1e-12):
+        _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")
 
 
-def _check_fracture_and_options(p: Parameters) -> None:
-    """The fracture parameters and their laws of C, the optional porosity and permeability bounds, and the
-    nucleation length bound (Eq. fracture_upper_bound)."""
-    if p.psi_c is None:
-        _gt(p, "cement", 0.0)  # psi_c = 0.0015 C^2 would vanish
-    else:
-        _ge(p, "cement", 0.0)
-    for name in ("Gc", "psi_c"):
-        if getattr(p, name) is not None:
-            _gt(p, name, 0.0)
-    if p.beta is not None:
-        _ge(p, "beta", 0.0)
+def _check_porosity_bounds(p: Parameters) -> None:
+    """The optional porosity floor and ceiling and permeability floor lie outside every initial value."""
     if p.porosity_floor is not None and not 0.0 < p.porosity_floor < p.phi_mean - p.phi_range:
         _fail("porosity_floor", p.porosity_floor, f"None or in (0, phi_mean - phi_range = {p.phi_mean - p.phi_range:.6g}) "
                                                   "(below every initial porosity)")
@@ -472,9 +396,6 @@ def _check_fracture_and_options(p: Parameters) -> None:
     if p.porosity_ceiling is not None and not p.phi_mean + p.phi_range < p.porosity_ceiling < 1.0:
         _fail("porosity_ceiling", p.porosity_ceiling, f"None or in (phi_mean + phi_range = {p.phi_mean + p.phi_range:.6g}, 1) "
                                                       "(above every initial porosity)")
-    bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
-    if not p.l_d <= bound * (1.0 + 1e-12):
-        _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")
 
 
 def integer_fields() -> tuple[str, ...]:
