@@ -300,13 +300,28 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
 
         progress = StepProgress(options.t_end)
     prof = profiling.Profile()
-    with profiling.activate(prof):
+    with profiling.activate(prof), one_openblas_thread():
         status, reason, rows, snaps, rejected, nfact = _run(params, options, out_dir, mesh, phi0, progress, t_wall,
                                                             warnings)
     ts = pd.DataFrame(rows)
     wall = time.perf_counter() - t_wall
     return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact,
                             profile=prof.to_dict())
+
+
+def one_openblas_thread():
+    """A context that holds numpy's and scipy's OpenBLAS thread pools to one thread (threadpoolctl; a no-op
+    when it is not installed).  The run's own BLAS calls are small (norms of the Newton vectors, Anderson's
+    least squares over a few columns), and idle OpenBLAS workers spinning beside PARDISO's OpenMP threads and
+    the assembly threads take their cores (results/bench/README.md, ninth round).  MKL (PARDISO) keeps its
+    threads."""
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:
+        from contextlib import nullcontext
+
+        return nullcontext()
+    return ThreadpoolController().select(internal_api="openblas").limit(limits=1)
 
 
 def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=()):
