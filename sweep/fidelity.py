@@ -110,9 +110,9 @@ def volume_budget(snap: dict, points, triangles, params) -> dict:
 
     φ0 is recovered per element from φ = φ0 + (1 − φ0)(ε_v + p/K_s) (Eq. summary_equations_3).
     """
-    x = points[triangles]
-    area = 0.5 * np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
-                        - (x[:, 2, 0] - x[:, 0, 0]) * (x[:, 1, 1] - x[:, 0, 1]))
+    from solver.fem import geometry
+
+    area = geometry(points, triangles).areas
     pe = snap["p"][triangles].mean(axis=1)
     z = snap["eps_v"] + pe / params.K_s
     phi0 = (snap["phi"] - z) / (1.0 - z)
@@ -135,11 +135,11 @@ def water_placement(snap: dict, points, triangles, r_inner: float, r_outer: floa
     region the front measure of the time series reads, ``solver.metrics.invaded_from_inlet``).  Two schemes
     can thus be compared on where they store the water even where their S = 0.5 fronts are not comparable.
     """
+    from solver.fem import geometry
     from solver.metrics import invaded_from_inlet, mesh_edges
 
     x = points[triangles]
-    area = 0.5 * np.abs((x[:, 1, 0] - x[:, 0, 0]) * (x[:, 2, 1] - x[:, 0, 1])
-                        - (x[:, 2, 0] - x[:, 0, 0]) * (x[:, 1, 1] - x[:, 0, 1]))
+    area = geometry(points, triangles).areas
     vol = snap["phi"] * np.clip(snap["S"][triangles].mean(axis=1), 0.0, 1.0) * area
     total = float(vol.sum())
     rc = np.hypot(*x.mean(axis=1).T)
