@@ -44,6 +44,7 @@ MU_OUTER_BCS = ("dirichlet", "zero_flux")
 CH_MOBILITIES = ("harmonic", "oil", "degenerate")
 OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow")
 
+
 def _param(default, unit: str, allowed: str, doc: str, choices: tuple = ()):
     """A parameter's one declaration: its default, unit (mm, s, kPa system; "-" dimensionless, "" for labels and
     seeds), allowed values as text (a bare "> 0" / ">= 0", optionally after "None or ", is enforced from here;
