@@ -11,6 +11,9 @@ Measured (wall-clock seconds, this machine):
 * the dry-run cost rates ``coupled_run_h{h}_wall_s_per_sim_s`` (``sweep.campaign.wall_per_sim_second``), from
   the longest run made at each h: a campaign run lasts seconds of simulated time, and the short run's rate is
   the start-up's, whose small steps cost several times more per simulated second;
+* ``shared_run_factor``: how much longer the h = 2 reference case takes with one run per core, each in a campaign
+  worker's environment (one BLAS, MKL and OpenMP thread), than alone with every core: the dry run's rate for
+  more than one job (not with ``--quick``);
 * with ``--profile`` (:func:`run_profile`): the reference run's wall time split by phase (assembly,
   symbolic and numeric factorization, solves, damage solve, stagger, metrics, output, Python) and by
   part of the run (t < 0.05 s against the rest), from the run's own accumulators
@@ -145,6 +148,35 @@ def _coupled_run(h: float, t_end: float) -> dict:
             "p_inj_end_kPa": float(res.timeseries["p_inj"].iloc[-1]) if n else None}
 
 
+_SHARED_CHILD = """
+import json, sys, time
+from solver import Parameters, RunOptions, simulate
+res = simulate(Parameters(), RunOptions(h=float(sys.argv[1]), t_end=float(sys.argv[2]), snapshot_times=[]))
+print(json.dumps({"status": res.status, "wall_s": res.wall_time}))
+"""
+
+
+def _shared_run(h: float, t_end: float) -> dict:
+    """The reference case at mesh size h (mm) to t_end (s) as a campaign with one job per core runs it: one
+    fresh process per core at once, each with the worker's thread environment (``sweep.scheduler``: one BLAS,
+    MKL and OpenMP thread, one assembly thread); the mean of their solver wall times (s)."""
+    import subprocess
+    import sys
+
+    from sweep.scheduler import ExecConfig, _child_env
+
+    n = os.cpu_count() or 1
+    env = _child_env(ExecConfig(root=".", campaign="bench", runner=None, blas_threads=1))
+    env["DCHFRAC_ASSEMBLY_THREADS"] = "1"
+    procs = [subprocess.Popen([sys.executable, "-c", _SHARED_CHILD, str(h), str(t_end)], stdout=subprocess.PIPE,
+                              text=True, env=env, cwd=Path(__file__).resolve().parent.parent) for _ in range(n)]
+    outs = [json.loads(p.communicate()[0].strip().splitlines()[-1]) for p in procs]
+    ok = [o["wall_s"] for o in outs if o["status"] == "ok"]
+    return {"h_mm": h, "t_end_s": t_end, "jobs": n, "status": "ok" if len(ok) == n else "failed",
+            "wall_s": float(np.mean(ok)) if ok else None,
+            "wall_s_per_sim_s": float(np.mean(ok)) / t_end if ok else None}
+
+
 def _refactorization_h1() -> dict:
     """The h = 1 mm refactorization time (s) of the default backend on this machine, now: the yardstick
     stated beside every absolute figure (machines of the same kind differ by 1.6-2.4x)."""
@@ -248,6 +280,9 @@ def _cost_rates(result: dict) -> None:
         if run is not None:
             result[f"coupled_run_h{h}_wall_s_per_sim_s"] = run["wall_s_per_sim_s"]
             result[f"coupled_run_h{h}_wall_s_per_sim_s_from"] = f"{run['t_end_s']:g} s run at h = {h} mm"
+    alone, shared = result.get("reference_run_h2", {}), result.get("shared_run_h2", {})
+    if alone.get("status") == "ok" and shared.get("status") == "ok":
+        result["shared_run_factor"] = shared["wall_s_per_sim_s"] / alone["wall_s_per_sim_s"]
 
 
 def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> dict:
@@ -269,6 +304,8 @@ def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> di
     if not quick:
         LOG.info("bench: reference case at h = 2 mm to 2 s ...")
         result["reference_run_h2"] = _coupled_run(2.0, 2.0)
+        LOG.info("bench: the same case with one run per core, as a campaign runs it ...")
+        result["shared_run_h2"] = _shared_run(2.0, 2.0)
     if reference:
         LOG.info("bench: reference run h = 1 mm to 2 s ...")
         result["reference_run_h1"] = _coupled_run(1.0, 2.0)

@@ -51,7 +51,9 @@ __all__ = [
     "DEFAULT_WALL_S_PER_SIM_S_H2",
     "COST_MESH_EXPONENT",
     "DEFAULT_PER_RUN_OVERHEAD_S",
+    "DEFAULT_SHARED_RUN_FACTOR",
     "per_run_overhead",
+    "shared_run_factor",
 ]
 
 DEFAULT_ROOT = "results"
@@ -69,6 +71,11 @@ COST_MESH_EXPONENT = 2.5
 # present, else this default: the committed h = 2 campaigns spent 2.0-2.5 s per run outside the
 # solver's time loop (wall_time_s - solver_wall_time_s of their tables) plus about 1 s of solver set-up.
 DEFAULT_PER_RUN_OVERHEAD_S = 3.0
+# With more than one job each run shares the machine (one core, one BLAS/MKL thread each): the rate above,
+# measured on a lone run, is multiplied by the factor ``dchfrac bench`` measures with one run per core
+# (bench.json key "shared_run_factor"), else by this default (h = 2 reference case, 2-core machine: 20.0 s side
+# by side against 13.1 s alone, results/bench/README.md, ninth round).
+DEFAULT_SHARED_RUN_FACTOR = 1.5
 
 
 def as_spec(spec) -> CampaignSpec:
@@ -648,6 +655,17 @@ def per_run_overhead(bench: Mapping[str, Any] | None = None) -> tuple[float, str
     return DEFAULT_PER_RUN_OVERHEAD_S, "default"
 
 
+def shared_run_factor(jobs: int, bench: Mapping[str, Any] | None = None) -> tuple[float, str]:
+    """How much longer a run takes beside others than alone with every core (1 for one job), and where the
+    figure comes from ("one job", "bench" or "default"); see DEFAULT_SHARED_RUN_FACTOR."""
+    if jobs <= 1:
+        return 1.0, "one job"
+    v = (bench or {}).get("shared_run_factor")
+    if isinstance(v, (int, float)) and v > 0:
+        return float(v), "bench"
+    return DEFAULT_SHARED_RUN_FACTOR, "default"
+
+
 def estimated_sim_time(params: Mapping[str, Any], options: Mapping[str, Any]) -> float:
     """Simulated time of a run, s: t_end, or less when the front should reach stop_front_radius first.
 
@@ -668,18 +686,21 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
     ``accept_stale``, failed with ``retry_failed``) of a campaign on ``jobs`` workers.
 
     Per run: :func:`per_run_overhead` plus :func:`wall_per_sim_second` (bench figures or the documented
-    default) times :func:`estimated_sim_time`; the sum divided by ``jobs`` (perfect packing: a lower bound
-    of the wall time when runs differ much in cost). Failed runs count only with ``retry_failed``.
+    default) times :func:`shared_run_factor` (a run beside others is slower than alone) times
+    :func:`estimated_sim_time`; the sum divided by ``jobs`` (perfect packing: a lower bound of the wall time
+    when runs differ much in cost). Failed runs count only with ``retry_failed``.
     """
     spec = as_spec(spec)
     plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=accept_stale)
     bench = _load_bench(root)
     overhead, overhead_src = per_run_overhead(bench)
+    shared, shared_src = shared_run_factor(jobs, bench)
     per_h: dict[float, dict] = {}
     total = 0.0
     for p, k in _todo(plan, retry_failed):
         h = float(p.options.get("h", 1.0))
         c, src = wall_per_sim_second(h, bench)
+        c *= shared
         t = estimated_sim_time(p.params, p.options)
         d = per_h.setdefault(h, {"runs": 0, "sim_s": 0.0, "wall_s": 0.0, "wall_s_per_sim_s": c, "source": src,
                                  "overhead_s": 0.0})
@@ -702,6 +723,8 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
         "jobs": jobs,
         "per_run_overhead_s": overhead,
         "per_run_overhead_source": overhead_src,
+        "shared_run_factor": shared,
+        "shared_run_factor_source": shared_src,
     }
 
 

@@ -179,6 +179,9 @@ def cmd_run(args) -> int:
             print(f"  h = {h:g} mm: {d['runs']} runs, {d['sim_s']:.1f} simulated s x {d['wall_s_per_sim_s']:.3g} "
                   f"wall s per simulated s ({d['source']}) + {d['runs']} x {est['per_run_overhead_s']:.3g} s per run "
                   f"({est['per_run_overhead_source']}) = {_fmt_s(d['wall_s'])} CPU")
+        if jobs > 1:
+            print(f"  (each rate x {est['shared_run_factor']:.3g}, a run beside {jobs - 1} other(s) against alone: "
+                  f"{est['shared_run_factor_source']})")
         print(f"estimated cost of the runs to do: {_fmt_s(est['cpu_s'])} CPU, about {_fmt_s(est['wall_s'])} "
               f"wall on {jobs} job(s)")
         for w in _input_warnings(spec):

@@ -1,7 +1,7 @@
 """The dry-run cost rates that ``dchfrac bench`` writes (``sweep.bench._cost_rates``): from the longest run made at
 each mesh size, never from a failed run, and read back by the dry-run estimate (``sweep.campaign.wall_per_sim_second``)."""
 from sweep.bench import _cost_rates
-from sweep.campaign import wall_per_sim_second
+from sweep.campaign import shared_run_factor, wall_per_sim_second
 
 
 def _run(t_end, wall, status="ok"):
@@ -27,3 +27,16 @@ def test_without_the_long_runs_the_short_one_sets_it_and_a_failed_run_never_does
               "reference_run_h1": _run(2.0, 1.0, status="failed")}
     _cost_rates(result)
     assert result["coupled_run_h2_wall_s_per_sim_s"] == 9.4 / 0.2 and "coupled_run_h1_wall_s_per_sim_s" not in result
+
+
+def test_the_shared_run_sets_the_factor_for_more_than_one_job():
+    """The factor is the shared run's rate over the lone reference run's (h = 2 to 2 s), read back for jobs > 1
+    only; a failed shared run sets none, and the estimate then takes the documented default."""
+    result = {"reference_run_h2": _run(2.0, 13.1), "shared_run_h2": _run(2.0, 20.0)}
+    _cost_rates(result)
+    assert result["shared_run_factor"] == (20.0 / 2.0) / (13.1 / 2.0)
+    assert shared_run_factor(2, result) == (result["shared_run_factor"], "bench")
+    assert shared_run_factor(1, result) == (1.0, "one job")
+    result = {"reference_run_h2": _run(2.0, 13.1), "shared_run_h2": _run(2.0, 20.0, status="failed")}
+    _cost_rates(result)
+    assert "shared_run_factor" not in result and shared_run_factor(2, result)[1] == "default"

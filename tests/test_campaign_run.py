@@ -286,11 +286,13 @@ def test_cli_dry_run_run_status_plot_report(tmp_path, capsys):
     root = tmp_path / "res"
     (root / "bench").mkdir(parents=True)
     (root / "bench" / "bench.json").write_text(json.dumps({"coupled_run_h2_wall_s_per_sim_s": 10.0,
-                                                           "per_run_overhead_s": 5.0}))
+                                                           "per_run_overhead_s": 5.0, "shared_run_factor": 2.0}))
     assert cli_main(["run", str(spec), "--results", str(root), "--dry-run", "--jobs", "2"]) == 0
     out = capsys.readouterr().out
-    # 6 runs x (1.5 simulated s x 10 wall s per simulated s + 5 s per run) = 120 s CPU, 60 s wall on 2 jobs
-    assert "6 runs in the grid" in out and "2m00s CPU" in out and "1m00s wall on 2 job(s)" in out
+    # 6 runs x (1.5 simulated s x 10 wall s per simulated s x 2 beside another + 5 s per run) = 210 s CPU, 105 s
+    # wall on 2 jobs
+    assert "6 runs in the grid" in out and "3m30s CPU" in out and "1m45s wall on 2 job(s)" in out
+    assert "x 2, a run beside 1 other(s) against alone: bench" in out
 
     assert cli_main(["run", str(spec), "--results", str(root), "--jobs", "2", "--quiet"]) == 1  # failures
     out = capsys.readouterr().out
@@ -404,11 +406,16 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
 
 def test_dry_run_counts_the_per_run_overhead_of_short_runs(tmp_path):
     """Without bench figures a run of almost no simulated time still costs the default per-run overhead."""
-    from sweep.campaign import DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost
+    from sweep.campaign import (DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2,
+                                estimate_cost)
 
     spec = tmp_path / "clitoy.toml"
     spec.write_text(_CLI_SPEC.replace("t_end = 1.5", "t_end = 0.001"))
     est = estimate_cost(str(spec), tmp_path / "res", jobs=2)
-    assert est["per_run_overhead_source"] == "default"
-    assert est["cpu_s"] == pytest.approx(6 * (0.001 * DEFAULT_WALL_S_PER_SIM_S_H2 + DEFAULT_PER_RUN_OVERHEAD_S))
+    assert est["per_run_overhead_source"] == "default" and est["shared_run_factor_source"] == "default"
+    rate = DEFAULT_WALL_S_PER_SIM_S_H2 * DEFAULT_SHARED_RUN_FACTOR  # two jobs: each run beside another
+    assert est["cpu_s"] == pytest.approx(6 * (0.001 * rate + DEFAULT_PER_RUN_OVERHEAD_S))
     assert est["wall_s"] == pytest.approx(est["cpu_s"] / 2)
+    one = estimate_cost(str(spec), tmp_path / "res", jobs=1)  # alone: the lone run's rate
+    assert one["shared_run_factor"] == 1.0
+    assert one["cpu_s"] == pytest.approx(6 * (0.001 * DEFAULT_WALL_S_PER_SIM_S_H2 + DEFAULT_PER_RUN_OVERHEAD_S))
