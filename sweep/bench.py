@@ -163,18 +163,27 @@ def _shared_run(h: float, t_end: float) -> dict:
     import subprocess
     import sys
 
-    from sweep.scheduler import ExecConfig, _child_env
+    from sweep.scheduler import ExecConfig, child_env
 
     n = os.cpu_count() or 1
-    env = _child_env(ExecConfig(root=".", campaign="bench", runner=None, blas_threads=1))
+    env = child_env(ExecConfig(root=".", campaign="bench", runner=None, blas_threads=1))
     env["DCHFRAC_ASSEMBLY_THREADS"] = "1"
     procs = [subprocess.Popen([sys.executable, "-c", _SHARED_CHILD, str(h), str(t_end)], stdout=subprocess.PIPE,
                               text=True, env=env, cwd=Path(__file__).resolve().parent.parent) for _ in range(n)]
-    outs = [json.loads(p.communicate()[0].strip().splitlines()[-1]) for p in procs]
+    outs = [_child_result(p.communicate()[0]) for p in procs]
     ok = [o["wall_s"] for o in outs if o["status"] == "ok"]
     return {"h_mm": h, "t_end_s": t_end, "jobs": n, "status": "ok" if len(ok) == n else "failed",
             "wall_s": float(np.mean(ok)) if ok else None,
             "wall_s_per_sim_s": float(np.mean(ok)) / t_end if ok else None}
+
+
+def _child_result(stdout: str) -> dict:
+    """The JSON line a bench child prints last, or a failed status when it printed none (it crashed)."""
+    lines = (stdout or "").strip().splitlines()
+    try:
+        return json.loads(lines[-1])
+    except (IndexError, json.JSONDecodeError):
+        return {"status": "failed", "wall_s": None}
 
 
 def _refactorization_h1() -> dict:

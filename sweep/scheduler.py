@@ -246,7 +246,9 @@ def _run_inprocess(runner, params, options, run_dir: Path) -> dict:
     return normalize_result(res)
 
 
-def _child_env(cfg: ExecConfig) -> dict:
+def child_env(cfg: ExecConfig) -> dict:
+    """The environment of a run's child process: this interpreter's import path, and ``cfg.blas_threads``
+    threads for every BLAS/OpenMP library when set (one run per core)."""
     env = dict(os.environ)
     paths = [p for p in sys.path if p]
     if env.get("PYTHONPATH"):
@@ -282,7 +284,7 @@ def _run_child(cfg: ExecConfig, params, options, run_dir: Path) -> dict:
         proc = subprocess.Popen(
             [sys.executable, "-m", "sweep.scheduler", str(payload), str(result), str(os.getpid())],
             stdout=logf, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            env=_child_env(cfg), start_new_session=True,
+            env=child_env(cfg), start_new_session=True,
         )
         try:
             rc = proc.wait(timeout=cfg.timeout)
