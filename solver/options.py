@@ -16,7 +16,7 @@ TRANSPORTS = ("galerkin", "upwind", "supg")  # the transport discretizations sol
 STEP_CONTROLS = ("state_change", "iterations")  # the step-size controllers solver.simulate._next_dt implements
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("h_inner", "h_outer", "frames", "xdmf_format", "pressure_stabilization", "first_stagger_rtol",
+_OMIT_WHEN_NONE = ("h_inner", "inner_grading_length", "h_outer", "frames", "xdmf_format", "pressure_stabilization", "first_stagger_rtol",
                    "linear_precision")
 # written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
 DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
@@ -30,9 +30,13 @@ class RunOptions:
     ----------
     h : mesh size, mm (the paper's reference mesh: 1.0); below (r_outer - r_inner)/2 (:func:`check_run_inputs`).
     h_inner : mesh size on the inner circle, mm, 0 < h_inner <= h: the annulus mesh is graded from
-        h_inner at r_inner to h at r_inner + 5 mm (see ``solver.mesh.annulus_mesh``); None (default)
-        or h: the quasi-uniform mesh of size h.  Omitted from :meth:`to_dict` when None, so the run
+        h_inner at r_inner to h at r_inner + ``inner_grading_length`` (see ``solver.mesh.annulus_mesh``); None
+        (default) or h: the quasi-uniform mesh of size h.  Omitted from :meth:`to_dict` when None, so the run
         keys / cache hashes of runs made before this option existed are unchanged.
+    inner_grading_length : distance from r_inner over which the inner grading reaches h, mm, > 0 (None, the
+        default: ``solver.mesh.GRADING_LENGTH`` = 5 mm).  A longer one keeps the cracks that start at the cavity
+        (the paper's reach r_i + 6 mm at 2 s) inside the fine zone.  Needs h_inner; omitted from :meth:`to_dict`
+        when None, as h_inner.
     h_outer : mesh size on the outer circle, mm, 0 < h_outer <= h: the annulus mesh is graded from
         h_outer at r_outer to h at r_outer - 5 mm (resolves the boundary layer at the drained outer
         wall; combinable with h_inner); None (default) or h: no outer grading.  Omitted from
@@ -124,6 +128,7 @@ class RunOptions:
 
     h: float = 1.0
     h_inner: float | None = None
+    inner_grading_length: float | None = None
     h_outer: float | None = None
     mesh_seed: int | None = None
     t_end: float = 2.0
@@ -210,6 +215,7 @@ def _fail(name, value, allowed):
 _NUMBERS = (
     ("h", float, 0.0, 24.0, True, False),
     ("h_inner", float, None, None, True, True),   # in (0, h]: checked after the loop
+    ("inner_grading_length", float, 0.0, None, True, True),
     ("h_outer", float, None, None, True, True),   # in (0, h]: checked after the loop
     ("frames", int, 1, None, False, True),
     ("mesh_seed", int, 0, None, False, True),
@@ -239,7 +245,7 @@ _NUMBERS = (
 # unit of every run option ("-": dimensionless; "" for counts, switches and labels): the one declaration the
 # campaign column dictionary reads; the meanings are the RunOptions docstring's
 OPTION_UNITS = {
-    "h": "mm", "h_inner": "mm", "h_outer": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
+    "h": "mm", "h_inner": "mm", "inner_grading_length": "mm", "h_outer": "mm", "mesh_seed": "", "t_end": "s", "dt0": "s", "dt_min": "s", "dt_max": "s",
     "dt_grow": "-", "dt_cut": "-", "easy_newton_its": "", "step_control": "", "dt_change_target": "-", "stop_front_radius": "mm", "snapshot_times": "s",
     "newton_rtol": "-", "newton_mass_tol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
     "linear_solver": "", "linear_precision": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
@@ -304,6 +310,8 @@ def _check(o: RunOptions) -> None:
     for name in ("h_inner", "h_outer"):
         if getattr(o, name) is not None and not 0.0 < getattr(o, name) <= o.h:
             _fail(name, getattr(o, name), f"(0, h = {o.h}]")
+    if o.inner_grading_length is not None and o.h_inner is None:
+        _fail("inner_grading_length", o.inner_grading_length, "None unless h_inner is given (it grades the inner side)")
     if o.anderson_depth is None:
         object.__setattr__(o, "anderson_depth", 0)
     if o.first_stagger_rtol is not None and o.first_stagger_rtol < o.newton_rtol:

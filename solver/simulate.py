@@ -358,13 +358,13 @@ def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=()):
 
 
 def _setup(params, options, mesh, phi0) -> Simulation:
-    """The mesh (default: the paper's annulus at ``options.h``, graded by ``h_inner`` / ``h_outer``), initial
-    porosity and discretized model."""
+    """The mesh (default: the paper's annulus at ``options.h``, graded by ``h_inner`` over
+    ``inner_grading_length`` and by ``h_outer``), initial porosity and discretized model."""
     if mesh is None:
-        from .mesh import annulus_mesh
+        from .mesh import GRADING_LENGTH, annulus_mesh
 
         mesh = annulus_mesh(params.r_inner, params.r_outer, options.h, options.mesh_seed, h_inner=options.h_inner,
-                            h_outer=options.h_outer)
+                            grading_length=options.inner_grading_length or GRADING_LENGTH, h_outer=options.h_outer)
     _validate_mesh(mesh)
     if phi0 is None:
         from .porosity import initial_porosity

@@ -508,3 +508,43 @@ def test_run_option_h_outer_round_trips_and_is_omitted_when_none():
     o = RunOptions(h=2.0, h_outer=0.5, h_inner=1.0)
     assert o.to_dict()["h_outer"] == 0.5
     assert RunOptions.from_dict(o.to_dict()) == o
+
+
+@pytest.mark.parametrize("kw,allowed", [
+    (dict(h=2.0, h_inner=1.0, inner_grading_length=0.0), "> 0.0"),
+    (dict(h=2.0, h_inner=1.0, inner_grading_length=-3.0), "> 0.0"),
+    (dict(h=2.0, h_inner=1.0, inner_grading_length=float("inf")), "a finite number"),
+    (dict(h=2.0, inner_grading_length=10.0), "None unless h_inner is given"),
+])
+def test_run_option_inner_grading_length_validation(kw, allowed):
+    from solver.options import RunOptions
+
+    with pytest.raises(ValueError) as e:
+        RunOptions(**kw)
+    assert f"run option inner_grading_length={kw['inner_grading_length']!r} is out of range: allowed {allowed}" \
+        in str(e.value)
+
+
+def test_run_option_inner_grading_length_reaches_the_run_mesh():
+    """The simulation's mesh is the annulus graded over the option's length (edge sizes follow annulus_size), and
+    the option is left out of the option dict (so of older run keys) when None."""
+    from solver import Parameters
+    from solver.mesh import annulus_size
+    from solver.options import RunOptions
+    from solver.simulate import _setup
+
+    assert "inner_grading_length" not in RunOptions(h=2.0, h_inner=1.0).to_dict()
+    o = RunOptions(h=2.0, h_inner=0.5, inner_grading_length=12.0)
+    assert RunOptions.from_dict(o.to_dict()) == o
+    p = Parameters()
+    m = _setup(p, o, None, None).mesh
+    assert m is annulus_mesh(p.r_inner, p.r_outer, 2.0, None, h_inner=0.5, grading_length=12.0)
+    e = m.edges()
+    L = np.linalg.norm(m.points[e[:, 1]] - m.points[e[:, 0]], axis=1)
+    rm = np.hypot(*(0.5 * (m.points[e[:, 0]] + m.points[e[:, 1]])).T)
+    band = (rm > p.r_inner + 5.5) & (rm < p.r_inner + 9.0)   # inside the 12 mm grading, beyond the 5 mm default
+    ratio = L[band] / annulus_size(rm[band], 2.0, 0.5, p.r_inner, 12.0)
+    assert abs(ratio.mean() - 1) < 0.05
+    # the default 5 mm grading would have size h = 2 there: the option is what makes the band fine
+    assert annulus_size(rm[band], 2.0, 0.5, p.r_inner, 5.0).min() == pytest.approx(2.0)
+    assert L[band].mean() < 1.6
