@@ -64,7 +64,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from sweep.regime_model import AxisScale, RegimeModel, boundary_band, boundary_uncertainty, fit_regime_model
-from sweep.spec import CampaignSpec, SpecError, expand_block, round_sig
+from sweep.sampler import Point, resolve_point
+from sweep.spec_model import CampaignSpec, SpecError, expand_block, round_sig
 
 __all__ = ["BoundarySettings", "BoundarySampler", "BoundaryState"]
 
@@ -262,8 +263,6 @@ class BoundarySampler:
 
     # -- replay ------------------------------------------------------------------------------
     def _point(self, spec, cfg: _Config, coords, index: int):
-        from sweep.sampler import Point, _resolve  # sweep.sampler registers this class on import
-
         block = spec.blocks[0]
         params, options = {**spec.params, **block.params}, {**spec.options, **block.options}
         swept = {}
@@ -271,7 +270,7 @@ class BoundarySampler:
             (params if t == "params" else options)[a.name] = v
             swept[a.name] = v
         where = f"{spec.source}: boundary sampler point ({', '.join(f'{k}={v!r}' for k, v in swept.items())})"
-        rp, ro = _resolve(where, params, options, spec.derived)
+        rp, ro = resolve_point(where, params, options, spec.derived)
         return Point(rp, ro, swept, (block.label,), index)
 
     def _replay(self, cfg: _Config, table) -> BoundaryState:

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, TextIO
 
-from sweep.sampler import SAMPLERS, Point
-from sweep.scheduler import DefaultRunner, ExecConfig, RunTask, classification_dict, iter_records, resolve_runner
-from sweep.spec import CampaignSpec, load_spec
+from sweep.sampler import Point
+from sweep.scheduler import DefaultRunner, ExecConfig, RunTask, classification_dict, iter_records
+from sweep.spec import CampaignSpec, load_spec, resolve_runner, samplers
 from sweep.store import ResultsStore, current_classifier_hash, current_code_hash, run_key, verify_run, write_text_atomic
 
 __all__ = [
@@ -183,7 +183,7 @@ def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, poin
     """
     spec = as_spec(spec)
     code_hash = current_code_hash() if code_hash is None else code_hash
-    pts = list(points) if points is not None else SAMPLERS[spec.sampler["kind"]]().initial(spec)
+    pts = list(points) if points is not None else samplers()[spec.sampler["kind"]]().initial(spec)
     store = ResultsStore(root, spec.name)
     keys = _keys(pts)
     recs = {k: r for k in keys if (r := store.read_record(k)) is not None}
@@ -471,7 +471,7 @@ def run_campaign(
     jobs, timeout, retries, isolate = _check_run_settings(spec, jobs, timeout, retries, isolate)
     runner_fn = _make_runner(spec, runner)
     code_hash = current_code_hash() if code_hash is None else code_hash
-    sampler = SAMPLERS[spec.sampler["kind"]]()
+    sampler = samplers()[spec.sampler["kind"]]()
     store = ResultsStore(root, spec.name)
     store.acquire_lock()
     try:
@@ -607,7 +607,7 @@ def _write_sampler_state(sampler, spec: CampaignSpec, table, store: ResultsStore
 def sampler_status(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None) -> dict | None:
     """The adaptive sampler's state dict (see ``sweep.boundary.BoundarySampler.state``), None for the grid."""
     spec = as_spec(spec)
-    sampler = SAMPLERS[spec.sampler["kind"]]()
+    sampler = samplers()[spec.sampler["kind"]]()
     if not hasattr(sampler, "state"):
         return None
     table = build_table(spec, root, code_hash=code_hash) if table is None else table

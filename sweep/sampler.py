@@ -13,16 +13,17 @@ interface is two methods, so that a smarter sampler can be dropped in:
 :class:`sweep.boundary.BoundarySampler` (``kind = "boundary"``) starts from a small
 space-filling design and adds batches where a probabilistic classifier of the regime is
 least certain about the boundary, until it is located within a tolerance or a budget is spent.
+The kinds a spec may name are ``sweep.spec.samplers()``; a new sampler is added there.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from sweep.spec import CampaignSpec, SpecError, evaluate_expression, expand_block, round_sig
+from sweep.spec_model import (CampaignSpec, SpecError, _jsonable, _options_class, _parameters_class, canonical_json,
+                              evaluate_expression, expand_block, round_sig)
 
-__all__ = ["Point", "GridSampler", "SAMPLERS", "grid_points", "validate_points", "canonical_json"]
+__all__ = ["Point", "GridSampler", "grid_points", "resolve_point"]
 
 
 @dataclass(frozen=True)
@@ -43,49 +44,10 @@ class Point:
     index: int
 
 
-def _jsonable(v):
-    if isinstance(v, tuple):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, list):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, dict):
-        return {k: _jsonable(x) for k, x in v.items()}
-    if hasattr(v, "item") and callable(v.item) and not isinstance(v, (str, bytes)):
-        try:
-            return v.item()
-        except (TypeError, ValueError):
-            pass
-    return v
-
-
-def canonical_value(v):
-    """Canonical form for hashing: floats at 12 significant digits, ints as floats, sorted dicts."""
-    v = _jsonable(v)
-    if isinstance(v, bool) or v is None or isinstance(v, str):
-        return v
-    if isinstance(v, int):
-        return float(v)
-    if isinstance(v, float):
-        if v != v:
-            return "nan"
-        if v in (float("inf"), float("-inf")):
-            return "inf" if v > 0 else "-inf"
-        return round_sig(v) + 0.0  # -0.0 -> 0.0
-    if isinstance(v, list):
-        return [canonical_value(x) for x in v]
-    if isinstance(v, dict):
-        return {str(k): canonical_value(x) for k, x in sorted(v.items())}
-    return str(v)
-
-
-def canonical_json(obj) -> str:
-    """Compact, sorted JSON of :func:`canonical_value` (0.1 and 0.1000000000001 give the same text)."""
-    return json.dumps(canonical_value(obj), sort_keys=True, separators=(",", ":"))
-
-
-def _resolve(where: str, params: dict, options: dict, derived: Mapping[str, str]):
+def resolve_point(where: str, params: dict, options: dict, derived: Mapping[str, str]):
+    """(parameters, options) of one point as JSON-able dicts of every field (mm, s, kPa): the ``[derived]``
+    expressions evaluated, both built and checked against the annulus; SpecError prefixed by ``where``."""
     from solver.options import check_run_inputs
-    from sweep.spec import _options_class, _parameters_class
 
     P, O = _parameters_class(), _options_class()
     try:
@@ -129,7 +91,7 @@ def grid_points(spec: CampaignSpec) -> list[Point]:
                 swept[name] = v
             desc = ", ".join(f"{k}={v!r}" for k, v in swept.items()) or "base point"
             where = f"{spec.source}: " + (f"blocks[{bi}] ({block.label}) " if len(spec.blocks) > 1 or block.label else "") + f"grid point ({desc})"
-            rp, ro = _resolve(where, params, options, spec.derived)
+            rp, ro = resolve_point(where, params, options, spec.derived)
             cj = canonical_json({"params": rp, "options": ro})
             if cj in seen:
                 i = seen[cj]
@@ -142,11 +104,6 @@ def grid_points(spec: CampaignSpec) -> list[Point]:
     if not pts:
         raise SpecError(f"{spec.source}: the grid is empty")
     return pts
-
-
-def validate_points(spec: CampaignSpec) -> None:
-    """Expand and validate the initial points of the spec's sampler (raises SpecError)."""
-    SAMPLERS[spec.sampler.get("kind", "grid")]().initial(spec)
 
 
 class GridSampler:
@@ -164,15 +121,3 @@ class GridSampler:
 
     def refine(self, spec: CampaignSpec, table) -> list[Point]:
         return []
-
-
-SAMPLERS: dict[str, type] = {"grid": GridSampler}
-
-
-def _register_boundary() -> None:
-    from sweep.boundary import BoundarySampler  # imports this module: registered after its definitions
-
-    SAMPLERS[BoundarySampler.kind] = BoundarySampler
-
-
-_register_boundary()

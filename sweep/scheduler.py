@@ -27,7 +27,6 @@ code (``code_hash``) and lists each file of the run folder with its size and SHA
 from __future__ import annotations
 
 import contextlib
-import importlib
 import json
 import os
 import signal
@@ -50,7 +49,6 @@ __all__ = [
     "execute_task",
     "iter_records",
     "normalize_result",
-    "resolve_runner",
     "classification_dict",
     "BACKENDS",
 ]
@@ -177,18 +175,6 @@ def _timeseries_metrics(ts) -> dict:
         put("mass_error_max", ts["mass_error"].abs().max())
     m["n_steps"] = int(len(ts))
     return m
-
-
-def resolve_runner(spec: str) -> Callable:
-    """Import a runner given as ``"package.module:function"``."""
-    mod, _, name = spec.partition(":")
-    try:
-        obj = getattr(importlib.import_module(mod), name)
-    except (ImportError, AttributeError) as e:
-        raise ValueError(f"runner={spec!r} cannot be imported: {e}") from None
-    if not callable(obj):
-        raise ValueError(f"runner={spec!r} is not callable")
-    return obj
 
 
 def normalize_result(res) -> dict:

@@ -37,7 +37,7 @@ Format (all tables optional except ``name``)::
     axes = {psi_c = [2.16e-4, 2.16e-3, 2.16e-2]}
 
     [sampler]
-    kind = "grid"                       # see sweep.sampler.SAMPLERS; "boundary": adaptive runs where
+    kind = "grid"                       # see samplers(); "boundary": adaptive runs where
                                         # the regime boundary is least certain (sweep.boundary: budget,
                                         # tolerance, seed, batch, ...; axes linear/log/range bounds)
 
@@ -54,14 +54,16 @@ Format (all tables optional except ``name``)::
 """
 from __future__ import annotations
 
-import ast
 import dataclasses
-import itertools
 import math
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
+
+# the data model lives in sweep.spec_model (below the samplers, which build on it); its public names are this
+# module's too, so that a spec's reader needs one import
+from sweep.spec_model import (Axis, Block, CampaignSpec, SpecError, _expr_names, _is_number, evaluate_expression,
+                              grid_size, option_fields, parameter_fields, round_sig)
 
 __all__ = [
     "SpecError",
@@ -70,111 +72,42 @@ __all__ = [
     "CampaignSpec",
     "load_spec",
     "spec_from_dict",
+    "samplers",
+    "resolve_runner",
     "parameter_fields",
     "option_fields",
     "evaluate_expression",
     "round_sig",
 ]
 
-SIG_DIGITS = 12  # significant digits kept for generated values and in run keys
+
+def samplers() -> dict[str, type]:
+    """The sampler kinds a spec's ``[sampler] kind`` may name, {kind: class}.  Imported on first use: the boundary
+    sampler's statistics (scipy.stats) take about a second to import, which a reader of results does not need."""
+    from sweep.boundary import BoundarySampler
+    from sweep.sampler import GridSampler
+
+    return {GridSampler.kind: GridSampler, BoundarySampler.kind: BoundarySampler}
 
 
-class SpecError(ValueError):
-    """An invalid campaign spec; the message names the offending key."""
+def resolve_runner(ref: str):
+    """The callable named by a runner reference ``"package.module:function"`` (``[run] runner``); ValueError
+    naming the reference when it cannot be imported or is not callable."""
+    import importlib
 
-
-# ---------------------------------------------------------------------------
-# model field names (lazy: solver.params / solver.options are imported on use)
-# ---------------------------------------------------------------------------
-def _parameters_class():
-    from solver.params import Parameters
-
-    return Parameters
-
-
-def _options_class():
-    from solver.options import RunOptions
-
-    return RunOptions
-
-
-def parameter_fields() -> tuple[str, ...]:
-    """Names of the fields of ``solver.params.Parameters``."""
-    return tuple(f.name for f in dataclasses.fields(_parameters_class()))
-
-
-def option_fields() -> tuple[str, ...]:
-    """Names of the fields of ``solver.options.RunOptions``."""
-    return tuple(f.name for f in dataclasses.fields(_options_class()))
-
-
-# ---------------------------------------------------------------------------
-# data
-# ---------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Axis:
-    """One swept quantity: ``target`` is "params" or "options"; ``values`` in the field's units;
-    ``scale`` how the values were written: "values" (a list), "linear", "log" or "range"."""
-
-    name: str
-    target: str
-    values: tuple
-    scale: str = "values"
-
-
-@dataclass(frozen=True)
-class Block:
-    """A grid block: overrides of the campaign's base, its axes and how they combine."""
-
-    label: str
-    params: Mapping[str, Any]
-    options: Mapping[str, Any]
-    axes: tuple[Axis, ...]
-    mode: str = "cross"
-    zip_groups: tuple[tuple[str, ...], ...] = ()
-
-
-@dataclass(frozen=True)
-class CampaignSpec:
-    """A validated campaign. ``params``/``options`` are the campaign-wide bases."""
-
-    name: str
-    description: str = ""
-    paper: str = ""
-    params: Mapping[str, Any] = field(default_factory=dict)
-    options: Mapping[str, Any] = field(default_factory=dict)
-    derived: Mapping[str, str] = field(default_factory=dict)
-    blocks: tuple[Block, ...] = ()
-    sampler: Mapping[str, Any] = field(default_factory=lambda: {"kind": "grid"})
-    classify: Mapping[str, Any] = field(default_factory=dict)
-    diagrams: tuple[Mapping[str, Any], ...] = ()
-    run: Mapping[str, Any] = field(default_factory=dict)
-    source: str = "<dict>"
-
-    @property
-    def axis_names(self) -> tuple[str, ...]:
-        """Swept names in order of first appearance (options prefixed ``options.`` only if ambiguous)."""
-        seen: dict[str, None] = {}
-        for b in self.blocks:
-            for a in b.axes:
-                seen.setdefault(a.name, None)
-        return tuple(seen)
+    mod, _, name = ref.partition(":")
+    try:
+        obj = getattr(importlib.import_module(mod), name)
+    except (ImportError, AttributeError) as e:
+        raise ValueError(f"runner={ref!r} cannot be imported: {e}") from None
+    if not callable(obj):
+        raise ValueError(f"runner={ref!r} is not callable")
+    return obj
 
 
 # ---------------------------------------------------------------------------
 # small helpers
 # ---------------------------------------------------------------------------
-def round_sig(x, digits: int = SIG_DIGITS):
-    """Round a float to ``digits`` significant digits (ints, bools, strings unchanged)."""
-    if isinstance(x, float) and math.isfinite(x) and x != 0.0:
-        return float(f"{x:.{digits}g}")
-    return x
-
-
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
 def _fail(where: str, msg: str):
     raise SpecError(f"{where}: {msg}")
 
@@ -372,43 +305,6 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int
 
 
 # ---------------------------------------------------------------------------
-# safe arithmetic for [derived]
-# ---------------------------------------------------------------------------
-_FUNCS = {"sqrt": math.sqrt, "exp": math.exp, "log": math.log, "log10": math.log10, "abs": abs, "min": min, "max": max}
-_BINOPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
-           ast.Div: lambda a, b: a / b, ast.Pow: lambda a, b: a ** b}
-
-
-def _expr_names(expr: str) -> set[str]:
-    tree = ast.parse(expr, mode="eval")
-    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id not in _FUNCS}
-
-
-def evaluate_expression(expr: str, env: Mapping[str, float]) -> float:
-    """Evaluate an arithmetic expression over ``env`` (numbers only; no attribute access, no calls
-    except sqrt, exp, log, log10, abs, min, max). Raises ValueError naming the unknown name."""
-    def ev(node):
-        if isinstance(node, ast.Expression):
-            return ev(node.body)
-        if isinstance(node, ast.Constant) and _is_number(node.value):
-            return node.value
-        if isinstance(node, ast.Name):
-            if node.id not in env:
-                raise ValueError(f"unknown name {node.id!r} in expression {expr!r}")
-            return env[node.id]
-        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-            return _BINOPS[type(node.op)](ev(node.left), ev(node.right))
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-            v = ev(node.operand)
-            return -v if isinstance(node.op, ast.USub) else v
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCS and not node.keywords:
-            return _FUNCS[node.func.id](*[ev(a) for a in node.args])
-        raise ValueError(f"unsupported syntax {ast.dump(node)[:60]} in expression {expr!r}")
-
-    return float(ev(ast.parse(expr, mode="eval")))
-
-
-# ---------------------------------------------------------------------------
 # parsing
 # ---------------------------------------------------------------------------
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")  # a plain folder name: not ".", "..", ".hidden"
@@ -418,8 +314,8 @@ def spec_from_dict(d: Mapping[str, Any], source: str = "<dict>", max_runs: int |
     """Build and validate a :class:`CampaignSpec` from a parsed TOML dict.
 
     Checks: known keys everywhere, axis syntax, zip lengths, non-empty axes, and that every
-    grid point builds a valid ``Parameters``/``RunOptions`` (done by ``sweep.sampler``'s
-    expansion in :func:`validate_points`). Raises :class:`SpecError` naming the key.
+    grid point builds a valid ``Parameters``/``RunOptions`` (the sampler's initial points are expanded
+    and validated). Raises :class:`SpecError` naming the key.
 
     max_runs : the largest grid allowed (default: ``[run] max_runs``, else DEFAULT_MAX_RUNS); a larger one
     is refused from the axes' lengths, before any grid point is built.
@@ -467,9 +363,7 @@ def _spec_from_dict(d, source, max_runs) -> CampaignSpec:
         params=dict(top.params), options=dict(top.options), derived=dict(derived), blocks=blocks,
         sampler=sampler, classify=dict(classify), diagrams=tuple(diagrams), run=dict(run), source=source,
     )
-    from sweep.sampler import validate_points
-
-    validate_points(spec)
+    samplers()[sampler["kind"]]().initial(spec)  # expands and validates every initial point (raises SpecError)
     return spec
 
 
@@ -520,12 +414,11 @@ def _check_derived(derived: dict, top, blocks: tuple, pfields) -> None:
 
 def _sampler(d: Mapping) -> dict:
     """The ``[sampler]`` table with its kind (default "grid"), the kind's settings checked by the sampler."""
-    from sweep.sampler import SAMPLERS
-
+    kinds = samplers()
     sampler = {"kind": "grid", **_table(d, "sampler", {"kind": "grid"})}
-    if sampler["kind"] not in SAMPLERS:
-        _fail("sampler.kind", f"kind={sampler['kind']!r} not allowed: one of {sorted(SAMPLERS)}")
-    SAMPLERS[sampler["kind"]].check_settings({k: v for k, v in sampler.items() if k != "kind"})
+    if sampler["kind"] not in kinds:
+        _fail("sampler.kind", f"kind={sampler['kind']!r} not allowed: one of {sorted(kinds)}")
+    kinds[sampler["kind"]].check_settings({k: v for k, v in sampler.items() if k != "kind"})
     return sampler
 
 
@@ -601,8 +494,6 @@ def _check_run(run: dict) -> None:
     if rn is not None and (not isinstance(rn, str) or ":" not in rn):
         _fail("run.runner", f"runner={rn!r} must be 'module:function'")
     if rn is not None:  # imported now, so that a dry run refuses a runner a real run could not import
-        from sweep.scheduler import resolve_runner
-
         try:
             resolve_runner(rn)
         except ValueError as e:
@@ -632,34 +523,3 @@ def load_spec(path, max_runs: int | None = None) -> CampaignSpec:
     return spec_from_dict(d, source=str(p), max_runs=max_runs)
 
 
-def block_groups(block: Block) -> list[tuple[Axis, ...]]:
-    """The axes of a block grouped for expansion: each group is zipped, groups are crossed."""
-    by = {a.name: a for a in block.axes}
-    if block.mode == "zip":
-        return [tuple(block.axes)] if block.axes else []
-    groups, used = [], set()
-    for a in block.axes:
-        if a.name in used:
-            continue
-        g = next((g for g in block.zip_groups if a.name in g), (a.name,))
-        groups.append(tuple(by[n] for n in g))
-        used.update(g)
-    return groups
-
-
-def grid_size(block: Block) -> int:
-    """Number of grid points of a block (before points shared with other blocks are merged)."""
-    return math.prod(len(g[0].values) for g in block_groups(block))
-
-
-def expand_block(block: Block) -> list[dict[tuple[str, str], Any]]:
-    """All combinations of a block's axes, as dicts {(target, name): value}, first axis slowest."""
-    groups = block_groups(block)
-    per_group = [[{(a.target, a.name): a.values[i] for a in g} for i in range(len(g[0].values))] for g in groups]
-    out = []
-    for combo in itertools.product(*per_group):
-        pt: dict = {}
-        for c in combo:
-            pt.update(c)
-        out.append(pt)
-    return out

@@ -31,7 +31,7 @@ import uuid
 from pathlib import Path
 from typing import Any, Mapping
 
-from sweep.sampler import canonical_json
+from sweep.spec_model import canonical_json
 
 __all__ = ["run_key", "KEY_FORMAT", "current_code_hash", "current_classifier_hash", "file_manifest", "verify_run", "ResultsStore", "write_json_atomic", "write_text_atomic", "to_json"]
 
@@ -294,12 +294,6 @@ class ResultsStore:
         tmp = self.table_parquet.with_name(f".table.{uuid.uuid4().hex[:8]}.parquet")
         pq.write_table(table, tmp)
         os.replace(tmp, self.table_parquet)
-
-    def read_table(self):
-        """The campaign table as written (typed; see ``sweep.load.load_campaign``)."""
-        from sweep.load import load_campaign
-
-        return load_campaign(self.dir)
 
     # -- single-writer lock ----------------------------------------------------
     def acquire_lock(self) -> None:

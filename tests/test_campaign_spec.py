@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from sweep.sampler import GridSampler, canonical_json, grid_points
+from sweep.sampler import GridSampler, grid_points
+from sweep.spec_model import canonical_json
 from sweep.spec import SpecError, load_spec, spec_from_dict
 from sweep.store import run_key
 
