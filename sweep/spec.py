@@ -6,7 +6,9 @@ option), the run options (``solver.options.RunOptions``: h in mm, times in s), t
 classification options passed to ``sweep.classify.classify_run``, the diagrams to draw
 and scheduler defaults. Everything is checked before any run starts: an unknown key, an
 out-of-range value or an empty grid raises :class:`SpecError` (a ``ValueError``) naming
-the key.
+the key.  The validated spec's types and its grid expansion are ``sweep.spec_model`` (its
+public names are importable from here); this module reads and checks, the samplers of
+:func:`samplers` expand and check every point.
 
 Format (all tables optional except ``name``)::
 
