@@ -265,3 +265,25 @@ def test_demo_is_coarse_and_spans_both_sides():
     assert {p.options["h"] for p in pts} == {4.0}
     cs = sorted({p.params["cement"] for p in pts})
     assert cs[0] <= 0.5 and cs[-1] >= 3.0
+
+
+def test_draws_campaign_is_the_h2_boundary_points_on_three_seeds():
+    """ca_star_boundary_h2_draws reruns exactly the 46 points of ca_star_boundary_h2_floor (its table) with every
+    setting of that campaign; only the porosity seed varies (0, 1, 2)."""
+    import csv
+
+    pts = grid_points(load_spec(CAMPAIGNS / "ca_star_boundary_h2_draws.toml"))
+    floor = load_spec(CAMPAIGNS / "ca_star_boundary_h2_floor.toml")
+    with open(ROOT / "results" / "ca_star_boundary_h2_floor" / "table.csv", newline="") as f:
+        table = [(float(r["cement"]), float(r["eta_o"])) for r in csv.DictReader(f)]
+    assert len(table) == 46 and len(pts) == 3 * 46
+    for seed in (0, 1, 2):
+        assert [(p.params["cement"], p.params["eta_o"]) for p in pts if p.params["seed"] == seed] == table
+    ref = grid_points(floor)[0]  # the floor campaign's initial grid: the same settings at every point
+    varied = {"cement", "eta_o", "seed"}
+    for p in pts:
+        assert {k: v for k, v in p.params.items() if k not in varied} == {
+            k: v for k, v in ref.params.items() if k not in varied}
+        assert p.options == ref.options
+        assert p.params["w_i"] == 50.0 and p.options["h"] == 2.0
+    assert floor.classify == load_spec(CAMPAIGNS / "ca_star_boundary_h2_draws.toml").classify
