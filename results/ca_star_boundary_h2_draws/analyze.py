@@ -1,0 +1,87 @@
+"""The judging protocol of campaigns/ca_star_boundary_h2_draws.toml (written in its header before the runs).
+
+1. Label agreement over the porosity draws at L_min = 4 mm: the share of points whose draws all carry the same
+   label, and the spread of the crack length (max - min over the draws) per point.
+2. The separatrix Ca*_c = A exp(B C) (sweep.diagrams.separatrix_profile_interval) on each seed alone and on the
+   draws pooled; the verdict is "B > 0 at 2 sigma" on the pooled fit.
+3. The pooled fit at L_min = 2, 3, 4, 5, 6 mm, reported whole (not the verdict).
+
+Rule 1 of sweep.classify labels a run fracturing iff crack_length > L_min, so the labels at other L_min are read
+from the stored crack lengths.  Units: lengths mm, C in %, Ca* dimensionless.
+
+    python results/ca_star_boundary_h2_draws/analyze.py CAMPAIGN_DIR [--out summary.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sweep.diagrams import separatrix_profile_interval
+from sweep.load import load_campaign
+from sweep.store import write_json_atomic
+
+L_PROTOCOL = 4.0  # mm, the campaign's [classify] min_crack_length
+L_SCAN = (2.0, 3.0, 4.0, 5.0, 6.0)  # mm
+
+
+def completed_runs(campaign_dir: Path) -> pd.DataFrame:
+    """The campaign's runs with status ok: seed, cement (%), eta_o (kPa s), Ca_star (-), crack_length (mm)."""
+    df = load_campaign(campaign_dir)
+    return df[df["status"] == "ok"][["seed", "cement", "eta_o", "Ca_star", "crack_length"]].reset_index(drop=True)
+
+
+def agreement(df: pd.DataFrame, l_min: float = L_PROTOCOL) -> dict:
+    """Per point (cement, eta_o) with every seed done: do the draws agree on the label, and the crack spread (mm)."""
+    seeds = sorted(df["seed"].unique())
+    g = df.assign(frac=df["crack_length"] > l_min).groupby(["cement", "eta_o"])
+    full = g.filter(lambda x: len(x) == len(seeds)).groupby(["cement", "eta_o"])
+    same = full["frac"].agg(lambda x: x.all() or not x.any())
+    spread = full["crack_length"].agg(lambda x: float(x.max() - x.min()))
+    return {"seeds": [int(s) for s in seeds], "points_with_every_seed": int(same.size),
+            "points_all_draws_agree": int(same.sum()),
+            "share_agree": float(same.mean()) if same.size else None,
+            "crack_spread_mm": {"median": float(spread.median()), "max": float(spread.max())} if same.size else None,
+            "fracturing_share_by_seed": {int(s): float((d["crack_length"] > l_min).mean())
+                                         for s, d in df.groupby("seed")}}
+
+
+def separatrix(df: pd.DataFrame, l_min: float) -> dict:
+    """The profile-likelihood fit on these runs at L_min (mm), or the reason it cannot be made."""
+    y = (df["crack_length"] > l_min).to_numpy()
+    row = {"runs": int(len(df)), "fracturing": int(y.sum())}
+    try:
+        s = separatrix_profile_interval(df["cement"], df["Ca_star"], y)
+    except ValueError as e:
+        return {**row, "error": str(e)}
+    return {**row, "A": s.A, "B": s.B, "B_interval": [float(v) for v in s.B_interval], "A_interval": [float(v) for v in s.A_interval],
+            "sharpness": s.sharpness, "B_positive_at_95": bool(s.B_interval[0] > 0)}
+
+
+def judge(df: pd.DataFrame) -> dict:
+    """The three parts of the protocol."""
+    return {"agreement_at_L4": agreement(df),
+            "per_seed_at_L4": {int(k): separatrix(d, L_PROTOCOL) for k, d in df.groupby("seed")},
+            "pooled_at_L4": separatrix(df, L_PROTOCOL),
+            "pooled_L_scan": {str(l): separatrix(df, l) for l in L_SCAN}}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("campaign_dir", type=Path)
+    ap.add_argument("--out", type=Path)
+    a = ap.parse_args(argv)
+    out = judge(completed_runs(a.campaign_dir))
+    text = json.dumps(out, indent=1)
+    if a.out:
+        write_json_atomic(a.out, out)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
