@@ -20,8 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from sweep.spec_model import (CampaignSpec, SpecError, _jsonable, _options_class, _parameters_class, canonical_json,
-                              evaluate_expression, expand_block, round_sig)
+from sweep.spec_model import (CampaignSpec, SpecError, canonical_json, evaluate_expression, expand_block, options_class,
+                              parameters_class, plain_value, round_sig)
 
 __all__ = ["Point", "GridSampler", "grid_points", "resolve_point"]
 
@@ -49,13 +49,13 @@ def resolve_point(where: str, params: dict, options: dict, derived: Mapping[str,
     expressions evaluated, both built and checked against the annulus; SpecError prefixed by ``where``."""
     from solver.options import check_run_inputs
 
-    P, O = _parameters_class(), _options_class()
+    P, O = parameters_class(), options_class()
     try:
         base = P.from_dict(params)
     except (ValueError, TypeError) as e:
         raise SpecError(f"{where}: {e}") from None
     if derived:
-        env = _jsonable(base.to_dict())
+        env = plain_value(base.to_dict())
         extra = {}
         for k, expr in derived.items():
             try:
@@ -71,7 +71,7 @@ def resolve_point(where: str, params: dict, options: dict, derived: Mapping[str,
         check_run_inputs(base, opts)  # the mesh fits the annulus, the stop radius lies inside it
     except (ValueError, TypeError) as e:
         raise SpecError(f"{where}: {e}") from None
-    return _jsonable(base.to_dict()), _jsonable(opts.to_dict())
+    return plain_value(base.to_dict()), plain_value(opts.to_dict())
 
 
 def grid_points(spec: CampaignSpec) -> list[Point]:

@@ -64,7 +64,7 @@ from typing import Any, Mapping
 
 # the data model lives in sweep.spec_model (below the samplers, which build on it); its public names are this
 # module's too, so that a spec's reader needs one import
-from sweep.spec_model import (Axis, Block, CampaignSpec, SpecError, _expr_names, _is_number, evaluate_expression,
+from sweep.spec_model import (Axis, Block, CampaignSpec, SpecError, evaluate_expression, expression_names, is_number,
                               grid_size, option_fields, parameter_fields, round_sig)
 
 __all__ = [
@@ -152,7 +152,7 @@ def _value_key(v):
     """Hashable identity of an axis value: numbers by value (1 == 1.0), others by their JSON text."""
     import json
 
-    return float(v) if _is_number(v) else json.dumps(v, sort_keys=True, default=str)
+    return float(v) if is_number(v) else json.dumps(v, sort_keys=True, default=str)
 
 
 def _too_many(where: str, n: int, limit: int):
@@ -174,7 +174,7 @@ def _expand_axis(where: str, spec, limit: int) -> tuple:
         return tuple(round_sig(v) for v in arg)
     if kind not in ("linear", "log", "range"):
         _fail(where, f"unknown range kind {kind!r}; allowed: values, linear, log, range")
-    if not (isinstance(arg, list) and len(arg) == 3 and all(_is_number(v) for v in arg)):
+    if not (isinstance(arg, list) and len(arg) == 3 and all(is_number(v) for v in arg)):
         _fail(f"{where}.{kind}", f"expected 3 numbers [start, stop, {'step' if kind == 'range' else 'count'}], got {arg!r}")
     a, b, n = arg
     ints = isinstance(a, int) and isinstance(b, int)
@@ -402,7 +402,7 @@ def _check_derived(derived: dict, top, blocks: tuple, pfields) -> None:
         if not isinstance(expr, str):
             _fail(f"derived.{k}", f"expected an expression string, got {expr!r}")
         try:
-            names = _expr_names(expr)
+            names = expression_names(expr)
         except SyntaxError as e:
             _fail(f"derived.{k}", f"invalid expression {expr!r}: {e.msg}")
         bad = sorted(names - set(pfields))
@@ -470,7 +470,7 @@ def _check_diagram(where, g, pfields, ofields) -> None:
     if kind in ("timeseries", "scatter") and ("x" not in g or "y" not in g):
         _fail(where, f"a {kind} diagram needs x and y")
     dp = g.get("dp_cri")
-    if dp is not None and dp != "estimate" and not (_is_number(dp) and dp > 0):
+    if dp is not None and dp != "estimate" and not (is_number(dp) and dp > 0):
         _fail(f"{where}.dp_cri", f"dp_cri={dp!r} must be a pressure > 0 (kPa) or \"estimate\"")
     if kind == "fields" and "field" not in g:
         _fail(f"{where}.field", "a fields diagram needs the field to draw (e.g. 'phi', 'd', 'S')")
@@ -481,7 +481,7 @@ def _check_run(run: dict) -> None:
     if unknown:
         _fail(f"run.{unknown[0]}", f"unknown key {unknown[0]!r}; allowed: {sorted(_RUN_KEYS)}")
     t = run.get("timeout")
-    if t is not None and (not _is_number(t) or t <= 0):
+    if t is not None and (not is_number(t) or t <= 0):
         _fail("run.timeout", f"timeout={t!r} must be a number of seconds > 0")
     r = run.get("retries", 0)
     if not isinstance(r, int) or isinstance(r, bool) or r < 0:

@@ -25,13 +25,15 @@ class SpecError(ValueError):
 # ---------------------------------------------------------------------------
 # model field names (lazy: solver.params / solver.options are imported on use)
 # ---------------------------------------------------------------------------
-def _parameters_class():
+def parameters_class():
+    """The model's parameter dataclass, ``solver.params.Parameters`` (imported on first use)."""
     from solver.params import Parameters
 
     return Parameters
 
 
-def _options_class():
+def options_class():
+    """The run options dataclass, ``solver.options.RunOptions`` (imported on first use)."""
     from solver.options import RunOptions
 
     return RunOptions
@@ -39,12 +41,12 @@ def _options_class():
 
 def parameter_fields() -> tuple[str, ...]:
     """Names of the fields of ``solver.params.Parameters``."""
-    return tuple(f.name for f in dataclasses.fields(_parameters_class()))
+    return tuple(f.name for f in dataclasses.fields(parameters_class()))
 
 
 def option_fields() -> tuple[str, ...]:
     """Names of the fields of ``solver.options.RunOptions``."""
-    return tuple(f.name for f in dataclasses.fields(_options_class()))
+    return tuple(f.name for f in dataclasses.fields(options_class()))
 
 
 # ---------------------------------------------------------------------------
@@ -110,7 +112,8 @@ def round_sig(x, digits: int = SIG_DIGITS):
     return x
 
 
-def _is_number(v) -> bool:
+def is_number(v) -> bool:
+    """A real number of a spec file (int or float; a bool is not a number here)."""
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
@@ -122,7 +125,8 @@ _BINOPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: l
            ast.Div: lambda a, b: a / b, ast.Pow: lambda a, b: a ** b}
 
 
-def _expr_names(expr: str) -> set[str]:
+def expression_names(expr: str) -> set[str]:
+    """The names a ``[derived]`` expression reads (its functions excluded)."""
     tree = ast.parse(expr, mode="eval")
     return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id not in _FUNCS}
 
@@ -133,7 +137,7 @@ def evaluate_expression(expr: str, env: Mapping[str, float]) -> float:
     def ev(node):
         if isinstance(node, ast.Expression):
             return ev(node.body)
-        if isinstance(node, ast.Constant) and _is_number(node.value):
+        if isinstance(node, ast.Constant) and is_number(node.value):
             return node.value
         if isinstance(node, ast.Name):
             if node.id not in env:
@@ -190,13 +194,14 @@ def expand_block(block: Block) -> list[dict[tuple[str, str], Any]]:
 # ---------------------------------------------------------------------------
 # canonical values (run keys)
 # ---------------------------------------------------------------------------
-def _jsonable(v):
+def plain_value(v):
+    """``v`` as plain JSON types: tuples become lists and numpy scalars Python numbers, recursively through lists and dicts."""
     if isinstance(v, tuple):
-        return [_jsonable(x) for x in v]
+        return [plain_value(x) for x in v]
     if isinstance(v, list):
-        return [_jsonable(x) for x in v]
+        return [plain_value(x) for x in v]
     if isinstance(v, dict):
-        return {k: _jsonable(x) for k, x in v.items()}
+        return {k: plain_value(x) for k, x in v.items()}
     if hasattr(v, "item") and callable(v.item) and not isinstance(v, (str, bytes)):
         try:
             return v.item()
@@ -207,7 +212,7 @@ def _jsonable(v):
 
 def canonical_value(v):
     """Canonical form for hashing: floats at 12 significant digits, ints as floats, sorted dicts."""
-    v = _jsonable(v)
+    v = plain_value(v)
     if isinstance(v, bool) or v is None or isinstance(v, str):
         return v
     if isinstance(v, int):
