@@ -180,6 +180,32 @@ def test_an_end_check_takes_the_real_delta_chi2_under_the_points_own_correction(
         assert abs(c["delta_chi2_real"] - c["delta_chi2_emulated"]) <= 2 * norm_r * d + d * d + 1e-9
 
 
+def test_with_fine_models_the_fit_is_its_own_profile_point_whatever_correction_it_was_made_under(tmp_path):
+    """With fine models Δχ² is measured from the fit's own point taken as every profile point is (the
+    correction re-estimated there, the others refitted under it), so Δχ² at the fit's strength is 0 up to the
+    refit's tolerance even when the fit was made under a correction estimated elsewhere (here at β = 20, the
+    truth being 40: the toy's mesh error grows with β).  The stale correction's χ² differs from that
+    reference by more than the threshold: measured from it, every point would carry that offset."""
+    from sweep.discrepancy.noise import add_discretization_error
+    from sweep.discrepancy.problem import Problem
+    from sweep.discrepancy.profile import _Profile
+
+    spec = _spec({"fine": True}, calibrate=("kbar", "E"))
+    data = load_measured(make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1), CONDS, TIMES,
+                                   {"beta": 40.0}, seed=1, observables=("p_inj", "front_radius_mean")))
+    prob = Problem(data, spec, ToyForward({}, h=8.0, beta_mesh=0.1))
+    fine = ToyForward({}, h=2.0, beta_mesh=0.1)
+    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
+    train = ["a", "b", "c"]
+    x0 = np.array([p.to_x(p.initial) for p in spec.calibrate] + [30.0])
+    fit = prob.fit(params, [x0], train)
+    add_discretization_error(prob, fine, {**fit.values(), "effect:damage_viscosity": 20.0})
+    fit = prob.fit(params, [fit.x], train)
+    pf = _Profile(prob, fit, 2, train, 3.841, fine)
+    assert abs(pf.chi2_hat - pf.chi2_fit) > pf.thr
+    assert abs(pf.dchi2(float(fit.x[2]))) <= 0.01 * pf.thr
+
+
 def test_workflow_with_the_emulator_names_the_effect_with_the_exact_interval_for_fewer_runs(tmp_path):
     """The toy workflow with and without the emulator: the same verdict and named effect, fewer forward runs
     in the profile stage, and the interval's ends apart by at most what each end's stopping rule allows:

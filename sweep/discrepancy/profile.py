@@ -47,7 +47,6 @@ class _Profile:
         self.w = (stats.series_weights(fit.r, problem.series[self.mask]) if self.po.likelihood == "weighted"
                   else np.ones(fit.r.size))
         chi2_w, n = stats.effective_chi2(fit.r, self.w)
-        self.chi2_hat = self.deviance(fit.r)
         self.thr = level * max(1.0, chi2_w / max(n - len(fit.params), 1.0))
         self.x_lo, self.x_hi = self.p.x_bounds
         self.wald = wald_bounds(fit, j, self.w)[:2]
@@ -55,8 +54,27 @@ class _Profile:
         self.fines = realizations(fine_forward)
         self.checks: list = []
         self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
-        if emulator is not None:     # Δχ² within one likelihood: the emulator's (its covariance) at the fit too
-            self.chi2_hat = self.fit_deviance(self.held(float(self.x_hat[j])))
+        self.chi2_fit = self.deviance(fit.r)
+        self.chi2_hat = self.reference_deviance()
+
+    def reference_deviance(self) -> float:
+        """The χ² that every Δχ² is measured from: the fit's own point taken as each profile point is
+        (:meth:`dchi2`).  On real runs without fine models that is the fit's χ².  With the emulator the others
+        are refitted on it at the fit's strength, so that Δχ² stays within one likelihood (the emulator's
+        covariance at the fit too).  With fine models the correction is re-estimated at the fit and the others
+        refitted under it: the fit was made under the correction of the last refresh pass, estimated at
+        that pass's start, and measured from that χ² every point's Δχ² would carry the difference of the two
+        corrections as a common offset (an offset above the threshold collapses the interval onto the fit)."""
+        if self.em is None and not self.fines:
+            return self.chi2_fit
+        xj = float(self.x_hat[self.j])
+        if not self.fines:
+            return self.fit_deviance(self.held(xj))
+        old = self.problem.noise.shift_correction(correction_at(self.problem, self.fines, self.fit.values()))
+        try:
+            return self.fit_deviance(self.held(xj))
+        finally:
+            self.problem.noise.shift_correction(old)
 
     def deviance(self, r: np.ndarray) -> float:
         """The profile's χ² of residuals ``r``: Σ w r² ("weighted", "gaussian": w = 1) or −2 ln of the
@@ -77,7 +95,7 @@ class _Profile:
         try:
             f = self.refit(xj, np.delete(self.x_hat, self.j))
             if self.fines:
-                row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_hat)
+                row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_fit)
                 self.point_correction = correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)})
                 old = problem.noise.shift_correction(self.point_correction)
                 try:
@@ -273,7 +291,8 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
                                     pf.p.from_x(pf.x_hat[j]))
     out = {"lower": float(pf.p.from_x(lo)), "upper": float(pf.p.from_x(hi)), "threshold": float(pf.thr),
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
-           "points": points, "smoothing": po.smoothing}
+           "points": points, "smoothing": po.smoothing,
+           "reference_offset": float(pf.chi2_hat - pf.chi2_fit)}
     if emulator is not None:
         out["emulator"] = {**emulator.summary(), "checks": pf.checks,
                            "confirmed": all(c["agrees"] for c in _last_per_side(pf.checks))}
