@@ -151,17 +151,14 @@ def test_emulated_profile_ends_are_crossings_of_the_real_profile(tmp_path):
     assert exact["lower"] == pytest.approx(pr["lower"], rel=1e-2) and exact["upper"] == pytest.approx(pr["upper"], rel=1e-2)
 
 
-def test_an_end_check_takes_the_real_delta_chi2_under_the_points_own_correction(tmp_path):
-    """With fine models each profile point is compared under the correction re-estimated there; an end's
-    check records the real run's Δχ² under that same correction, so on an agreeing check it differs from the
-    emulated Δχ² by at most the emulator's error, 2 |r| |d| + |d|² (Cauchy–Schwarz, as above).  The toy's
-    mesh error depends strongly on β (β → β (1 + 0.1 h)), so the fit's correction would put the real Δχ²
-    off by far more."""
+def _mesh_dependent_toy_fit(tmp_path, profile: dict, corrected_at_beta: float | None = None):
+    """The toy whose mesh error grows with β (β → β (1 + 0.1 h)): data at h = 2 with β = 40, the model at
+    h = 8 fitted with kbar, E and β, the correction from one h = 2 realization estimated at the first fit (at
+    β = ``corrected_at_beta`` when given) and the model refitted under it.  Returns (problem, fine, fit, train)."""
     from sweep.discrepancy.noise import add_discretization_error
     from sweep.discrepancy.problem import Problem
-    from sweep.discrepancy.profile import emulator_for, profile_interval
 
-    spec = _spec({"emulator": "gp", "fine": True, "refine": 10, "refine_tol": 0.01}, calibrate=("kbar", "E"))
+    spec = _spec(profile, calibrate=("kbar", "E"))
     data = load_measured(make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1), CONDS, TIMES,
                                    {"beta": 40.0}, seed=1, observables=("p_inj", "front_radius_mean")))
     prob = Problem(data, spec, ToyForward({}, h=8.0, beta_mesh=0.1))
@@ -169,8 +166,21 @@ def test_an_end_check_takes_the_real_delta_chi2_under_the_points_own_correction(
     params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
     train = ["a", "b", "c"]
     fit = prob.fit(params, [np.array([p.to_x(p.initial) for p in spec.calibrate] + [30.0])], train)
-    add_discretization_error(prob, fine, fit.values())
-    fit = prob.fit(params, [fit.x], train)
+    at = fit.values() if corrected_at_beta is None else {**fit.values(), "effect:damage_viscosity": corrected_at_beta}
+    add_discretization_error(prob, fine, at)
+    return prob, fine, prob.fit(params, [fit.x], train), train
+
+
+def test_an_end_check_takes_the_real_delta_chi2_under_the_points_own_correction(tmp_path):
+    """With fine models each profile point is compared under the correction re-estimated there; an end's
+    check records the real run's Δχ² under that same correction, so on an agreeing check it differs from the
+    emulated Δχ² by at most the emulator's error, 2 |r| |d| + |d|² (Cauchy–Schwarz, as above).  The toy's
+    mesh error depends strongly on β (β → β (1 + 0.1 h)), so the fit's correction would put the real Δχ²
+    off by far more."""
+    from sweep.discrepancy.profile import emulator_for, profile_interval
+
+    prob, fine, fit, train = _mesh_dependent_toy_fit(tmp_path, {"emulator": "gp", "fine": True, "refine": 10,
+                                                                 "refine_tol": 0.01})
     pr = profile_interval(prob, fit, 2, train, fine_forward=fine, emulator=emulator_for(prob, fit, train))
     agreeing = [c for c in pr["emulator"]["checks"] if c["agrees"]]
     assert len(agreeing) == 2 and pr["lower"] < 40.0 < pr["upper"]
@@ -186,21 +196,9 @@ def test_with_fine_models_the_fit_is_its_own_profile_point_whatever_correction_i
     refit's tolerance even when the fit was made under a correction estimated elsewhere (here at β = 20, the
     truth being 40: the toy's mesh error grows with β).  The stale correction's χ² differs from that
     reference by more than the threshold: measured from it, every point would carry that offset."""
-    from sweep.discrepancy.noise import add_discretization_error
-    from sweep.discrepancy.problem import Problem
     from sweep.discrepancy.profile import _Profile
 
-    spec = _spec({"fine": True}, calibrate=("kbar", "E"))
-    data = load_measured(make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0, beta_mesh=0.1), CONDS, TIMES,
-                                   {"beta": 40.0}, seed=1, observables=("p_inj", "front_radius_mean")))
-    prob = Problem(data, spec, ToyForward({}, h=8.0, beta_mesh=0.1))
-    fine = ToyForward({}, h=2.0, beta_mesh=0.1)
-    params = tuple(spec.calibrate) + (spec.candidate_param("damage_viscosity"),)
-    train = ["a", "b", "c"]
-    x0 = np.array([p.to_x(p.initial) for p in spec.calibrate] + [30.0])
-    fit = prob.fit(params, [x0], train)
-    add_discretization_error(prob, fine, {**fit.values(), "effect:damage_viscosity": 20.0})
-    fit = prob.fit(params, [fit.x], train)
+    prob, fine, fit, train = _mesh_dependent_toy_fit(tmp_path, {"fine": True}, corrected_at_beta=20.0)
     pf = _Profile(prob, fit, 2, train, 3.841, fine)
     assert abs(pf.chi2_hat - pf.chi2_fit) > pf.thr
     assert abs(pf.dchi2(float(fit.x[2]))) <= 0.01 * pf.thr
