@@ -305,3 +305,32 @@ def test_recentring_ignores_a_dip_within_the_profiles_scatter():
     assert recentre_target({**raw, "quadratic": q}) is pts[5]
     tiny = [{"value": 1.0, "delta_chi2": 0.0}, {"value": 1.1, "delta_chi2": -0.001}, {"value": 0.9, "delta_chi2": 2.0}]
     assert recentre_target({"points": tiny, "threshold": 4.0}) is None   # below the fit by < tol × threshold
+
+
+def test_on_the_emulator_a_profile_points_correction_makes_its_model_the_fine_model_there(tmp_path):
+    """With fine models and the emulator, the profile compares the data at a point with the emulator's mean
+    plus the correction re-estimated there.  The correction is taken against that mean (fine − mean), so the
+    two together are the fine model at the point, whatever the emulator's error; the real run's correction
+    (fine − run) would leave the run's jitter about the emulator's smooth part in the residuals (here the
+    coarse toy's white p_inj jitter of sd A kPa, which the emulator's nugget smooths)."""
+    from sweep.discrepancy.noise import correction_at
+    from sweep.discrepancy.problem import Problem
+    from sweep.discrepancy.profile import _Profile, emulator_for
+
+    prob, params = _problem(tmp_path, _NoisyToy({}, h=8.0))
+    fine = ToyForward({}, h=2.0)
+    train = ["a", "b", "c"]
+    fit = prob.fit(params, [np.array([params[0].to_x(params[0].initial), 30.0])], train)
+    em = emulator_for(prob, fit, train)
+    pf = _Profile(prob, fit, 1, train, 3.841, fine, em)
+    x = np.array(fit.x, float)
+    x[1] = params[1].to_x(1.03 * params[1].from_x(fit.x[1]))
+    corr = correction_at(prob, fine, {q.name: q.from_x(v) for q, v in zip(params, x)})
+    on_fine = Problem(prob.data, prob.spec, fine)
+    fine_vec = on_fine.model_vector(on_fine.prediction(params, x, train), em.mask)
+    mean = em.predict(x)[0]
+    ok = np.isfinite(fine_vec)
+    assert ok.sum() > 10
+    assert np.allclose((pf.model_correction(corr, x)[em.mask] + mean)[ok], fine_vec[ok], rtol=0, atol=1e-9)
+    off = (corr[em.mask] + mean - fine_vec)[ok]          # the run's own correction: the jitter stays
+    assert np.sqrt(np.mean(off ** 2)) > 0.3 * A

@@ -70,11 +70,27 @@ class _Profile:
         xj = float(self.x_hat[self.j])
         if not self.fines:
             return self.fit_deviance(self.held(xj))
-        old = self.problem.noise.shift_correction(correction_at(self.problem, self.fines, self.fit.values()))
+        corr = correction_at(self.problem, self.fines, self.fit.values())
+        old = self.problem.noise.shift_correction(self.model_correction(corr, self.x_hat))
         try:
             return self.fit_deviance(self.held(xj))
         finally:
             self.problem.noise.shift_correction(old)
+
+    def model_correction(self, corr: np.ndarray, at) -> np.ndarray:
+        """The correction ``corr`` (fine − coarse, real runs at a point) as the profile's model needs it there.
+        On real runs that is ``corr``.  On the emulator the model is the emulator's mean, so the coarse part
+        is that mean: fine − mean = corr + (real coarse run − mean) on the emulator's rows.  With ``corr``
+        alone the real run's own jitter about the emulator's smooth part (the nugget) would stay in every
+        emulated point's residuals, where a real-run profile cancels it against the run itself.  ``at``: the
+        point, a Fit of the emulator (its ``x_full``) or the full parameter vector."""
+        if self.em is None:
+            return corr
+        x = np.asarray(getattr(at, "x_full", at), float)
+        gap = self.em.model_vectors([x])[0] - self.em.predict(x)[0]
+        out = np.array(corr, float)
+        out[self.em.mask] += np.where(np.isfinite(gap), gap, 0.0)
+        return out
 
     def deviance(self, r: np.ndarray) -> float:
         """The profile's χ² of residuals ``r``: Σ w r² ("weighted", "gaussian": w = 1) or −2 ln of the
@@ -97,7 +113,7 @@ class _Profile:
             if self.fines:
                 row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_fit)
                 self.point_correction = correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)})
-                old = problem.noise.shift_correction(self.point_correction)
+                old = problem.noise.shift_correction(self.model_correction(self.point_correction, f))
                 try:
                     f = self.refit(xj, np.array(f.x, float))
                 finally:
