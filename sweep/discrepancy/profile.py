@@ -54,22 +54,18 @@ class _Profile:
         self.fines = realizations(fine_forward)
         self.checks: list = []
         self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
-        self.chi2_fit = self.deviance(fit.r)
-        self.chi2_hat = self.reference_deviance()
+        # the fit's χ² under the correction it was made under, taken as the points' are: on the emulator (its
+        # covariance at the fit too) when there is one, so that Δχ² stays within one likelihood
+        self.chi2_fit = self.deviance(fit.r) if emulator is None else self.fit_deviance(self.held(float(fit.x[j])))
+        self.chi2_hat = self.reference_deviance() if self.fines else self.chi2_fit
 
     def reference_deviance(self) -> float:
-        """The χ² that every Δχ² is measured from: the fit's own point taken as each profile point is
-        (:meth:`dchi2`).  On real runs without fine models that is the fit's χ².  With the emulator the others
-        are refitted on it at the fit's strength, so that Δχ² stays within one likelihood (the emulator's
-        covariance at the fit too).  With fine models the correction is re-estimated at the fit and the others
-        refitted under it: the fit was made under the correction of the last refresh pass, estimated at
-        that pass's start, and measured from that χ² every point's Δχ² would carry the difference of the two
-        corrections as a common offset (an offset above the threshold collapses the interval onto the fit)."""
-        if self.em is None and not self.fines:
-            return self.chi2_fit
+        """With fine models, the χ² every Δχ² is measured from: the fit's own point taken as each profile point
+        is (:meth:`dchi2`), under the correction re-estimated at the fit with the others refitted under it.  The
+        fit was made under the correction of the last refresh pass, estimated at that pass's start; measured
+        from that χ², every point's Δχ² would carry the difference of the two corrections as a common offset
+        (an offset above the threshold collapses the interval onto the fit)."""
         xj = float(self.x_hat[self.j])
-        if not self.fines:
-            return self.fit_deviance(self.held(xj))
         corr = correction_at(self.problem, self.fines, self.fit.values())
         old = self.problem.noise.shift_correction(self.model_correction(corr, self.x_hat))
         try:
