@@ -66,10 +66,21 @@ class _Profile:
         from that χ², every point's Δχ² would carry the difference of the two corrections as a common offset
         (an offset above the threshold collapses the interval onto the fit)."""
         xj = float(self.x_hat[self.j])
-        corr = correction_at(self.problem, self.fines, self.fit.values())
-        old = self.problem.noise.shift_correction(self.model_correction(corr, self.x_hat))
+        self.problem.fixed = {self.p.name: self.p.from_x(xj)}
         try:
-            return self.fit_deviance(self.held(xj))
+            f, _ = self.corrected_refit(xj, self.fit.values(), self.x_hat, np.delete(self.x_hat, self.j))
+        finally:
+            self.problem.fixed = {}
+        return self.fit_deviance(f)
+
+    def corrected_refit(self, xj: float, values: dict, at, x0: np.ndarray) -> tuple:
+        """The others refitted from ``x0`` with the parameter at ``xj`` (held by the caller in
+        ``problem.fixed``), under the correction re-estimated at ``values`` and taken as the model needs it at
+        ``at`` (:meth:`model_correction`).  Returns (the refit, the correction from real runs)."""
+        corr = correction_at(self.problem, self.fines, values)
+        old = self.problem.noise.shift_correction(self.model_correction(corr, at))
+        try:
+            return self.refit(xj, x0), corr
         finally:
             self.problem.noise.shift_correction(old)
 
@@ -108,12 +119,8 @@ class _Profile:
             f = self.refit(xj, np.delete(self.x_hat, self.j))
             if self.fines:
                 row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_fit)
-                self.point_correction = correction_at(problem, self.fines, {**f.values(), p.name: p.from_x(xj)})
-                old = problem.noise.shift_correction(self.model_correction(self.point_correction, f))
-                try:
-                    f = self.refit(xj, np.array(f.x, float))
-                finally:
-                    problem.noise.shift_correction(old)
+                f, self.point_correction = self.corrected_refit(xj, {**f.values(), p.name: p.from_x(xj)}, f,
+                                                                np.array(f.x, float))
         finally:
             problem.fixed = {}
         d = float(self.fit_deviance(f) - self.chi2_hat)
