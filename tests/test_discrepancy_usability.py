@@ -99,6 +99,7 @@ def test_init_writes_a_commented_spec_that_loads(tmp_path):
     assert (parse_options({}).noise.disc_error_fraction, parse_options({}).profile.likelihood) == (0.5, "weighted")
     for word in ("w35", "front_radius_branches (mm)", "p_inj (kPa)", "regime (label)", "[profile]", "rough_tol"):
         assert word in text
+    assert "'w65': 'fracturing at 0.31 s'" in text                               # each condition's observed label
     parsed = tomllib.loads(text)
     for table, cls in OPTION_TABLES.items():                                      # every setting listed
         assert set(parsed[table]) == {f.name for f in dataclasses.fields(cls)}

@@ -49,7 +49,8 @@ def _header(data: MeasuredData, folder: Path) -> list[str]:
         n = {cid: int(((data.curves.observable == name) & (data.curves.condition == cid)).sum()) for cid in data.ids}
         L.append(f"#   {name} ({REGISTRY[name].unit}): {REGISTRY[name].doc}; points per condition {n}")
     if data.regimes:
-        L.append(f"#   regime (label) in {sorted(data.regimes)}")
+        seen = {cid: f"{label} at {t:g} s" for cid, (t, label) in data.regimes.items()}
+        L.append(f"#   regime (label): {seen}")
     return L + [""]
 
 
