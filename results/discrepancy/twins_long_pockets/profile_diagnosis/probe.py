@@ -33,8 +33,9 @@ class _AtProfile(Exception):
     """Raised in place of the profile stage, carrying its arguments."""
 
 
-def state_at_profile(campaign: str, cache: str, scratch: str) -> dict:
-    """The workflow's problem, fit, parameter index, training ids, fine models and emulator at its profile."""
+def state_at_profile(campaign: str, cache: str, scratch: str, twin: str = TWIN) -> dict:
+    """The workflow's problem, fit, parameter index, training ids, fine models and emulator at the profile of
+    the campaign's twin ``twin``."""
     cap = {}
 
     def stop(problem, fit, j, ids, max_passes=2, fine_forward=None, emulator=None):
@@ -44,7 +45,7 @@ def state_at_profile(campaign: str, cache: str, scratch: str) -> dict:
     W.profile_recentred = stop
     setup = T._prepare_campaign(campaign, scratch, cache, 2)
     try:
-        T._run_one_twin(setup, next(t for t in setup.camp["twin"] if t["name"] == TWIN))
+        T._run_one_twin(setup, next(t for t in setup.camp["twin"] if t["name"] == twin))
     except _AtProfile:
         return cap
     raise RuntimeError("the twin ended before its profile stage")
