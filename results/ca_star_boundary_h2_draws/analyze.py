@@ -9,7 +9,7 @@
 Rule 1 of sweep.classify labels a run fracturing iff crack_length > L_min, so the labels at other L_min are read
 from the stored crack lengths.  Units: lengths mm, C in %, Ca* dimensionless.
 
-    python results/ca_star_boundary_h2_draws/analyze.py CAMPAIGN_DIR [--out summary.json]
+    python results/ca_star_boundary_h2_draws/analyze.py CAMPAIGN_DIR [--out summary.json] [--figure draws.png]
 """
 from __future__ import annotations
 
@@ -70,12 +70,62 @@ def judge(df: pd.DataFrame) -> dict:
             "pooled_L_scan": {str(l): separatrix(df, l) for l in L_SCAN}}
 
 
+def _separatrix_line(ax, fit: dict, C: np.ndarray, **kw) -> None:
+    """Draw Ca*_c = A exp(B C) (A, B from a :func:`separatrix` row) over the cement range C (%), if fitted."""
+    if "B" in fit:
+        c = np.linspace(C.min(), C.max(), 50)
+        ax.plot(c, fit["A"] * np.exp(fit["B"] * c), **kw)
+
+
+def figure(df: pd.DataFrame, out: dict, path: Path) -> None:
+    """One panel per draw (labels at L_min = 4 mm with that draw's separatrix) and one of the share of draws
+    that fracture at each point with the pooled separatrix.  Axes: C (%), Ca* (-, log)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    seeds = sorted(df["seed"].unique())
+    fig, axes = plt.subplots(1, len(seeds) + 1, figsize=(4.2 * (len(seeds) + 1), 4.0), sharey=True)
+    C = df["cement"].to_numpy()
+    for ax, s in zip(axes, seeds):
+        d = df[df["seed"] == s]
+        y = d["crack_length"] > L_PROTOCOL
+        ax.scatter(d["cement"][~y], d["Ca_star"][~y], facecolors="none", edgecolors="C0", label="porous invasion")
+        ax.scatter(d["cement"][y], d["Ca_star"][y], marker="^", color="C3", label="fracturing")
+        fit = out["per_seed_at_L4"][int(s)]
+        _separatrix_line(ax, fit, C, color="k")
+        ax.set_title(f"seed {s}: " + (f"B = {fit['B']:.2f} [{fit['B_interval'][0]:.2f}, {fit['B_interval'][1]:.2f}]"
+                                      if "B" in fit else "no separatrix"), fontsize=9)
+    share = df.assign(f=df["crack_length"] > L_PROTOCOL).groupby(["cement", "eta_o"]).agg(
+        f=("f", "mean"), Ca_star=("Ca_star", "first")).reset_index()
+    sc = axes[-1].scatter(share["cement"], share["Ca_star"], c=share["f"], cmap="coolwarm", vmin=0, vmax=1)
+    fig.colorbar(sc, ax=axes[-1], label="share of draws fracturing")
+    pooled = out["pooled_at_L4"]
+    _separatrix_line(axes[-1], pooled, C, color="k")
+    axes[-1].set_title(f"pooled: B = {pooled['B']:.2f} [{pooled['B_interval'][0]:.2f}, {pooled['B_interval'][1]:.2f}]"
+                       if "B" in pooled else "pooled: no separatrix", fontsize=9)
+    for ax in axes:
+        ax.set_yscale("log")
+        ax.set_xlabel("cement volume ratio C (%)")
+    axes[0].set_ylabel("modified capillary number Ca* (-)")
+    axes[0].legend(fontsize=8, loc="lower right")
+    fig.suptitle(f"Ca*-C labels at L_min = {L_PROTOCOL:g} mm over the porosity draws (h = 2 mm); B in 1/%, 95 % intervals",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("campaign_dir", type=Path)
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--figure", type=Path, help="PNG: the labels per draw and the share of draws fracturing")
     a = ap.parse_args(argv)
-    out = judge(completed_runs(a.campaign_dir))
+    df = completed_runs(a.campaign_dir)
+    out = judge(df)
+    if a.figure:
+        figure(df, out, a.figure)
     text = json.dumps(out, indent=1)
     if a.out:
         write_json_atomic(a.out, out)
