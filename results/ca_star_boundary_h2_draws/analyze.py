@@ -35,10 +35,15 @@ def completed_runs(campaign_dir: Path) -> pd.DataFrame:
     return df[df["status"] == "ok"][["seed", "cement", "eta_o", "Ca_star", "crack_length"]].reset_index(drop=True)
 
 
+def fracturing(df: pd.DataFrame, l_min: float) -> pd.Series:
+    """Rule 1 of sweep.classify at L_min (mm): a run fractures iff its crack is longer than L_min."""
+    return df["crack_length"] > l_min
+
+
 def agreement(df: pd.DataFrame, l_min: float = L_PROTOCOL) -> dict:
     """Per point (cement, eta_o) with every seed done: do the draws agree on the label, and the crack spread (mm)."""
     seeds = sorted(df["seed"].unique())
-    g = df.assign(frac=df["crack_length"] > l_min).groupby(["cement", "eta_o"])
+    g = df.assign(frac=fracturing(df, l_min)).groupby(["cement", "eta_o"])
     full = g.filter(lambda x: len(x) == len(seeds)).groupby(["cement", "eta_o"])
     same = full["frac"].agg(lambda x: x.all() or not x.any())
     spread = full["crack_length"].agg(lambda x: float(x.max() - x.min()))
@@ -46,13 +51,13 @@ def agreement(df: pd.DataFrame, l_min: float = L_PROTOCOL) -> dict:
             "points_all_draws_agree": int(same.sum()),
             "share_agree": float(same.mean()) if same.size else None,
             "crack_spread_mm": {"median": float(spread.median()), "max": float(spread.max())} if same.size else None,
-            "fracturing_share_by_seed": {int(s): float((d["crack_length"] > l_min).mean())
+            "fracturing_share_by_seed": {int(s): float(fracturing(d, l_min).mean())
                                          for s, d in df.groupby("seed")}}
 
 
 def separatrix(df: pd.DataFrame, l_min: float) -> dict:
     """The profile-likelihood fit on these runs at L_min (mm), or the reason it cannot be made."""
-    y = (df["crack_length"] > l_min).to_numpy()
+    y = fracturing(df, l_min).to_numpy()
     row = {"runs": int(len(df)), "fracturing": int(y.sum())}
     try:
         s = separatrix_profile_interval(df["cement"], df["Ca_star"], y)
@@ -90,14 +95,14 @@ def figure(df: pd.DataFrame, out: dict, path: Path) -> None:
     C = df["cement"].to_numpy()
     for ax, s in zip(axes, seeds):
         d = df[df["seed"] == s]
-        y = d["crack_length"] > L_PROTOCOL
+        y = fracturing(d, L_PROTOCOL)
         ax.scatter(d["cement"][~y], d["Ca_star"][~y], facecolors="none", edgecolors="C0", label="porous invasion")
         ax.scatter(d["cement"][y], d["Ca_star"][y], marker="^", color="C3", label="fracturing")
         fit = out["per_seed_at_L4"][int(s)]
         _separatrix_line(ax, fit, C, color="k")
         ax.set_title(f"seed {s}: " + (f"B = {fit['B']:.2f} [{fit['B_interval'][0]:.2f}, {fit['B_interval'][1]:.2f}]"
                                       if "B" in fit else "no separatrix"), fontsize=9)
-    share = df.assign(f=df["crack_length"] > L_PROTOCOL).groupby(["cement", "eta_o"]).agg(
+    share = df.assign(f=fracturing(df, L_PROTOCOL)).groupby(["cement", "eta_o"]).agg(
         f=("f", "mean"), Ca_star=("Ca_star", "first")).reset_index()
     sc = axes[-1].scatter(share["cement"], share["Ca_star"], c=share["f"], cmap="coolwarm", vmin=0, vmax=1)
     fig.colorbar(sc, ax=axes[-1], label="share of draws fracturing")

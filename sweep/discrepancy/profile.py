@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import math
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -66,16 +67,22 @@ class _Profile:
         from that χ², every point's Δχ² would carry the difference of the two corrections as a common offset
         (an offset above the threshold collapses the interval onto the fit)."""
         xj = float(self.x_hat[self.j])
-        self.problem.fixed = {self.p.name: self.p.from_x(xj)}
-        try:
+        with self.holding(xj):
             f, _ = self.corrected_refit(xj, self.fit.values(), self.x_hat, np.delete(self.x_hat, self.j))
-        finally:
-            self.problem.fixed = {}
         return self.fit_deviance(f)
 
+    @contextmanager
+    def holding(self, xj: float):
+        """The parameter held at ``xj`` (internal coordinates) in ``problem.fixed`` for the refits inside."""
+        self.problem.fixed = {self.p.name: self.p.from_x(xj)}
+        try:
+            yield
+        finally:
+            self.problem.fixed = {}
+
     def corrected_refit(self, xj: float, values: dict, at, x0: np.ndarray) -> tuple:
-        """The others refitted from ``x0`` with the parameter at ``xj`` (held by the caller in
-        ``problem.fixed``), under the correction re-estimated at ``values`` and taken as the model needs it at
+        """The others refitted from ``x0`` with the parameter at ``xj`` (held by the caller,
+        :meth:`holding`), under the correction re-estimated at ``values`` and taken as the model needs it at
         ``at`` (:meth:`model_correction`).  Returns (the refit, the correction from real runs)."""
         corr = correction_at(self.problem, self.fines, values)
         old = self.problem.noise.shift_correction(self.model_correction(corr, at))
@@ -112,17 +119,14 @@ class _Profile:
         when there is one: :meth:`refit`); with fine models the correction is re-estimated at
         that point and the others refitted again (σ and the covariance stay the fit's, so every Δχ² is on one
         scale)."""
-        problem, p = self.problem, self.p
-        problem.fixed = {p.name: p.from_x(xj)}
+        p = self.p
         row = {"value": p.from_x(xj)}
-        try:
+        with self.holding(xj):
             f = self.refit(xj, np.delete(self.x_hat, self.j))
             if self.fines:
                 row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_fit)
                 f, self.point_correction = self.corrected_refit(xj, {**f.values(), p.name: p.from_x(xj)}, f,
                                                                 np.array(f.x, float))
-        finally:
-            problem.fixed = {}
         d = float(self.fit_deviance(f) - self.chi2_hat)
         row.update({"delta_chi2": d, "others": jsonable(f.values())})
         if self.em is not None:
@@ -134,11 +138,8 @@ class _Profile:
 
     def held(self, xj: float) -> Fit:
         """The others refitted with the parameter held at ``xj`` (from the fit's values)."""
-        self.problem.fixed = {self.p.name: self.p.from_x(xj)}
-        try:
+        with self.holding(xj):
             return self.refit(xj, np.delete(self.x_hat, self.j))
-        finally:
-            self.problem.fixed = {}
 
     def fit_deviance(self, f: Fit) -> float:
         """The profile's χ² of a refit: :meth:`deviance` of its residuals.  An emulated refit's are whitened
