@@ -1,0 +1,82 @@
+"""The judging protocol of campaigns/ca_star_boundary_h2_pockets.toml (written in its header before the runs).
+
+1. The separatrix Ca*_c = A exp(B C) on the sampler's runs (deterministic mesh) at L_min = 4 mm; the verdict is
+   "B > 0 at 2 sigma".
+2. The same fit over L_min = 2-6 mm, reported whole (not the verdict), beside the crack lengths.
+3. With the mesh stage (campaigns/ca_star_boundary_h2_pockets_meshes.toml: the same points on mesh_seed 1): label
+   agreement between the two meshes at L_min = 4 mm, the crack-length spread, and the pooled fit.
+
+The deterministic mesh is realization 0 of column ``mesh_seed``.  Units: lengths mm, C in %, Ca* dimensionless.
+
+    python results/ca_star_boundary_h2_pockets/analyze.py SAMPLER_DIR [MESHES_DIR] [--out summary.json]
+        [--figure meshes.png]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from sweep import label_agreement as la
+from sweep.load import load_campaign
+
+L_PROTOCOL = 4.0  # mm, the campaign's [classify] min_crack_length
+L_SCAN = (2.0, 3.0, 4.0, 5.0, 6.0)  # mm
+COLUMNS = ["mesh_seed", "cement", "eta_o", "Ca_star", "crack_length"]
+
+
+def completed(campaign_dir: Path, mesh_seed: int | None) -> pd.DataFrame:
+    """The campaign's ok runs; ``mesh_seed`` fills the column when the campaign does not sweep it."""
+    df = load_campaign(campaign_dir)
+    df = df[df["status"] == "ok"]
+    if mesh_seed is not None:
+        df = df.assign(mesh_seed=mesh_seed)
+    return df[COLUMNS].reset_index(drop=True)
+
+
+def crack_summary(df: pd.DataFrame) -> dict:
+    """The crack lengths (mm) of the runs: quantiles and the distinct values to 0.01 mm."""
+    L = df["crack_length"]
+    return {"quantiles_0_25_50_75_100": [float(v) for v in L.quantile([0, 0.25, 0.5, 0.75, 1.0])],
+            "distinct_values": sorted({round(float(v), 2) for v in L})}
+
+
+def paired(sampler: pd.DataFrame, meshes: pd.DataFrame) -> pd.DataFrame:
+    """The sampler's runs at the mesh stage's points (matched exactly: the stage copies them at full precision)
+    followed by the mesh stage's runs."""
+    pts = meshes[la.POINT].drop_duplicates()
+    return pd.concat([sampler.merge(pts, on=la.POINT), meshes], ignore_index=True)
+
+
+def judge(sampler: pd.DataFrame, both: pd.DataFrame | None) -> dict:
+    """Parts 1-2 on the sampler's runs and, with the mesh stage (``both``: :func:`paired`), part 3."""
+    out = {"sampler": {"at_L4": la.separatrix(sampler, L_PROTOCOL),
+                       "L_scan": {str(l): la.separatrix(sampler, l) for l in L_SCAN},
+                       "crack_length_mm": crack_summary(sampler)}}
+    if both is not None:
+        out["meshes"] = la.judge(both, "mesh_seed", L_PROTOCOL, L_SCAN)
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sampler_dir", type=Path)
+    ap.add_argument("meshes_dir", type=Path, nargs="?")
+    ap.add_argument("--out", type=Path)
+    ap.add_argument("--figure", type=Path, help="PNG: the labels per mesh and the share of meshes fracturing")
+    a = ap.parse_args(argv)
+    sampler = completed(a.sampler_dir, 0)
+    both = paired(sampler, completed(a.meshes_dir, None)) if a.meshes_dir else None
+    out = judge(sampler, both)
+    if a.figure and both is not None:
+        la.figure(both, out["meshes"], "mesh_seed", L_PROTOCOL, a.figure,
+                  f"Ca*-C labels at L_min = {L_PROTOCOL:g} mm on the three-pocket field, deterministic mesh (0) "
+                  "and a perturbed one (1); h = 2 mm, B in 1/%, 95 % intervals")
+    la.report(out, a.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
