@@ -9,7 +9,7 @@
 The deterministic mesh is realization 0 of column ``mesh_seed``.  Units: lengths mm, C in %, Ca* dimensionless.
 
     python results/ca_star_boundary_h2_pockets/analyze.py SAMPLER_DIR [MESHES_DIR] [--out summary.json]
-        [--figure meshes.png]
+        [--figure meshes.png] [--crack-map crack_length.png]
 """
 from __future__ import annotations
 
@@ -60,12 +60,37 @@ def judge(sampler: pd.DataFrame, both: pd.DataFrame | None) -> dict:
     return out
 
 
+def crack_map(df: pd.DataFrame, path: Path) -> None:
+    """PNG at ``path``: the crack length (mm, colour) over the Ca*-C plane, one panel per mesh (column
+    ``mesh_seed``).  Axes: C (%), Ca* (-, log)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    seeds = sorted(df["mesh_seed"].unique())
+    fig, axes = plt.subplots(1, len(seeds), figsize=(4.8 * len(seeds), 4.0), sharey=True, squeeze=False)
+    lo, hi = df["crack_length"].min(), df["crack_length"].max()
+    for ax, s in zip(axes[0], seeds):
+        d = df[df["mesh_seed"] == s]
+        sc = ax.scatter(d["cement"], d["Ca_star"], c=d["crack_length"], cmap="viridis", vmin=lo, vmax=hi)
+        ax.set_yscale("log")
+        ax.set_xlabel("cement volume ratio C (%)")
+        ax.set_title(f"mesh_seed {s} ({'deterministic' if s == 0 else 'perturbed'} mesh), {len(d)} runs", fontsize=9)
+    axes[0][0].set_ylabel("modified capillary number Ca* (-)")
+    fig.colorbar(sc, ax=axes[0].tolist(), label="crack length at the judged time (mm)")
+    fig.suptitle("Crack length, three-pocket field (h = 2 mm)", fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sampler_dir", type=Path)
     ap.add_argument("meshes_dir", type=Path, nargs="?")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--figure", type=Path, help="PNG: the labels per mesh and the share of meshes fracturing")
+    ap.add_argument("--crack-map", type=Path, help="PNG: the crack length over the Ca*-C plane per mesh")
     a = ap.parse_args(argv)
     sampler = completed(a.sampler_dir, 0)
     both = paired(sampler, completed(a.meshes_dir, None)) if a.meshes_dir else None
@@ -74,6 +99,8 @@ def main(argv=None) -> int:
         la.figure(both, out["meshes"], "mesh_seed", L_PROTOCOL, a.figure,
                   f"Ca*-C labels at L_min = {L_PROTOCOL:g} mm on the three-pocket field, deterministic mesh (0) "
                   "and a perturbed one (1); h = 2 mm, B in 1/%, 95 % intervals")
+    if a.crack_map:
+        crack_map(sampler if both is None else pd.concat([sampler, both[both["mesh_seed"] != 0]]), a.crack_map)
     la.report(out, a.out)
     return 0
 
