@@ -290,15 +290,16 @@ def test_draws_campaign_is_the_h2_boundary_points_on_three_seeds():
 
 
 def test_pocket_mesh_stage_is_the_sampler_points_on_a_perturbed_mesh():
-    """ca_star_boundary_h2_pockets_meshes reruns exactly the points of ca_star_boundary_h2_pockets (its table, in
-    its order) with every setting of that campaign; only mesh_seed is added (1)."""
+    """ca_star_boundary_h2_pockets_meshes reruns exactly the points of ca_star_boundary_h2_pockets (its table; the
+    order is the sampler's, which a report may change in the table) with every setting of that campaign; only
+    mesh_seed is added (1)."""
     import csv
 
     pts = grid_points(load_spec(CAMPAIGNS / "ca_star_boundary_h2_pockets_meshes.toml"))
     sampler = load_spec(CAMPAIGNS / "ca_star_boundary_h2_pockets.toml")
     with open(ROOT / "results" / "ca_star_boundary_h2_pockets" / "table.csv", newline="") as f:
         table = [(float(r["cement"]), float(r["eta_o"])) for r in csv.DictReader(f)]
-    assert len(table) == 60 and [(p.params["cement"], p.params["eta_o"]) for p in pts] == table
+    assert len(table) == 60 and sorted((p.params["cement"], p.params["eta_o"]) for p in pts) == sorted(table)
     ref = grid_points(sampler)[0]
     for p in pts:
         assert {k: v for k, v in p.params.items() if k not in {"cement", "eta_o"}} == {
