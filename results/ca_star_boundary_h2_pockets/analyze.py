@@ -17,6 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from sweep import label_agreement as la
@@ -24,7 +25,8 @@ from sweep.load import load_campaign
 
 L_PROTOCOL = 4.0  # mm, the campaign's [classify] min_crack_length
 L_SCAN = (2.0, 3.0, 4.0, 5.0, 6.0)  # mm
-COLUMNS = ["mesh_seed", "cement", "eta_o", "Ca_star", "crack_length"]
+L_PEAK = (7.0, 8.0, 9.0, 10.0)  # mm: the longest-crack scan (8 mm: the rule chosen on the h = 1 line)
+COLUMNS = ["mesh_seed", "cement", "eta_o", "Ca_star", "crack_length", "open_tip_radius_max", "r_inner"]
 
 
 def completed(campaign_dir: Path, mesh_seed: int | None) -> pd.DataFrame:
@@ -43,6 +45,20 @@ def crack_summary(df: pd.DataFrame) -> dict:
             "distinct_values": sorted({round(float(v), 2) for v in L})}
 
 
+def peak_record(df: pd.DataFrame) -> dict:
+    """Not the protocol (added after the sampler's runs, reported whole): the label of sweep.classify's
+    ``crack_record = "longest"`` (the longest crack up to the judged time, mm), whose L_min = 8 mm was chosen on
+    the h = 1 random-field line (results/ca_star_peak_label_h2/), with the fit at L_PEAK; and the rank
+    correlations of the judged and the longest crack with C and Ca*."""
+    from scipy.stats import spearmanr
+
+    peak = df.assign(crack_length=np.maximum(df["crack_length"], df["open_tip_radius_max"] - df["r_inner"]))
+    rho = {f"{which}_vs_{c}": float(spearmanr(d["crack_length"], d[c])[0])
+           for which, d in (("judged", df), ("longest", peak)) for c in ("cement", "Ca_star")}
+    return {"L_scan": {str(l): la.separatrix(peak, l) for l in L_PEAK}, "spearman": rho,
+            "longest_crack_mm": crack_summary(peak), "closing_mm_median": float((peak["crack_length"] - df["crack_length"]).median())}
+
+
 def paired(sampler: pd.DataFrame, meshes: pd.DataFrame) -> pd.DataFrame:
     """The sampler's runs at the mesh stage's points (matched exactly: the stage copies them at full precision)
     followed by the mesh stage's runs."""
@@ -54,9 +70,11 @@ def judge(sampler: pd.DataFrame, both: pd.DataFrame | None) -> dict:
     """Parts 1-2 on the sampler's runs and, with the mesh stage (``both``: :func:`paired`), part 3."""
     out = {"sampler": {"at_L4": la.separatrix(sampler, L_PROTOCOL),
                        "L_scan": {str(l): la.separatrix(sampler, l) for l in L_SCAN},
-                       "crack_length_mm": crack_summary(sampler)}}
+                       "crack_length_mm": crack_summary(sampler)},
+           "longest_crack_not_protocol": peak_record(sampler)}
     if both is not None:
-        out["meshes"] = la.judge(both, "mesh_seed", L_PROTOCOL, L_SCAN)
+        out["meshes"] = {**la.judge(both, "mesh_seed", L_PROTOCOL, L_SCAN),
+                         "agreement_L_scan": {str(l): la.agreement(both, "mesh_seed", l) for l in L_SCAN}}
     return out
 
 
