@@ -8,7 +8,10 @@ campaign that reruns the same points on other realizations asks how much of the 
 * :func:`separatrix` — the fit Ca*_c = A exp(B C) (:func:`sweep.diagrams.separatrix_profile_interval`) on a set of
   runs, or the reason none can be fitted;
 * :func:`judge` — both, per realization and pooled, with the pooled fit over a scan of L_min;
-* :func:`figure` — one panel per realization and one of the share of realizations that fracture.
+* :func:`figure` — one panel per realization and one of the share of realizations that fracture;
+* :func:`longest`, :func:`crack_summary`, :func:`rank_correlations` — the crack as a continuous quantity: the
+  longest crack up to the judged time (the record of ``crack_record = "longest"``), the lengths' quantiles and
+  distinct values, and their rank correlations with C and Ca*.
 
 Rule 1 of ``sweep.classify`` labels a run fracturing iff its crack is longer than L_min
 (:func:`fracturing`), so the labels at another L_min are read from the stored crack lengths.
@@ -26,7 +29,8 @@ import pandas as pd
 from sweep.diagrams import separatrix_profile_interval
 from sweep.store import write_json_atomic
 
-__all__ = ["fracturing", "agreement", "separatrix", "judge", "figure", "report"]
+__all__ = ["fracturing", "agreement", "separatrix", "judge", "figure", "report", "longest", "crack_summary",
+           "rank_correlations"]
 
 POINT = ["cement", "eta_o"]  # a Ca*–C point: cement ratio (%) and oil viscosity (kPa·s)
 
@@ -34,6 +38,27 @@ POINT = ["cement", "eta_o"]  # a Ca*–C point: cement ratio (%) and oil viscosi
 def fracturing(df: pd.DataFrame, l_min: float) -> pd.Series:
     """Rule 1 of sweep.classify at L_min (mm): a run fractures iff its ``crack_length`` (mm) exceeds L_min."""
     return df["crack_length"] > l_min
+
+
+def longest(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with ``crack_length`` (mm) replaced by the longest crack up to the judged time: the larger of the
+    judged crack and ``open_tip_radius_max`` − ``r_inner`` (mm), as ``sweep.classify`` reads it with
+    ``crack_record = "longest"`` for a run judged at its last step."""
+    return df.assign(crack_length=np.maximum(df["crack_length"], df["open_tip_radius_max"] - df["r_inner"]))
+
+
+def crack_summary(df: pd.DataFrame) -> dict:
+    """The crack lengths (mm) of the runs: quantiles 0, 25, 50, 75, 100 % and the distinct values to 0.01 mm."""
+    L = df["crack_length"]
+    return {"quantiles_0_25_50_75_100": [float(v) for v in L.quantile([0, 0.25, 0.5, 0.75, 1.0])],
+            "distinct_values": sorted({round(float(v), 2) for v in L})}
+
+
+def rank_correlations(df: pd.DataFrame, columns: Sequence[str] = ("cement", "Ca_star")) -> dict:
+    """Spearman's rank correlation of ``crack_length`` with each of ``columns``."""
+    from scipy.stats import spearmanr
+
+    return {c: float(spearmanr(df["crack_length"], df[c])[0]) for c in columns}
 
 
 def agreement(df: pd.DataFrame, by: str, l_min: float) -> dict:

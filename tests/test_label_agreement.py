@@ -53,3 +53,16 @@ def test_judge_keys_follow_the_realization_column_and_the_scan():
     out = la.judge(df, "mesh_seed", 4.0, (3.0, 5.0))
     assert set(out) == {"agreement_at_L4", "per_mesh_seed_at_L4", "pooled_at_L4", "pooled_L_scan"}
     assert set(out["per_mesh_seed_at_L4"]) == {0, 1} and set(out["pooled_L_scan"]) == {"3.0", "5.0"}
+
+
+def test_longest_crack_is_the_larger_of_the_judged_and_the_recorded_peak():
+    df = pd.DataFrame({"crack_length": [5.0, 3.0, 0.0], "open_tip_radius_max": [9.0, 12.5, 4.0], "r_inner": 5.0})
+    assert la.longest(df)["crack_length"].tolist() == [5.0, 7.5, 0.0]   # a peak below the cavity counts as no crack
+
+
+def test_crack_summary_and_rank_correlations():
+    df = pd.DataFrame({"crack_length": [1.0, 2.0, 2.004, 4.0, 5.0], "cement": [5, 4, 3, 2, 1],
+                       "Ca_star": [1e7, 2e7, 3e7, 4e7, 5e7]})
+    s = la.crack_summary(df)
+    assert s["quantiles_0_25_50_75_100"] == [1.0, 2.0, 2.004, 4.0, 5.0] and s["distinct_values"] == [1.0, 2.0, 4.0, 5.0]
+    assert la.rank_correlations(df) == {"cement": pytest.approx(-1.0), "Ca_star": pytest.approx(1.0)}

@@ -17,7 +17,6 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from sweep import label_agreement as la
@@ -38,25 +37,17 @@ def completed(campaign_dir: Path, mesh_seed: int | None) -> pd.DataFrame:
     return df[COLUMNS].reset_index(drop=True)
 
 
-def crack_summary(df: pd.DataFrame) -> dict:
-    """The crack lengths (mm) of the runs: quantiles and the distinct values to 0.01 mm."""
-    L = df["crack_length"]
-    return {"quantiles_0_25_50_75_100": [float(v) for v in L.quantile([0, 0.25, 0.5, 0.75, 1.0])],
-            "distinct_values": sorted({round(float(v), 2) for v in L})}
-
-
 def peak_record(df: pd.DataFrame) -> dict:
     """Not the protocol (added after the sampler's runs, reported whole): the label of sweep.classify's
     ``crack_record = "longest"`` (the longest crack up to the judged time, mm), whose L_min = 8 mm was chosen on
     the h = 1 random-field line (results/ca_star_peak_label_h2/), with the fit at L_PEAK; and the rank
     correlations of the judged and the longest crack with C and Ca*."""
-    from scipy.stats import spearmanr
-
-    peak = df.assign(crack_length=np.maximum(df["crack_length"], df["open_tip_radius_max"] - df["r_inner"]))
-    rho = {f"{which}_vs_{c}": float(spearmanr(d["crack_length"], d[c])[0])
-           for which, d in (("judged", df), ("longest", peak)) for c in ("cement", "Ca_star")}
+    peak = la.longest(df)
+    rho = {f"{which}_vs_{c}": v for which, d in (("judged", df), ("longest", peak))
+           for c, v in la.rank_correlations(d).items()}
     return {"L_scan": {str(l): la.separatrix(peak, l) for l in L_PEAK}, "spearman": rho,
-            "longest_crack_mm": crack_summary(peak), "closing_mm_median": float((peak["crack_length"] - df["crack_length"]).median())}
+            "longest_crack_mm": la.crack_summary(peak),
+            "closing_mm_median": float((peak["crack_length"] - df["crack_length"]).median())}
 
 
 def paired(sampler: pd.DataFrame, meshes: pd.DataFrame) -> pd.DataFrame:
@@ -70,7 +61,7 @@ def judge(sampler: pd.DataFrame, both: pd.DataFrame | None) -> dict:
     """Parts 1-2 on the sampler's runs and, with the mesh stage (``both``: :func:`paired`), part 3."""
     out = {"sampler": {"at_L4": la.separatrix(sampler, L_PROTOCOL),
                        "L_scan": {str(l): la.separatrix(sampler, l) for l in L_SCAN},
-                       "crack_length_mm": crack_summary(sampler)},
+                       "crack_length_mm": la.crack_summary(sampler)},
            "longest_crack_not_protocol": peak_record(sampler)}
     if both is not None:
         out["meshes"] = {**la.judge(both, "mesh_seed", L_PROTOCOL, L_SCAN),
