@@ -3,15 +3,15 @@
 ``code_hash()`` is the SHA-256 (first 16 hex digits) of the solver package's ``*.py`` files,
 sorted by name, each hashed by content (never by modification time), found next to this
 module through ``__file__``: an installed (non-editable) copy hashes its own files.
-``classifier_code_hash()`` hashes the regime classifier (``sweep/classify.py``) and the solver
-module it imports (``solver/tomlio.py``, which reads a run's parameters).
+The classifier's hash lives beside the classifier (``sweep.regimes.provenance``): the solver never imports
+``sweep``.
 
 A result stored with a hash other than the current one was made by other code (stale).
 Both hashes are computed once per process.
 
 Command line (prints the hashes of this copy, or of a git revision of a checkout)::
 
-    python -m solver.codehash [--git REV [--repo DIR]]
+    python -m solver.codehash [--git REV [--repo DIR]]     (the classifier's: python -m sweep.regimes.provenance)
 """
 from __future__ import annotations
 
@@ -20,12 +20,10 @@ import hashlib
 from pathlib import Path
 from typing import Iterable
 
-__all__ = ["source_hash", "directory_hash", "code_hash", "classifier_code_hash", "git_hashes", "HASH_DIGITS"]
+__all__ = ["source_hash", "directory_hash", "code_hash", "git_code_hash", "HASH_DIGITS"]
 
 HASH_DIGITS = 16
 SOLVER_DIR = Path(__file__).resolve().parent
-# the classifier's files, relative to the folder holding the solver and sweep packages
-CLASSIFIER_FILES = ("sweep/classify.py", "solver/tomlio.py")
 
 
 def source_hash(files: Iterable[tuple[str, bytes]]) -> str:
@@ -51,28 +49,17 @@ def code_hash() -> str:
     return directory_hash(SOLVER_DIR)
 
 
-@functools.lru_cache(maxsize=None)
-def classifier_code_hash() -> str:
-    """Hash of the regime classifier's source (``sweep/classify.py`` and ``solver/tomlio.py``)."""
-    import sweep.classify
-
-    classify_file = Path(sweep.classify.__file__).resolve()
-    paths = {"sweep/classify.py": classify_file, "solver/tomlio.py": SOLVER_DIR / "tomlio.py"}
-    return source_hash((name, paths[name].read_bytes()) for name in CLASSIFIER_FILES)
+def git_code_hash(rev: str, repo=".") -> str:
+    """Hash of the solver's sources at git revision ``rev`` of the checkout ``repo``: what a result made by
+    that commit's code records as ``code_hash``."""
+    names = _git(repo, "ls-tree", "--name-only", rev, "solver/").decode().split()
+    return source_hash((Path(n).name, _git(repo, "show", f"{rev}:{n}")) for n in names if n.endswith(".py"))
 
 
-def git_hashes(rev: str, repo=".") -> dict:
-    """{"code_hash", "classifier_hash"} of the sources at git revision ``rev`` of the checkout ``repo``:
-    what a result made by that commit's code records."""
+def _git(repo, *args) -> bytes:
     import subprocess
 
-    def git(*args) -> bytes:
-        return subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True).stdout
-
-    names = git("ls-tree", "--name-only", rev, "solver/").decode().split()
-    solver = [(Path(n).name, git("show", f"{rev}:{n}")) for n in names if n.endswith(".py")]
-    classifier = [(n, git("show", f"{rev}:{n}")) for n in CLASSIFIER_FILES]
-    return {"code_hash": source_hash(solver), "classifier_hash": source_hash(classifier)}
+    return subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True).stdout
 
 
 def main(argv=None) -> int:
@@ -85,8 +72,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repo", default=".", metavar="DIR", help="git checkout for --git (default: .)")
     a = ap.parse_args(argv)
     try:
-        hashes = git_hashes(a.git, a.repo) if a.git else {"code_hash": code_hash(),
-                                                          "classifier_hash": classifier_code_hash()}
+        hashes = {"code_hash": git_code_hash(a.git, a.repo) if a.git else code_hash()}
     except subprocess.CalledProcessError as e:
         print(f"error: --git {a.git}: {e.stderr.decode(errors='replace').strip()}", file=sys.stderr)
         return 2

@@ -1,7 +1,17 @@
-"""dchfrac campaigns: specs, scheduler, results store, classifier, diagrams, loaders.
+"""dchfrac's studies over the solver, in four floors (each imports only those below it, and ``solver``):
+
+* ``sweep.regimes``: what a run *is*: the regime classifier, the dimensionless numbers, the regime model and
+  the phase diagrams (no campaign machinery);
+* ``sweep.campaign``: the campaign engine: specs, samplers, scheduler, run store, tables, loaders, reports;
+* ``sweep.studies``: studies of the paper built on campaigns: the reference run, the fidelity study, label
+  agreement over realizations, threshold sensitivity, benchmarks;
+* ``sweep.discrepancy``: the discrepancy workflow (measured data -> the missing effect);
+* ``sweep.cli`` (the ``dchfrac`` command) and ``sweep.animate`` on top.
+
+The public loaders::
 
     from sweep import load_campaign, load_timeseries
 """
-from .load import load_campaign, load_timeseries
+from .campaign.load import load_campaign, load_timeseries
 
 __all__ = ["load_campaign", "load_timeseries"]

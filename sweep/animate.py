@@ -52,7 +52,7 @@ def build_animation(run_dir, fields: Sequence[str] = ("S", "phi", "d", "p")):
     from matplotlib.tri import Triangulation
 
     from solver.output import SNAPSHOT_FIELDS, load_run
-    from sweep.figures import axis_label, colour_scale
+    from sweep.campaign.figures import axis_label, colour_scale
 
     pts, tri, snaps = load_run(run_dir)
     if not snaps:

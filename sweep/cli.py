@@ -132,7 +132,7 @@ def _bench_options(pairs: list[str]) -> dict:
 
 
 def cmd_bench(args) -> int:
-    from .bench import run_benchmarks, run_profile
+    from .studies.bench import run_benchmarks, run_profile
 
     out = args.out or ("results/bench/profile.json" if args.profile else "results/bench/bench.json")
     bad = _writable_or_exit("bench", Path(out).parent, "--out folder")
@@ -163,7 +163,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from .reference import convergence_report, reference_report
+    from .studies.reference import convergence_report, reference_report
 
     bad = _writable_or_exit("report", args.out, "--out")
     if bad:
@@ -327,7 +327,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", required=True)
     rp.add_argument("--paper", help="path to paper_reported.toml (default: the shared file beside the project, else the copy shipped with the package)")
     rp.set_defaults(func=cmd_report)
-    from .campaign_cli import add_campaign_commands
+    from .campaign.cli import add_campaign_commands
     from .discrepancy.cli import add_discrepancy_commands
 
     add_campaign_commands(sub)
@@ -339,7 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from .logs import end_logging, setup_logging
+    from .campaign.logs import end_logging, setup_logging
 
     args = build_parser().parse_args(argv)
     setup_logging(args.verbose, args.less)

@@ -1,11 +1,11 @@
-"""Campaign accounting (sweep.accounting) on records with known start and end times."""
+"""Campaign accounting (sweep.campaign.accounting) on records with known start and end times."""
 from __future__ import annotations
 
 from datetime import datetime, timedelta
 
 import pytest
 
-from sweep.accounting import campaign_throughput, run_intervals
+from sweep.campaign.accounting import campaign_throughput, run_intervals
 
 T0 = datetime(2026, 11, 26, 12, 0, 0)
 

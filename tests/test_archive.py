@@ -1,4 +1,4 @@
-"""Pruning a campaign (sweep.archive): the labels, the table and the resume are those of the unpruned runs.
+"""Pruning a campaign (sweep.campaign.archive): the labels, the table and the resume are those of the unpruned runs.
 
 The runner writes run folders in the solver's format: an annulus r = 10..60 mm, three snapshots at 0.5, 1 and
 1.5 s, a front of S at R(t) = 30 t mm, and an open crack (phi = 1) along the +x axis from r_i to r_i + L with
@@ -14,11 +14,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweep.archive import LABEL_FIELDS, prune_campaign, prune_run
-from sweep.campaign import build_table, plan_campaign, reclassify, run_campaign
-from sweep.campaign_cli import main as cli_main
-from sweep.spec import spec_from_dict
-from sweep.store import ResultsStore, verify_run
+from sweep.campaign.archive import LABEL_FIELDS, prune_campaign, prune_run
+from sweep.campaign.engine import build_table, plan_campaign, reclassify, run_campaign
+from sweep.campaign.cli import main as cli_main
+from sweep.campaign.spec import spec_from_dict
+from sweep.campaign.store import ResultsStore, verify_run
 
 VERSION = "test-archive"
 R_I, R_O = 10.0, 60.0

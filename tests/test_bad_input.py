@@ -206,8 +206,8 @@ _BASE = 'name = "c"\n[base]\nw_i = 10.0\n[options]\nh = 4.0\nt_end = 0.5\n'
     (_BASE + "stop_front_radius = 2.0\n", "stop_front_radius=2.0"),
     (_BASE.replace("h = 4.0", "h = 8.0") + "[axes]\nr_outer = [53.0, 20.0]\n", "grid point (r_outer=20.0)"),
     (_BASE + "[run]\nrunner = \"no_such_module:run\"\n", "run.runner: runner='no_such_module:run' cannot be imported"),
-    (_BASE + "[run]\nrunner = \"sweep.spec:no_such_function\"\n", "cannot be imported"),
-    (_BASE + "[run]\nrunner = \"sweep.spec\"\n", "must be 'module:function'"),
+    (_BASE + "[run]\nrunner = \"sweep.campaign.spec:no_such_function\"\n", "cannot be imported"),
+    (_BASE + "[run]\nrunner = \"sweep.campaign.spec\"\n", "must be 'module:function'"),
     (_BASE + "[run]\nmax_runs = 0\n", "max_runs=0 must be an integer >= 1"),
     (_BASE + "[axes]\ncement = {linear = [0.5, 3.0, 1000]}\neta_o = {log = [0.01, 1.0, 1000]}\n",
      "axes: 1000000 runs exceed the limit max_runs = 10000"),
@@ -216,7 +216,7 @@ _BASE = 'name = "c"\n[base]\nw_i = 10.0\n[options]\nh = 4.0\nt_end = 0.5\n'
     ('name = "c"\n[axes]\ncement = [1.0, 2.0]\nh = [4.0, 30.0]\n', "grid point (cement=1.0, h=30.0): run option h=30.0"),
 ])
 def test_campaign_dry_run_refuses(tmp_path, capsys, text, fragment):
-    from sweep.campaign_cli import main
+    from sweep.campaign.cli import main
 
     spec = tmp_path / "c.toml"
     spec.write_text(text)
@@ -225,7 +225,7 @@ def test_campaign_dry_run_refuses(tmp_path, capsys, text, fragment):
 
 
 def test_campaign_grid_limit_can_be_raised(tmp_path, capsys):
-    from sweep.campaign_cli import main
+    from sweep.campaign.cli import main
 
     spec = tmp_path / "c.toml"
     spec.write_text(_BASE + "[axes]\ncement = {linear = [0.5, 3.0, 20]}\n[run]\nmax_runs = 10\n")
@@ -234,7 +234,7 @@ def test_campaign_grid_limit_can_be_raised(tmp_path, capsys):
 
 
 def test_campaign_dry_run_warns_of_an_unresolved_interface(tmp_path, capsys):
-    from sweep.campaign_cli import main
+    from sweep.campaign.cli import main
 
     spec = tmp_path / "c.toml"
     spec.write_text(_BASE.replace("h = 4.0\n", "") + "[axes]\nh = [2.0, 4.0]\n")
@@ -245,7 +245,7 @@ def test_campaign_dry_run_warns_of_an_unresolved_interface(tmp_path, capsys):
 
 
 def test_campaign_refuses_an_unwritable_results_folder(tmp_path, capsys):
-    from sweep.campaign_cli import main
+    from sweep.campaign.cli import main
 
     spec = tmp_path / "c.toml"
     spec.write_text(_BASE)
@@ -429,19 +429,19 @@ def test_workflow_runs_on_conditions_with_a_seed_column(tmp_path):
     ("anderson_depth", "--option 'anderson_depth' is not allowed: name=value"), ("first_stagger_rtol=fast", "first_stagger_rtol='fast'"),
 ])
 def test_bench_profile_refuses_bad_run_options_before_any_run(tmp_path, capsys, option, fragment, monkeypatch):
-    import sweep.bench
+    import sweep.studies.bench
     from sweep.cli import main
 
-    monkeypatch.setattr(sweep.bench, "run_profile", lambda *a, **k: pytest.fail("a run started"))
+    monkeypatch.setattr(sweep.studies.bench, "run_profile", lambda *a, **k: pytest.fail("a run started"))
     _refused(capsys, main(["bench", "--profile", "--out", str(tmp_path / "p.json"), "--option", option]), fragment)
 
 
 def test_bench_profile_passes_its_run_options(tmp_path, monkeypatch):
-    import sweep.bench
+    import sweep.studies.bench
     from sweep.cli import main
 
     seen = {}
-    monkeypatch.setattr(sweep.bench, "run_profile", lambda out, sizes, t_end, options=None: seen.update(options=options))
+    monkeypatch.setattr(sweep.studies.bench, "run_profile", lambda out, sizes, t_end, options=None: seen.update(options=options))
     assert main(["bench", "--profile", "--out", str(tmp_path / "p.json"), "--option", "anderson_depth=3",
                  "--option", "first_stagger_rtol=1e-3"]) == 0
     assert seen["options"] == {"anderson_depth": 3, "first_stagger_rtol": 1e-3}

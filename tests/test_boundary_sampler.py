@@ -1,7 +1,7 @@
 """The boundary sampler on known answers: synthetic oracles replace the solver (no solver run).
 
 * An exponential separatrix Ca*_c = A exp(B C) (porous invasion / fracturing) over (C, eta_o), Ca*
-  from sweep.numbers as in a campaign table; sharp, and with a fuzzy transition (labels drawn from a
+  from sweep.regimes.numbers as in a campaign table; sharp, and with a fuzzy transition (labels drawn from a
   logistic of width W_FUZZY decades about the separatrix).
 * A 3-regime map over two log axes whose regions are the argmax of three quadratics (curved
   boundaries and a triple point).
@@ -11,7 +11,7 @@ pair of labels between the true and the fitted boundaries, in tolerance units, <
 the runs of the grid that reaches the same tolerance (spacing 2 x tolerance on every axis: a boundary
 between two neighbours of different labels is then within one tolerance of their midpoint); and, on the
 separatrix, sharp and fuzzy, the 95 % profile intervals of A and B
-(sweep.diagrams.separatrix_profile_interval) cover the truth in >= 90 % of seeds.
+(sweep.regimes.diagrams.separatrix_profile_interval) cover the truth in >= 90 % of seeds.
 
 Seed counts of the coverage claim, from the binomial law of the number of seeds covered: with the
 sharp separatrix the intervals bound the separating separatrices and are conservative, 20 seeds and
@@ -29,11 +29,11 @@ import pandas as pd
 import pytest
 from scipy.spatial import cKDTree
 
-from sweep.boundary import BoundarySampler
-from sweep.campaign import _numbers
-from sweep.diagrams import separatrix_profile_interval
-from sweep.regime_model import unit_grid
-from sweep.spec import SpecError, spec_from_dict
+from sweep.campaign.boundary import BoundarySampler
+from sweep.campaign.engine import _numbers
+from sweep.regimes.diagrams import separatrix_profile_interval
+from sweep.regimes.regime_model import unit_grid
+from sweep.campaign.spec import SpecError, spec_from_dict
 
 SEEDS = range(20)
 A_TRUE, B_TRUE = 1.0e6, 1.2          # Ca*_c = A exp(B C), C in %
@@ -219,7 +219,7 @@ def test_classifier_prior_scale_follows_the_transition_width(beta):
     """Type-II maximum likelihood of the prior scale sigma: with 2000 labels drawn from P = expit(beta u) the
     slope's direction w_b - w_a (prior sd sigma sqrt 2) is beta, so the evidence peaks at sigma = beta / sqrt 2,
     and the factor-2 grid holds a point in [beta / 2, beta]; a step picks the largest sigma (the sharpest)."""
-    from sweep.regime_model import AxisScale, fit_regime_model
+    from sweep.regimes.regime_model import AxisScale, fit_regime_model
 
     axes = (AxisScale("x", 0.0, 1.0, False, 0.01),)
     rng = np.random.default_rng(0)
@@ -254,7 +254,7 @@ def _campaign_spec(source="<dict>"):
 
 
 def _coords(root):
-    from sweep.store import ResultsStore
+    from sweep.campaign.store import ResultsStore
 
     return sorted((r["params"]["cement"], r["params"]["eta_o"]) for r in ResultsStore(root, "bnd").records().values())
 
@@ -262,7 +262,7 @@ def _coords(root):
 def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path):
     import json
 
-    from sweep.campaign import run_campaign
+    from sweep.campaign.engine import run_campaign
 
     spec = _campaign_spec()
     full = run_campaign(spec, tmp_path / "full", runner=separatrix_runner, code_hash="t", progress=None)
@@ -270,8 +270,8 @@ def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path)
     assert state["stopped"] and state["runs_used"] == full.n_executed == len(_coords(tmp_path / "full")) <= 40
     st, _ = drive(spec, separatrix_sharp)
     assert sorted(c for r in st.rounds for c in r) == _coords(tmp_path / "full")     # the sequence, stored
-    from sweep.campaign import _boundary_figure, build_table
-    from sweep.store import ResultsStore
+    from sweep.campaign.engine import _boundary_figure, build_table
+    from sweep.campaign.store import ResultsStore
 
     figs, table = _boundary_figure(spec, ResultsStore(tmp_path / "full", "bnd"), build_table(spec, tmp_path / "full",
                                                                                               code_hash="t"))
@@ -290,8 +290,8 @@ def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path)
 
 
 def test_cli_status_shows_round_budget_and_uncertainty(tmp_path, capsys):
-    from sweep.campaign import run_campaign
-    from sweep.campaign_cli import main as cli_main
+    from sweep.campaign.engine import run_campaign
+    from sweep.campaign.cli import main as cli_main
 
     path = tmp_path / "bnd.toml"
     path.write_text('name = "bnd"\n[base]\neta_w = 1e-6\nkbar = 0.0015\n[options]\nh = 4.0\n[axes]\n'
@@ -351,8 +351,8 @@ def test_fill_batch_runs_full_rounds_where_one_band_covers_every_candidate():
 def test_nf_vs_nb_classifier_shading_recovers_a_known_map(tmp_path):
     """The smooth shading is the regime classifier fitted in the log plane: on runs from a known 3-regime map
     (a 6 x 6 grid) its most probable regime agrees with the map away from the boundaries."""
-    from sweep.diagrams import plot_nf_vs_nb
-    from sweep.regime_model import AxisScale, fit_regime_model
+    from sweep.regimes.diagrams import plot_nf_vs_nb
+    from sweep.regimes.regime_model import AxisScale, fit_regime_model
 
     lx, ly = np.meshgrid(np.linspace(-2, 4, 6), np.linspace(-3, 2, 6))
     lab = _map_truth(np.c_[10 ** (lx.ravel() / 1.5 - 2.0), 10 ** (ly.ravel() * 0.6 - 2.5)])

@@ -18,10 +18,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from sweep.campaign import build_table, plan_campaign, run_campaign, write_report
-from sweep.campaign_cli import main as cli_main
-from sweep.columns import typed_table
-from sweep.spec import spec_from_dict
+from sweep.campaign.engine import build_table, plan_campaign, run_campaign, write_report
+from sweep.campaign.cli import main as cli_main
+from sweep.campaign.columns import typed_table
+from sweep.campaign.spec import spec_from_dict
 
 VERSION = "test-1"
 HERE = Path(__file__).resolve().parent
@@ -107,7 +107,7 @@ def test_table_rows_known_answers_and_store_layout(tmp_path):
     assert list(t["regime"]) == ["porous_invasion", "fracturing", "porous_invasion", "fracturing",
                                  "porous_invasion", "porous_invasion"]
     assert set(t["status"]) == {"ok"} and list(t["h_used"]) == [4.0] * 6
-    # dimensionless numbers of sweep.numbers: Ca = eta_o w_i / gamma (gamma = 0.03 kPa*mm by default)
+    # dimensionless numbers of sweep.regimes.numbers: Ca = eta_o w_i / gamma (gamma = 0.03 kPa*mm by default)
     assert list(t["Ca"]) == pytest.approx(list(t["eta_o"] * 10.0 / 0.03), rel=1e-12)
     for key in t["key"]:
         d = tmp_path / "toy" / "runs" / key
@@ -177,7 +177,7 @@ _INTERRUPTED = textwrap.dedent("""
     signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's Ctrl-C, whatever disposition the test
     sys.path[:0] = [{here!r}, {repo!r}]                        # process passed on (an ignored SIGINT is inherited)
     from test_campaign_run import _spec, gated_runner, VERSION
-    from sweep.campaign import run_campaign
+    from sweep.campaign.engine import run_campaign
     spec = _spec(axes={{"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]}})
     run_campaign(spec, {root!r}, runner=gated_runner, jobs=2, code_hash=VERSION, progress=None)
 """)
@@ -328,7 +328,7 @@ def test_report_of_an_unrun_campaign_lists_pending(tmp_path):
 def test_add_campaign_commands_parses_every_option():
     import argparse
 
-    from sweep.campaign_cli import add_campaign_commands, cmd_run, cmd_status
+    from sweep.campaign.cli import add_campaign_commands, cmd_run, cmd_status
 
     parser = argparse.ArgumentParser(prog="dchfrac")
     add_campaign_commands(parser.add_subparsers(dest="command"))
@@ -385,8 +385,8 @@ def contract_runner(params, options, run_dir):
 
 
 def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
-    pytest.importorskip("sweep.classify")
-    from sweep.campaign import plot_campaign, reclassify
+    pytest.importorskip("sweep.regimes.classify")
+    from sweep.campaign.engine import plot_campaign, reclassify
 
     spec = spec_from_dict({"name": "fmt", "axes": {"eta_o": [0.25, 1.0]},
                            "diagrams": [{"kind": "timeseries", "x": "t", "y": "p_inj", "by": "eta_o"},
@@ -406,7 +406,7 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
 
 def test_dry_run_counts_the_per_run_overhead_of_short_runs(tmp_path):
     """Without bench figures a run of almost no simulated time still costs the default per-run overhead."""
-    from sweep.campaign import (DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2,
+    from sweep.campaign.engine import (DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2,
                                 estimate_cost)
 
     spec = tmp_path / "clitoy.toml"

@@ -6,13 +6,19 @@ from pathlib import Path
 
 import pytest
 
-from sweep.sampler import GridSampler, grid_points
-from sweep.spec_model import canonical_json
-from sweep.spec import SpecError, load_spec, spec_from_dict
-from sweep.store import run_key
+from sweep.campaign.sampler import GridSampler, grid_points
+from sweep.campaign.spec_model import canonical_json
+from sweep.campaign.spec import SpecError, load_spec, spec_from_dict
+from sweep.campaign.store import run_key
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPAIGNS = ROOT / "campaigns"
+
+
+def _campaign(name: str) -> Path:
+    """The one spec of that name in the campaigns/ folders (examples, paper, studies, discrepancy)."""
+    (path,) = CAMPAIGNS.rglob(f"{name}.toml")
+    return path
 
 
 def _swept(spec):
@@ -195,7 +201,7 @@ EXPECTED_SIZES = {"reference": 1, "mesh_convergence": 3, "ca_star_vs_cement": 30
 @pytest.mark.parametrize("name", ["ca_star_vs_cement", "fracture_sensitivity", "branching_number", "nf_vs_nb"])
 def test_h2_campaigns_are_their_studies_at_h_2(name):
     """The h = 2 mm versions run exactly the grid of the h = 1 mm study, only the mesh differs."""
-    full, h2 = (grid_points(load_spec(CAMPAIGNS / f"{n}.toml")) for n in (name, f"{name}_h2"))
+    full, h2 = (grid_points(load_spec(_campaign(n))) for n in (name, f"{name}_h2"))
     assert [p.params for p in full] == [p.params for p in h2]
     assert all(p.options["h"] == 1.0 for p in full) and all(p.options["h"] == 2.0 for p in h2)
     assert [{**p.options, "h": 0} for p in full] == [{**p.options, "h": 0} for p in h2]
@@ -203,25 +209,25 @@ def test_h2_campaigns_are_their_studies_at_h_2(name):
 
 @pytest.mark.parametrize("name", sorted(EXPECTED_SIZES))
 def test_campaign_files_load_with_expected_grid_size(name):
-    spec = load_spec(CAMPAIGNS / f"{name}.toml")
+    spec = load_spec(_campaign(name))
     assert spec.name == name
     assert len(grid_points(spec)) == EXPECTED_SIZES[name]
 
 
 def test_reference_campaign_is_sec_3_5():
-    (p,) = grid_points(load_spec(CAMPAIGNS / "reference.toml"))
+    (p,) = grid_points(load_spec(_campaign("reference")))
     assert (p.params["cement"], p.params["eta_o"], p.params["eta_w"], p.params["kbar"]) == (1.2, 0.29, 1e-6, 0.0015)
     assert (p.options["h"], p.options["t_end"]) == (1.0, 2.0)
 
 
 def test_mesh_convergence_uses_pockets_and_three_meshes():
-    pts = grid_points(load_spec(CAMPAIGNS / "mesh_convergence.toml"))
+    pts = grid_points(load_spec(_campaign("mesh_convergence")))
     assert [p.options["h"] for p in pts] == [4.0, 2.0, 1.0]
     assert {p.params["porosity_field"] for p in pts} == {"pockets"}
 
 
 def test_ca_star_campaign_spans_two_decades_and_the_cement_range():
-    pts = grid_points(load_spec(CAMPAIGNS / "ca_star_vs_cement.toml"))
+    pts = grid_points(load_spec(_campaign("ca_star_vs_cement")))
     prod = sorted({p.params["eta_o"] * p.params["w_i"] for p in pts})
     assert prod[-1] / prod[0] == pytest.approx(100.0, rel=1e-9)
     assert sorted({p.params["cement"] for p in pts}) == [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
@@ -229,7 +235,7 @@ def test_ca_star_campaign_spans_two_decades_and_the_cement_range():
 
 
 def test_fracture_sensitivity_is_tenfold_around_the_c12_laws():
-    pts = grid_points(load_spec(CAMPAIGNS / "fracture_sensitivity.toml"))
+    pts = grid_points(load_spec(_campaign("fracture_sensitivity")))
     C = 1.2
     law = {"psi_c": 0.0015 * C**2, "Gc": (0.26 * C + 1.0) ** 2, "beta": 65.7 * math.sqrt(C)}
     for name, ref in law.items():
@@ -246,7 +252,7 @@ def test_branching_number_rows_match_the_paper():
     if not ref.exists():
         pytest.skip("shared/data/paper_reported.toml not beside the repository")
     rows = tomllib.loads(ref.read_text())["branching_number_sensitivity"]
-    pts = grid_points(load_spec(CAMPAIGNS / "branching_number.toml"))
+    pts = grid_points(load_spec(_campaign("branching_number")))
     for row, var in (("permeability_row", "kbar"), ("water_viscosity_row", "eta_w"), ("oil_viscosity_row", "eta_o")):
         fixed = {k: v for k, v in rows[row].items() if k in ("kbar", "eta_w", "eta_o")}
         got = sorted(p.params[var] for p in pts if all(p.params[k] == v for k, v in fixed.items() if k != var))
@@ -254,14 +260,14 @@ def test_branching_number_rows_match_the_paper():
 
 
 def test_nf_vs_nb_covers_appendix_a_ranges():
-    pts = grid_points(load_spec(CAMPAIGNS / "nf_vs_nb.toml"))
+    pts = grid_points(load_spec(_campaign("nf_vs_nb")))
     for name, (lo, hi) in {"eta_o": (1e-4, 1.0), "eta_w": (1e-6, 1e-3), "kbar": (1e-4, 1e-1)}.items():
         vals = [p.params[name] for p in pts]
         assert min(vals) == lo and max(vals) == hi
 
 
 def test_demo_is_coarse_and_spans_both_sides():
-    pts = grid_points(load_spec(CAMPAIGNS / "demo.toml"))
+    pts = grid_points(load_spec(_campaign("demo")))
     assert {p.options["h"] for p in pts} == {4.0}
     cs = sorted({p.params["cement"] for p in pts})
     assert cs[0] <= 0.5 and cs[-1] >= 3.0
@@ -272,8 +278,8 @@ def test_draws_campaign_is_the_h2_boundary_points_on_three_seeds():
     setting of that campaign; only the porosity seed varies (0, 1, 2)."""
     import csv
 
-    pts = grid_points(load_spec(CAMPAIGNS / "ca_star_boundary_h2_draws.toml"))
-    floor = load_spec(CAMPAIGNS / "ca_star_boundary_h2_floor.toml")
+    pts = grid_points(load_spec(_campaign("ca_star_boundary_h2_draws")))
+    floor = load_spec(_campaign("ca_star_boundary_h2_floor"))
     with open(ROOT / "results" / "ca_star_boundary_h2_floor" / "table.csv", newline="") as f:
         table = [(float(r["cement"]), float(r["eta_o"])) for r in csv.DictReader(f)]
     assert len(table) == 46 and len(pts) == 3 * 46
@@ -286,7 +292,7 @@ def test_draws_campaign_is_the_h2_boundary_points_on_three_seeds():
             k: v for k, v in ref.params.items() if k not in varied}
         assert p.options == ref.options
         assert p.params["w_i"] == 50.0 and p.options["h"] == 2.0
-    assert floor.classify == load_spec(CAMPAIGNS / "ca_star_boundary_h2_draws.toml").classify
+    assert floor.classify == load_spec(_campaign("ca_star_boundary_h2_draws")).classify
 
 
 def test_pocket_mesh_stage_is_the_sampler_points_on_a_perturbed_mesh():
@@ -295,8 +301,8 @@ def test_pocket_mesh_stage_is_the_sampler_points_on_a_perturbed_mesh():
     mesh_seed is added (1)."""
     import csv
 
-    pts = grid_points(load_spec(CAMPAIGNS / "ca_star_boundary_h2_pockets_meshes.toml"))
-    sampler = load_spec(CAMPAIGNS / "ca_star_boundary_h2_pockets.toml")
+    pts = grid_points(load_spec(_campaign("ca_star_boundary_h2_pockets_meshes")))
+    sampler = load_spec(_campaign("ca_star_boundary_h2_pockets"))
     with open(ROOT / "results" / "ca_star_boundary_h2_pockets" / "table.csv", newline="") as f:
         table = [(float(r["cement"]), float(r["eta_o"])) for r in csv.DictReader(f)]
     assert len(table) == 60 and sorted((p.params["cement"], p.params["eta_o"]) for p in pts) == sorted(table)
@@ -306,4 +312,4 @@ def test_pocket_mesh_stage_is_the_sampler_points_on_a_perturbed_mesh():
             k: v for k, v in ref.params.items() if k not in {"cement", "eta_o"}}
         assert p.options == {**ref.options, "mesh_seed": 1}
         assert p.params["porosity_field"] == "pockets" and p.options["h"] == 2.0
-    assert sampler.classify == load_spec(CAMPAIGNS / "ca_star_boundary_h2_pockets_meshes.toml").classify
+    assert sampler.classify == load_spec(_campaign("ca_star_boundary_h2_pockets_meshes")).classify

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from sweep.classify import (
+from sweep.regimes.classify import (
     REGIME_RULES,
     REGIMES,
     Classification,
@@ -451,7 +451,7 @@ def test_run_metrics_keep_the_longest_open_crack():
     """The campaign table's open_tip_radius_max is the largest open_tip_radius of the run, _final the last one."""
     import pandas as pd
 
-    from sweep.scheduler import _timeseries_metrics
+    from sweep.campaign.scheduler import _timeseries_metrics
 
     ts = pd.DataFrame({"t": [0.5, 1.0, 2.0, 2.5], "p_inj": [1.0, 2.0, 3.0, 2.5],
                        "open_tip_radius": [RI, RI + 9.0, RI + 4.0, RI + 3.0]})

@@ -16,7 +16,7 @@ from solver import Parameters, RunOptions
 from solver.params import field_unit
 from solver.progress import StepProgress
 from sweep.cli import build_parser, main
-from sweep.logs import end_logging, level_of, setup_logging
+from sweep.campaign.logs import end_logging, level_of, setup_logging
 from importlib.metadata import version as _dist_version
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 from solver import codehash
-from sweep.campaign import plan_campaign, run_campaign
-from sweep.campaign_cli import main as cli_main
-from sweep.spec import spec_from_dict
+from sweep.regimes import provenance
+from sweep.campaign.engine import plan_campaign, run_campaign
+from sweep.campaign.cli import main as cli_main
+from sweep.campaign.spec import spec_from_dict
 
 SOLVER_DIR = Path(codehash.__file__).resolve().parent
 
@@ -67,13 +68,29 @@ def test_git_hashes_give_the_hash_of_a_committed_copy(tmp_path):
     repo = tmp_path / "repo"
     _copy_solver(repo / "solver")
     (repo / "sweep").mkdir()
-    shutil.copy2(SOLVER_DIR.parent / "sweep" / "classify.py", repo / "sweep" / "classify.py")
+    (repo / "sweep" / "regimes").mkdir()
+    shutil.copy2(SOLVER_DIR.parent / "sweep" / "regimes" / "classify.py", repo / "sweep" / "regimes" / "classify.py")
     git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
     subprocess.run([*git, "init", "-q"], check=True)
     subprocess.run([*git, "add", "."], check=True)
     subprocess.run([*git, "commit", "-q", "-m", "c"], check=True)
-    h = codehash.git_hashes("HEAD", repo)
-    assert h == {"code_hash": codehash.code_hash(), "classifier_hash": codehash.classifier_code_hash()}
+    h = provenance.git_hashes("HEAD", repo)
+    assert h == {"code_hash": codehash.code_hash(), "classifier_hash": provenance.classifier_code_hash()}
+
+
+def test_the_classifier_hash_is_unchanged_by_the_move_of_its_file(tmp_path):
+    """A revision holding the classifier at its logical (old) path hashes like one holding it at today's path."""
+    if shutil.which("git") is None:
+        pytest.skip("git not installed")
+    repo = tmp_path / "repo"
+    _copy_solver(repo / "solver")
+    (repo / "sweep").mkdir()
+    shutil.copy2(SOLVER_DIR.parent / "sweep" / "regimes" / "classify.py", repo / "sweep" / "classify.py")
+    git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "add", "."], check=True)
+    subprocess.run([*git, "commit", "-q", "-m", "c"], check=True)
+    assert provenance.git_hashes("HEAD", repo)["classifier_hash"] == provenance.classifier_code_hash()
 
 
 # ---------------------------------------------------------------------------
@@ -148,7 +165,7 @@ def test_a_record_without_a_code_hash_is_stale_and_keeps_its_folder(tmp_path, mo
 
 
 def test_labels_of_other_classifier_code_are_reclassified_not_rerun(tmp_path, monkeypatch):
-    pytest.importorskip("sweep.classify")
+    pytest.importorskip("sweep.regimes.classify")
     from test_campaign_run import contract_runner
 
     def labelled_by_old_classifier(params, options, run_dir):
@@ -159,7 +176,7 @@ def test_labels_of_other_classifier_code_are_reclassified_not_rerun(tmp_path, mo
     first = run_campaign(spec, tmp_path, runner=labelled_by_old_classifier, progress=None, isolate="none")
     assert first.reclassified == [first.table["key"][0]]  # relabelled at once: its label is of other code
     rec = json.loads((tmp_path / "relabel" / "runs" / first.table["key"][0] / "record.json").read_text())
-    assert rec["classifier_hash"] == codehash.classifier_code_hash()
+    assert rec["classifier_hash"] == provenance.classifier_code_hash()
     assert rec["classification"]["regime"] == "uniform_invasion"  # S = 1 inside a circle, no crack
     again = run_campaign(spec, tmp_path, runner=labelled_by_old_classifier, progress=None, isolate="none")
     assert again.n_executed == 0 and again.reclassified == []

@@ -1,4 +1,4 @@
-"""Comparing two campaigns point by point (sweep.compare, ``dchfrac campaign compare``).
+"""Comparing two campaigns point by point (sweep.campaign.compare, ``dchfrac campaign compare``).
 
 Two toy campaigns with known outcomes: ``a`` fractures iff eta_o > 0.2 (crack 12.5 mm) and fails at C = 3;
 ``b`` fractures iff eta_o > 0.3 (crack 12.5 + C mm), never fails, and has one more cement value.  Every count
@@ -12,10 +12,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweep.campaign import run_campaign
-from sweep.campaign_cli import main as cli_main
-from sweep.compare import compare_campaigns
-from sweep.spec import spec_from_dict
+from sweep.campaign.engine import run_campaign
+from sweep.campaign.cli import main as cli_main
+from sweep.campaign.compare import compare_campaigns
+from sweep.campaign.spec import spec_from_dict
 
 VERSION = "test-compare"
 

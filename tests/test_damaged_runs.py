@@ -11,17 +11,17 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from sweep.campaign import DamagedRunsError, build_table, plan_campaign, plot_campaign, reclassify, run_campaign
-from sweep.campaign_cli import main as cli_main
-from sweep.store import file_manifest, verify_run
+from sweep.campaign.engine import DamagedRunsError, build_table, plan_campaign, plot_campaign, reclassify, run_campaign
+from sweep.campaign.cli import main as cli_main
+from sweep.campaign.store import file_manifest, verify_run
 
-pytest.importorskip("sweep.classify")
+pytest.importorskip("sweep.regimes.classify")
 
 
 def solver_format_runner(params, options, run_dir):
-    """contract_runner's run folder (snapshots, time series) and a summary.json, classified by sweep.classify."""
-    from sweep.classify import classify_run
-    from sweep.scheduler import classification_dict
+    """contract_runner's run folder (snapshots, time series) and a summary.json, classified by sweep.regimes.classify."""
+    from sweep.regimes.classify import classify_run
+    from sweep.campaign.scheduler import classification_dict
     from test_campaign_run import contract_runner
 
     contract_runner(params, options, run_dir)

@@ -5,8 +5,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweep.classify import REGIMES
-from sweep.diagrams import (
+from sweep.regimes.classify import REGIMES
+from sweep.regimes.diagrams import (
     REGIME_STYLE,
     fit_exponential_separatrix,
     plot_ca_star_vs_cement,

@@ -131,12 +131,12 @@ def test_an_alternative_does_not_block_an_effect_it_cannot_mimic(tmp_path):
 
 
 def test_the_real_solver_campaign_declares_k_s_uncertain():
-    """campaigns/discrepancy_twins_alternatives_k6.toml: the k6 twins with K_s as an alternative, on emulators."""
+    """campaigns/discrepancy/discrepancy_twins_alternatives_k6.toml: the k6 twins with K_s as an alternative, on emulators."""
     from pathlib import Path
 
     from sweep.discrepancy.twins import load_twin_campaign
 
-    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_alternatives_k6.toml")
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / "discrepancy_twins_alternatives_k6.toml")
     spec = spec_from_dict(camp["spec"])
     assert [(a.name, a.initial) for a in spec.alternatives] == [("K_s", 1600.0)]
     assert spec.profile.emulator == "gp" and spec.profile.emulate_refits

@@ -1,6 +1,6 @@
 """Discrepancy workflow with the real solver: forward-model plumbing (fast) and twin experiments (slow).
 
-The slow tests run campaigns/discrepancy_twins_ci.toml: data on h = 3 mm (perturbed mesh, mesh_seed = 11,
+The slow tests run campaigns/discrepancy/discrepancy_twins_ci.toml: data on h = 3 mm (perturbed mesh, mesh_seed = 11,
 dt_max = 0.005 s) plus noise; workflow on h = 4 mm (dt_max = 0.02 s) with a discretization correction
 estimated at h = 3 mm over three mesh realizations (mesh_seeds) and re-estimated at the named model's fit
 (disc_refresh); 3 conditions (w_i = 35, 50, 65 mm/s, 50 held out), t_end = 0.3 s.  Measured cost: 30-40 minutes
@@ -101,7 +101,7 @@ def test_cli_rejects_bad_data_before_any_run(tmp_path, capsys):
 def test_real_solver_twin(tmp_path, name):
     from sweep.discrepancy.twins import run_twins
 
-    s = run_twins(ROOT / "campaigns" / "discrepancy_twins_ci.toml", tmp_path / "res", tmp_path / "cache", only=[name])
+    s = run_twins(ROOT / "campaigns" / "discrepancy" / "discrepancy_twins_ci.toml", tmp_path / "res", tmp_path / "cache", only=[name])
     assert s[name]["passed"], json.dumps(s[name], indent=1)
 
 
@@ -109,14 +109,14 @@ def test_real_solver_confounded_twin_is_not_identifiable(tmp_path):
     """The CI-size real-solver twin (issue #6 §4, the confounded case): data made with an outer compliance
     (c = 0.01 mm/kPa, h = 3 mm, perturbed mesh, dt 0.005 s, noise), only the injection pressure measured, the
     grain bulk modulus K_s calibrated.  The two are both global storage: the compliance's signature keeps 6 %
-    of its norm off K_s's with noise weights (campaigns/discrepancy_twins_confounded.toml), 12 % in the
+    of its norm off K_s's with noise weights (campaigns/discrepancy/discrepancy_twins_confounded.toml), 12 % in the
     workflow's whitened screen (results/discrepancy/twins_confounded), below the 15 % identifiability threshold,
     so the workflow must list it as not identifiable and name nothing, and K_s must absorb the softness (633 kPa
     measured, against the 1600 kPa of Table A)."""
     from sweep.discrepancy.twins import run_twins
 
     name = "compliance_vs_grains"
-    s = run_twins(ROOT / "campaigns" / "discrepancy_twins_confounded.toml", tmp_path / "res", tmp_path / "cache",
+    s = run_twins(ROOT / "campaigns" / "discrepancy" / "discrepancy_twins_confounded.toml", tmp_path / "res", tmp_path / "cache",
                   only=[name], n_jobs=2)[name]
     assert s["passed"], json.dumps(s, indent=1)
     assert s["verdict"] != "named" and "compliant_boundary" in s["not_identifiable"] and s["observables"] == ["p_inj"]
@@ -128,7 +128,7 @@ def test_real_solver_confounded_twin_is_not_identifiable(tmp_path):
 
 def test_reference_check_runs_the_three_models_against_the_paper(tmp_path):
     """[reference_check]: truth, calibrated baseline and named model at the reference conditions, each
-    compared with paper_reported.toml by sweep.reference; gaps are |model - paper| of the same rows, and the
+    compared with paper_reported.toml by sweep.studies.reference; gaps are |model - paper| of the same rows, and the
     named model's beta follows its sqrt(C) scaling at the reference cement ratio."""
     from sweep.discrepancy.reference_check import GAP_QUANTITIES, load_reference_check, reference_models, run_reference_check
     from sweep.discrepancy.spec import spec_from_dict

@@ -102,7 +102,7 @@ def test_hidden_effect_is_named_with_its_strength(tmp_path, hidden, effect, trut
         assert key in saved
     import sweep.discrepancy
     from solver.codehash import directory_hash
-    from sweep.store import current_code_hash
+    from sweep.campaign.store import current_code_hash
     assert saved["code"] == {"solver": current_code_hash(),
                              "workflow": directory_hash(Path(sweep.discrepancy.__file__).parent)}
 
@@ -557,13 +557,13 @@ def test_twins_ci_campaign_has_fine_realizations_other_than_the_datas():
     from sweep.discrepancy.spec import fine_options
     from sweep.discrepancy.twins import load_twin_campaign
 
-    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_ci.toml")
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / "discrepancy_twins_ci.toml")
     opts = fine_options(spec_from_dict(camp["spec"]))
     assert [o["mesh_seed"] for o in opts] == [1, 2, 3] and all(o["h"] == 3.0 for o in opts)
     assert camp["data"]["mesh_seed"] not in [o["mesh_seed"] for o in opts]
 
 
-_TWIN_CAMPAIGNS = sorted(p.name for p in (Path(__file__).resolve().parents[1] / "campaigns").glob("discrepancy_*.toml"))
+_TWIN_CAMPAIGNS = sorted(p.name for p in (Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy").glob("discrepancy_*.toml"))
 
 
 @pytest.mark.parametrize("campaign", _TWIN_CAMPAIGNS)
@@ -574,7 +574,7 @@ def test_every_twin_campaign_is_valid_before_any_run(campaign):
 
     from sweep.discrepancy.twins import load_twin_campaign, validate_twin_campaign
 
-    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / campaign)
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / campaign)
     validate_twin_campaign(camp, spec_from_dict(camp["spec"]))
 
 
@@ -597,7 +597,7 @@ def test_a_bad_twin_is_refused_before_any_run(tmp_path, edit, msg):
 
     from sweep.discrepancy.twins import load_twin_campaign, run_twins, validate_twin_campaign
 
-    camp = copy.deepcopy(load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_tie.toml"))
+    camp = copy.deepcopy(load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / "discrepancy_twins_tie.toml"))
     edit(camp)
     with pytest.raises(ValueError, match=msg):
         validate_twin_campaign(camp, spec_from_dict(camp["spec"]))
@@ -614,7 +614,7 @@ def test_twin_campaign_overrides_set_one_setting_and_refuse_bad_ones(tmp_path):
 
     from sweep.discrepancy.twins import apply_overrides, load_twin_campaign, run_twins
 
-    path = Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_coverage_e_rate.toml"
+    path = Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / "discrepancy_coverage_e_rate.toml"
     camp = load_twin_campaign(path)
     out = apply_overrides(camp, ["spec.profile.fine=false", "spec.noise.disc_refresh=3", "data.seed=9"])
     assert (out["spec"]["profile"]["fine"], out["spec"]["noise"]["disc_refresh"], out["data"]["seed"]) == (False, 3, 9)
@@ -637,7 +637,7 @@ def test_twin_data_may_observe_the_regime_label_and_refuse_a_bad_flag(tmp_path):
 
     from sweep.discrepancy.twins import _prepare_campaign, load_twin_campaign, run_twins
 
-    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_ci.toml")
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / "discrepancy_twins_ci.toml")
     good = copy.deepcopy(camp)
     good["data"]["regime"] = True
     setup = _prepare_campaign(good, tmp_path / "res", tmp_path / "cache", 1)
@@ -656,7 +656,7 @@ def test_twins_refuse_data_on_a_checked_mesh_realization(tmp_path):
 
     from sweep.discrepancy.twins import load_twin_campaign, run_twins
 
-    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_ci.toml")
+    camp = load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / "discrepancy_twins_ci.toml")
     bad = copy.deepcopy(camp)
     bad["data"]["mesh_seed"] = 2
     with pytest.raises(ValueError, match=r"mesh_seed=2 is among .*mesh_seeds=\[1, 2, 3\]"):
@@ -1186,7 +1186,7 @@ def test_a_failed_twin_is_recorded_and_the_next_one_runs(tmp_path, monkeypatch):
 
     import sweep.discrepancy.twins as tw
 
-    camp = tw.load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy_twins_long.toml")
+    camp = tw.load_twin_campaign(Path(__file__).resolve().parents[1] / "campaigns" / "discrepancy" / "discrepancy_twins_long.toml")
     names = [t["name"] for t in camp["twin"]]
     ran = []
 

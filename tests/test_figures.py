@@ -18,8 +18,8 @@ import pytest
 from fake_runs import field_runner
 
 from sweep import figures
-from sweep.campaign import plot_campaign, run_campaign
-from sweep.spec import spec_from_dict
+from sweep.campaign.engine import plot_campaign, run_campaign
+from sweep.campaign.spec import spec_from_dict
 
 VERSION = "test-fig"
 
@@ -99,7 +99,7 @@ def test_colour_scale_known_answers():
 
 def test_reference_fields_volumetric_strain_is_white_at_zero(tmp_path, monkeypatch):
     """The reference report on a short real run: the diverging maps have limits symmetric about zero."""
-    import sweep.reference as ref
+    import sweep.studies.reference as ref
     from solver import Parameters, RunOptions, simulate
 
     run = tmp_path / "run"

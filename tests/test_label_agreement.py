@@ -1,4 +1,4 @@
-"""sweep.label_agreement: labels of the same Ca*-C points over realizations, against hand-counted answers."""
+"""sweep.studies.label_agreement: labels of the same Ca*-C points over realizations, against hand-counted answers."""
 import numpy as np
 import pandas as pd
 import pytest

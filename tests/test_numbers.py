@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from sweep.numbers import (
+from sweep.regimes.numbers import (
     branching_number,
     capillary_number,
     dimensionless_numbers,

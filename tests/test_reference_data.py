@@ -3,7 +3,7 @@ from pathlib import Path
 
 import pytest
 
-from sweep.reference import PACKAGED_PAPER_TOML, paper_reported
+from sweep.paper import PACKAGED_PAPER_TOML, paper_reported
 
 SHARED = next((d / "shared" / "data" / "paper_reported.toml" for d in Path(__file__).resolve().parents
                if (d / "shared" / "data" / "paper_reported.toml").is_file()), Path("/nonexistent"))
@@ -17,7 +17,7 @@ def test_packaged_copy_equals_the_shared_file():
 
 def test_packaged_copy_is_found_from_anywhere(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # no shared/ relative to the working directory
-    monkeypatch.setattr("sweep.reference.PAPER_TOML_CANDIDATES", ())
+    monkeypatch.setattr("sweep.paper.PAPER_TOML_CANDIDATES", ())
     ref = paper_reported()["reference_experiment"]
     assert ref == paper_reported(PACKAGED_PAPER_TOML)["reference_experiment"] and len(ref) > 0
 

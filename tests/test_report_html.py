@@ -17,9 +17,9 @@ matplotlib.use("Agg")
 import pytest
 from fake_runs import field_runner
 
-from sweep.campaign import run_campaign
-from sweep.report_html import paper_sections, write_html_report
-from sweep.spec import spec_from_dict
+from sweep.campaign.engine import run_campaign
+from sweep.campaign.report_html import paper_sections, write_html_report
+from sweep.campaign.spec import spec_from_dict
 
 VERSION = "test-html"
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,7 +86,7 @@ def test_the_browser_check_sees_a_broken_image(report, tmp_path):
 
 
 def test_cli_report_html(tmp_path, capsys):
-    from sweep.campaign_cli import main
+    from sweep.campaign.cli import main
 
     spec = tmp_path / "figcli.toml"
     spec.write_text('name = "figcli"\n[axes]\ncement = [1.0, 2.0]\neta_o = [0.5]\n'

@@ -1,4 +1,4 @@
-"""Re-classification of a campaign on a (phi_open, L_min) grid (sweep.threshold_sensitivity), on synthetic runs.
+"""Re-classification of a campaign on a (phi_open, L_min) grid (sweep.studies.threshold_sensitivity), on synthetic runs.
 
 Known answers: each run has one radial crack (porosity 1) of a chosen length and, ahead of its tip, a zone of
 porosity 0.985 (open at phi_open = 0.98, closed at 0.99), so the crack length at each level is known to within
@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from solver.mesh import annulus_mesh
-from sweep.threshold_sensitivity import ThresholdGrid, crack_lengths, main, separatrix_grid
+from sweep.studies.threshold_sensitivity import ThresholdGrid, crack_lengths, main, separatrix_grid
 
 RI, RO, H = 5.0, 53.0, 2.0
 A_TRUE, B_TRUE = 1e6, 1.5  # separatrix Ca*_c = A exp(B C), C in %

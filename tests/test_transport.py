@@ -185,9 +185,9 @@ def test_the_reference_experiment_is_valid_measured_data():
 
 
 def test_every_fidelity_variant_is_a_valid_model():
-    """Each screening variant (sweep.fidelity.VARIANTS) passes the parameter and run-option validation, so a
+    """Each screening variant (sweep.studies.fidelity.VARIANTS) passes the parameter and run-option validation, so a
     misspelt option fails here and not after a campaign has started."""
-    from sweep.fidelity import VARIANTS
+    from sweep.studies.fidelity import VARIANTS
 
     for name, (changes, opts) in VARIANTS.items():
         Parameters(**changes)
@@ -196,14 +196,14 @@ def test_every_fidelity_variant_is_a_valid_model():
 
 
 def test_water_placement_against_analytic_volumes():
-    """sweep.fidelity.water_placement on an annulus (r_i = 5, r_o = 53 mm, h = 1 mm) with uniform φ = 0.3:
+    """sweep.studies.fidelity.water_placement on an annulus (r_i = 5, r_o = 53 mm, h = 1 mm) with uniform φ = 0.3:
     a disk of water S = 1 for r <= 20 mm and a separate ring S = 1 for 45 <= r <= 50 mm.  Analytic: the
     volume φ π ((20² − 5²) + (50² − 45²)), the connected fraction (20² − 5²)/((20² − 5²) + (50² − 45²)), the
     outer-band fraction (r > 43 mm) the ring's share, and r50 from the cumulative volume.  A P1 step is
     smeared over one element row at each edge of the water, so volumes hold to 2 h × circumference and radii
     to h."""
     from solver.mesh import annulus_mesh
-    from sweep.fidelity import water_placement
+    from sweep.studies.fidelity import water_placement
 
     h, phi = 1.0, 0.3
     m = annulus_mesh(5.0, 53.0, h)

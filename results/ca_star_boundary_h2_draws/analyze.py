@@ -1,12 +1,12 @@
-"""The judging protocol of campaigns/ca_star_boundary_h2_draws.toml (written in its header before the runs).
+"""The judging protocol of campaigns/studies/ca_star_boundary_h2_draws.toml (written in its header before the runs).
 
 1. Label agreement over the porosity draws (column ``seed``) at L_min = 4 mm: the share of points whose draws all
    carry the same label, and the spread of the crack length (max - min over the draws) per point.
-2. The separatrix Ca*_c = A exp(B C) (sweep.diagrams.separatrix_profile_interval) on each seed alone and on the
+2. The separatrix Ca*_c = A exp(B C) (sweep.regimes.diagrams.separatrix_profile_interval) on each seed alone and on the
    draws pooled; the verdict is "B > 0 at 2 sigma" on the pooled fit.
 3. The pooled fit at L_min = 2, 3, 4, 5, 6 mm, reported whole (not the verdict).
 
-The protocol's steps are sweep.label_agreement's.  Units: lengths mm, C in %, Ca* dimensionless.
+The protocol's steps are sweep.studies.label_agreement's.  Units: lengths mm, C in %, Ca* dimensionless.
 
     python results/ca_star_boundary_h2_draws/analyze.py CAMPAIGN_DIR [--out summary.json] [--figure draws.png]
 """
@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from sweep import label_agreement as la
-from sweep.load import load_campaign
+from sweep.campaign.load import load_campaign
 
 L_PROTOCOL = 4.0  # mm, the campaign's [classify] min_crack_length
 L_SCAN = (2.0, 3.0, 4.0, 5.0, 6.0)  # mm

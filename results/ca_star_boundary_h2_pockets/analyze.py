@@ -1,9 +1,9 @@
-"""The judging protocol of campaigns/ca_star_boundary_h2_pockets.toml (written in its header before the runs).
+"""The judging protocol of campaigns/studies/ca_star_boundary_h2_pockets.toml (written in its header before the runs).
 
 1. The separatrix Ca*_c = A exp(B C) on the sampler's runs (deterministic mesh) at L_min = 4 mm; the verdict is
    "B > 0 at 2 sigma".
 2. The same fit over L_min = 2-6 mm, reported whole (not the verdict), beside the crack lengths.
-3. With the mesh stage (campaigns/ca_star_boundary_h2_pockets_meshes.toml: the same points on mesh_seed 1): label
+3. With the mesh stage (campaigns/studies/ca_star_boundary_h2_pockets_meshes.toml: the same points on mesh_seed 1): label
    agreement between the two meshes at L_min = 4 mm, the crack-length spread, and the pooled fit.
 
 The deterministic mesh is realization 0 of column ``mesh_seed``.  Units: lengths mm, C in %, Ca* dimensionless.
@@ -20,7 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from sweep import label_agreement as la
-from sweep.load import load_campaign
+from sweep.campaign.load import load_campaign
 
 L_PROTOCOL = 4.0  # mm, the campaign's [classify] min_crack_length
 L_SCAN = (2.0, 3.0, 4.0, 5.0, 6.0)  # mm
@@ -38,7 +38,7 @@ def completed(campaign_dir: Path, mesh_seed: int | None) -> pd.DataFrame:
 
 
 def peak_record(df: pd.DataFrame) -> dict:
-    """Not the protocol (added after the sampler's runs, reported whole): the label of sweep.classify's
+    """Not the protocol (added after the sampler's runs, reported whole): the label of sweep.regimes.classify's
     ``crack_record = "longest"`` (the longest crack up to the judged time, mm), whose L_min = 8 mm was chosen on
     the h = 1 random-field line (results/ca_star_peak_label_h2/), with the fit at L_PEAK; and the rank
     correlations of the judged and the longest crack with C and Ca*."""

@@ -1,4 +1,4 @@
-"""The judging protocol of campaigns/ca_star_boundary_h2_pockets_tip.toml (written in its header before the runs).
+"""The judging protocol of campaigns/studies/ca_star_boundary_h2_pockets_tip.toml (written in its header before the runs).
 
 1. The separatrix Ca*_c = A exp(B C) on all the sampler's runs at L_min = 6 mm; the verdict is "B > 0 at 2 sigma".
 2. The fit over L_min = 4-10 mm, reported whole, for the judged crack and for the longest crack up to the judged
@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from sweep import label_agreement as la
-from sweep.load import load_campaign
+from sweep.campaign.load import load_campaign
 
 L_PROTOCOL = 6.0  # mm, the campaign's [classify] min_crack_length
 L_SCAN = (4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0)  # mm

@@ -3,7 +3,7 @@
 For each finished run of a campaign store with its full snapshots (a run pruned by ``dchfrac campaign prune`` has
 lost them: its rows are kept from an earlier pass, if ``--out`` holds them) and each of its snapshots, writes one
 row: the run's key and swept values, the snapshot time t (s), the crack length L (mm,
-``sweep.classify`` rule 1: the phi >= phi_open region connected to the cavity, beyond r_i) at each phi_open of
+``sweep.regimes.classify`` rule 1: the phi >= phi_open region connected to the cavity, beyond r_i) at each phi_open of
 PHI_OPEN, the number of cracks at phi_open = 0.99 and L_min = 4 mm, the largest damage d, and, in the elements of
 the phi >= 0.99 crack region, the range of the damage (element mean of d) and of the volumetric strain eps_v, the
 largest porosity, and the time the run was classified at.  Units: mm, s; d, phi, eps_v dimensionless.
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sweep.classify import classify_fields, list_snapshots
+from sweep.regimes.classify import classify_fields, list_snapshots
 
 PHI_OPEN = (0.95, 0.99, 0.995)
 L_MIN = 4.0  # mm, the boundary campaigns' threshold

@@ -8,11 +8,11 @@ the longest crack (mm) at or before the judged time, read two ways:
 * ``steps``: every accepted step of the run's time series, phi_open = 0.99 only: the crack length is
   ``open_tip_radius - r_inner`` (the largest radius of the phi >= 0.99 region connected to the inlet, less the
   cavity's radius; solver.metrics.open_tip_radius);
-* ``snapshots``: the classifier's crack length (sweep.classify rule 1) on the stored snapshots (t = 0.5, 1, 2,
+* ``snapshots``: the classifier's crack length (sweep.regimes.classify rule 1) on the stored snapshots (t = 0.5, 1, 2,
   3 s and the judged time; ``crack_history.csv``) at each phi_open of the history.
 
 and fits Ca*_c = A exp(B C) at each (phi_open, L_min) with the protocol's fit
-(``sweep.threshold_sensitivity.separatrix_grid``).  Units: mm, s, %.
+(``sweep.studies.threshold_sensitivity.separatrix_grid``).  Units: mm, s, %.
 
     python results/fidelity/longest_crack_separatrix.py FOLDER [--table CSV] --l-min 3 4 5 --out FILE.json --md FILE.md
 
@@ -28,8 +28,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from sweep.classify import longest_open_crack
-from sweep.threshold_sensitivity import ThresholdGrid, separatrix_grid, to_markdown
+from sweep.regimes.classify import longest_open_crack
+from sweep.studies.threshold_sensitivity import ThresholdGrid, separatrix_grid, to_markdown
 
 
 def _finished(folder: Path, table_csv: Path | None) -> pd.DataFrame:
@@ -52,7 +52,7 @@ def longest_from_snapshots(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
 
 def longest_from_steps(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
     """``L@0.99`` (mm) per run key: the largest ``open_tip_radius - r_inner`` over the accepted steps at
-    t <= the judged time (``sweep.classify.longest_open_crack``), and the time it was reached (s)."""
+    t <= the judged time (``sweep.regimes.classify.longest_open_crack``), and the time it was reached (s)."""
     rows = {}
     for key, run in table.iterrows():
         rd = folder / "runs" / key

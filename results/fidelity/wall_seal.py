@@ -1,4 +1,4 @@
-"""The closing probes (campaigns/wall_seal_h2.toml, wall_open_h2.toml, porosity_ceiling_h2.toml,
+"""The closing probes (campaigns/studies/wall_seal_h2.toml, wall_open_h2.toml, porosity_ceiling_h2.toml,
 wall_compliance_h2.toml, damage_viscosity_closure_h2.toml): per run, the quantities their headers read.
 
 For each finished run of the campaign store: from the time series, the crack (``open_tip_radius - r_inner``, mm)
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from sweep.classify import list_snapshots
+from sweep.regimes.classify import list_snapshots
 
 RADII = (6.0, 10.0, 20.0, 30.0, 40.0, 45.0)   # mm, ring centres (half-width 1 mm)
 WALL = ((3.0, 0.5), (1.0, 0.5), (0.2, 0.1))   # mm inside r_o: ring centres near the wall and their half-widths

@@ -1,4 +1,4 @@
-"""The baseline of campaigns/porosity_ceiling_h2.toml (its point and options without a ceiling) rerun on this code,
+"""The baseline of campaigns/studies/porosity_ceiling_h2.toml (its point and options without a ceiling) rerun on this code,
 as the quantities of results/fidelity/wall_seal.py, printed as JSON (units mm, s, kPa).
 
     python results/porosity_ceiling_h2/baseline.py > baseline_current_code.json

@@ -86,7 +86,7 @@ def main(argv=None) -> int:
         return 2
     text = markdown(c)
     if a.out:
-        from sweep.store import write_text_atomic
+        from sweep.campaign.store import write_text_atomic
 
         write_text_atomic(Path(a.out), text)
     else:

@@ -281,7 +281,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--combine", nargs="+", metavar="JSON", help="merge these studies of one variant instead")
     a = ap.parse_args(argv)
-    from sweep.store import write_json_atomic
+    from sweep.campaign.store import write_json_atomic
 
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
 

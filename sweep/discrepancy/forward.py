@@ -85,7 +85,7 @@ def finished(run_dir, code_hash: str | None = None) -> bool:
     the workflow a truncated curve (NaN residuals), so it is run again.  So is an entry whose
     ``code_hash`` (the solver source that made it) is not ``code_hash`` (default: the current one), and
     an "ok" entry whose time series is missing or does not parse (damaged)."""
-    from sweep.store import current_code_hash
+    from sweep.campaign.store import current_code_hash
 
     rd = Path(run_dir)
     try:
@@ -116,7 +116,7 @@ def _run_one(pdict: dict, odict: dict, run_dir: str, code_hash: str) -> None:
     import shutil
 
     from solver import Parameters, RunOptions, simulate
-    from sweep.store import write_json_atomic
+    from sweep.campaign.store import write_json_atomic
 
     rd = Path(run_dir)
     if finished(rd, code_hash):
@@ -155,8 +155,8 @@ class SolverForward(ForwardModel):
 
     @property
     def regime_labels(self) -> tuple:
-        """The regime labels this model gives (sweep.classify.REGIMES): measured labels must be among them."""
-        from sweep.classify import REGIMES
+        """The regime labels this model gives (sweep.regimes.classify.REGIMES): measured labels must be among them."""
+        from sweep.regimes.classify import REGIMES
 
         return REGIMES
 
@@ -180,7 +180,7 @@ class SolverForward(ForwardModel):
         return None
 
     def predict_many(self, jobs: list) -> list:
-        from sweep.store import current_code_hash
+        from sweep.campaign.store import current_code_hash
 
         code = current_code_hash()
         bad = [self.invalid(o) for o, _ in jobs]
@@ -245,9 +245,9 @@ def fine_forwards(spec, cache_dir, n_jobs: int = 1) -> list:
 
 
 def _regime(rd: Path):
-    """Regime label of the last snapshot of run folder ``rd`` (sweep.classify), None if unavailable."""
+    """Regime label of the last snapshot of run folder ``rd`` (sweep.regimes.classify), None if unavailable."""
     try:
-        from sweep.classify import classify_run
+        from sweep.regimes.classify import classify_run
 
         return str(classify_run(rd).classification.regime)
     except Exception:  # classifier missing or run without snapshot: no label, reported as such

@@ -132,7 +132,7 @@ def starting_spec(data: MeasuredData, folder) -> str:
 def write_starting_spec(measured, out, force: bool = False) -> Path:
     """Validate the measured-data folder ``measured``, write its starting SPEC to ``out`` (atomically; an
     existing file only with ``force``) and check that it loads.  Returns the path."""
-    from sweep.store import write_text_atomic
+    from sweep.campaign.store import write_text_atomic
 
     from .spec import spec_from_dict
 

@@ -7,7 +7,7 @@ twins, the residual maps and the report all take their observables from :data:`R
 a new :class:`Observable` here and the column it reads in the solver's time series (solver/simulate.py).
 
 A "curve" observable is a number per observation time; a "label" observable (the regime) is one label per
-condition, classified from the run's last snapshot (sweep.classify), not from the time series.
+condition, classified from the run's last snapshot (sweep.regimes.classify), not from the time series.
 Units: mm, s, kPa.
 """
 from __future__ import annotations
@@ -62,7 +62,7 @@ REGISTRY: dict[str, Observable] = {o.name: o for o in (
     Observable("crack_length", "mm", "curve", ("open_tip_radius",), _crack_length, 0.3,
                "length of the open crack beyond the inner radius (0 before initiation)"),
     Observable("regime", "label", "label", (), None, None,
-               "regime label of the last snapshot (sweep.classify), e.g. fracturing"),
+               "regime label of the last snapshot (sweep.regimes.classify), e.g. fracturing"),
 )}
 
 CURVES = tuple(n for n, o in REGISTRY.items() if o.kind == "curve")

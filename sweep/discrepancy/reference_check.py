@@ -12,7 +12,7 @@ After the workflow, three models are run to ``t_end`` at those conditions: the d
 ("truth"), the calibrated baseline ("baseline_fit": without the effects the workflow was not told) and the
 model the workflow ends with ("named_fit", or "partial_fit" when the accepted effects are only a partial
 explanation).  Each run is compared with ``paper_reported.toml [reference_experiment]`` by
-:func:`sweep.reference.reference_report` (the same measures as the reference campaign), and the gap to the
+:func:`sweep.studies.reference.reference_report` (the same measures as the reference campaign), and the gap to the
 paper's figures before (baseline) and after (named) is tabulated.  Units: mm, s, kPa.
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pathlib import Path
 
 __all__ = ["ReferenceCheck", "load_reference_check", "reference_models", "run_reference_check", "GAP_QUANTITIES"]
 
-# rows of sweep.reference.reference_report compared before/after (the paper figure, model value)
+# rows of sweep.studies.reference.reference_report compared before/after (the paper figure, model value)
 GAP_QUANTITIES = ("peak injection pressure (kPa)", "front radius at 2 s, main branches (mm)",
                   "crack length beyond r_i (mm)")
 
@@ -90,12 +90,12 @@ def run_reference_check(check: ReferenceCheck, models: dict, out_dir, cache_dir,
                         paper_path=None) -> dict:
     """Run ``models`` ({label: overrides}) at the reference experiment, compare each with the paper.
 
-    Writes ``<out_dir>/<label>/`` (sweep.reference.reference_report: comparison.md/json, figures) and
+    Writes ``<out_dir>/<label>/`` (sweep.studies.reference.reference_report: comparison.md/json, figures) and
     ``<out_dir>/reference_check.{json,md}``; returns the JSON dict: per quantity the paper's figure and
     each model's value, and per model the gap |model − paper| of :data:`GAP_QUANTITIES`.
     """
-    from sweep.reference import paper_reported, reference_report
-    from sweep.store import write_json_atomic, write_text_atomic
+    from sweep.studies.reference import paper_reported, reference_report
+    from sweep.campaign.store import write_json_atomic, write_text_atomic
 
     from .forward import SolverForward, finished
 
@@ -136,7 +136,7 @@ def _markdown(res: dict, labels: list) -> str:
     fmt = lambda v: "n/a" if v is None else f"{v:.3g}"  # noqa: E731
     md = ["# Reference experiment (Sec. 3.5) with the workflow's models", "",
           f"Conditions {res['conditions']}, h = {res['h']} mm, t_end = {res['t_end']} s; "
-          f"run status {res['status']}.  Measures as in results/reference (sweep/reference.py).", "",
+          f"run status {res['status']}.  Measures as in results/reference (sweep/studies/reference.py).", "",
           "| quantity | paper | " + " | ".join(labels) + " |", "|---|---|" + "---|" * len(labels)]
     for q, v in res["quantities"].items():
         md.append(f"| {q} | {fmt(v.get('paper'))} | " + " | ".join(fmt(v.get(lb)) for lb in labels) + " |")

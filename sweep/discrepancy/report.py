@@ -86,7 +86,7 @@ def build_report(run, forward) -> dict:
 
 def _source_hashes() -> dict:
     from solver.codehash import directory_hash
-    from sweep.store import current_code_hash
+    from sweep.campaign.store import current_code_hash
 
     return {"solver": current_code_hash(), "workflow": directory_hash(Path(__file__).parent)}
 
@@ -162,7 +162,7 @@ def _fig_residuals(problem, fit, path, title):
         row = problem.overrides(cid, fit.values())
         try:
             from solver import Parameters
-            from sweep.numbers import dimensionless_numbers
+            from sweep.regimes.numbers import dimensionless_numbers
 
             dn = dimensionless_numbers(Parameters.from_dict(row))
             x = float(dn["Ca_star"]) if "Ca_star" in dn else float(ids.index(cid))
@@ -409,7 +409,7 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     """Write report.json, report.md and (optionally) the figures into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    from sweep.store import write_text_atomic   # a killed run never leaves a truncated report
+    from sweep.campaign.store import write_text_atomic   # a killed run never leaves a truncated report
 
     write_text_atomic(out / "report.json", json.dumps(report, indent=1) + "\n")
     figs = []

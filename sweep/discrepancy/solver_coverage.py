@@ -141,7 +141,7 @@ def main(argv=None) -> int:
     md = coverage_markdown(rows, summary)
     print(md)
     if a.out:
-        from sweep.store import write_json_atomic, write_text_atomic
+        from sweep.campaign.store import write_json_atomic, write_text_atomic
 
         write_json_atomic(Path(a.out), {"rows": rows, **summary})
         write_text_atomic(Path(a.out).with_suffix(".md"), md)

@@ -328,7 +328,7 @@ def _check_before_runs(setup: _TwinSetup, only) -> _TwinSetup:
 
     ref = None
     if "reference_check" in setup.camp:
-        from sweep.reference import paper_reported
+        from sweep.paper import paper_reported
 
         from .reference_check import load_reference_check
         ref = load_reference_check(setup.camp["reference_check"])

@@ -6,7 +6,7 @@ H: mesh size, mm; CONFIGS: comma-separated names of CONFIGS below.  Each configu
 handle with the solver's settings of round three (solver/linsolve.py before the two-level factorization became
 its setting) plus its extra iparm entries (1-based), one analysis, then
 three rounds of (numeric factorization, substitution); prints the best of three, the relative residual and the
-factors' entries (iparm(18)).  The state is `dchfrac bench`'s (sweep.bench.newton_state).  Units: s.
+factors' entries (iparm(18)).  The state is `dchfrac bench`'s (sweep.studies.bench.newton_state).  Units: s.
 """
 import os
 import sys
@@ -19,7 +19,7 @@ import scipy.sparse as sp  # noqa: E402
 
 from solver import linsolve  # noqa: E402
 from solver.model import residual_and_jacobian  # noqa: E402
-from sweep.bench import newton_state  # noqa: E402
+from sweep.studies.bench import newton_state  # noqa: E402
 
 CONFIGS = {"base": {}, "vbsr80": {37: -80}, "vbsr95": {37: -95}, "twolevel": {24: 1}, "twolevel10": {24: 10}}
 SOLVER_IPARM = {1: 1, 2: 2, 8: 0, 10: 13, 11: 0, 13: 0}   # solver.linsolve._pardiso_solver's, round three

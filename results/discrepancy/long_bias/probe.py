@@ -19,7 +19,7 @@ from sweep.discrepancy.forward import SolverForward
 from sweep.discrepancy.spec import spec_from_dict
 from sweep.discrepancy.twins import load_twin_campaign
 
-CAMP = load_twin_campaign(Path(__file__).resolve().parents[3] / "campaigns" / "discrepancy_twins_long.toml")
+CAMP = load_twin_campaign(Path(__file__).resolve().parents[3] / "campaigns" / "discrepancy" / "discrepancy_twins_long.toml")
 SPEC = spec_from_dict(CAMP["spec"])
 A, B, N = CAMP["data"]["times"]
 TIMES = np.linspace(A, B, N)

@@ -17,7 +17,7 @@ from solver import RunOptions
 from sweep.discrepancy.forward import SolverForward
 from sweep.discrepancy.spec import spec_from_dict
 from sweep.discrepancy.twins import load_twin_campaign
-camp = load_twin_campaign(Path(__file__).resolve().parents[3] / "campaigns" / "discrepancy_twins_long_floor.toml")
+camp = load_twin_campaign(Path(__file__).resolve().parents[3] / "campaigns" / "discrepancy" / "discrepancy_twins_long_floor.toml")
 spec = spec_from_dict(camp["spec"])
 a, b, n = camp["data"]["times"]; times = np.linspace(a, b, n)
 obs = camp["data"]["observables"]; noise = camp["data"]["noise"]

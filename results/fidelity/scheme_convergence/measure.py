@@ -1,12 +1,12 @@
 """Galerkin against SUPG on the wall-graded mesh (h_outer = 0.25 mm): three bulk sizes and three mesh seeds.
 
-Measures the run folders named below with ``sweep.fidelity.measure`` (p_inj, fronts, crack tip, outflow, and
+Measures the run folders named below with ``sweep.studies.fidelity.measure`` (p_inj, fronts, crack tip, outflow, and
 where the water is: ``water_placement``) and writes ``scheme_convergence.json``, ``scheme_convergence.md`` and
 ``S_fields.png`` (S at 0.5, 1 and 2 s) here.  Units mm, s, kPa.
 
     python results/fidelity/scheme_convergence/measure.py RUNS_ROOT
 
-RUNS_ROOT holds the run folders (made by ``sweep.fidelity.run_variant`` for the h series, by
+RUNS_ROOT holds the run folders (made by ``sweep.studies.fidelity.run_variant`` for the h series, by
 ``seeds_run.py`` for the seeds); the folders are not committed.
 """
 import json
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep.fidelity import measure
-from sweep.store import write_text_atomic
+from sweep.studies.fidelity import measure
+from sweep.campaign.store import write_text_atomic
 
 HERE = Path(__file__).resolve().parent
 #: (scheme, h mm, mesh seed, run folder relative to RUNS_ROOT)

@@ -5,7 +5,7 @@
 import sys
 from pathlib import Path
 from solver import Parameters, RunOptions, simulate
-from sweep.fidelity import VARIANTS, SNAPSHOT_TIMES
+from sweep.studies.fidelity import VARIANTS, SNAPSHOT_TIMES
 out = Path(sys.argv[1])
 for seed in (1, 2, 3):
     for name in ("f_graded", "fc_supg_graded"):

@@ -1,6 +1,6 @@
 """The compliance twin's profile near its fit: real runs against the workflow's emulator.
 
-Runs the twin `compliant_boundary_long_pockets` of campaigns/discrepancy_twins_long_pockets.toml up to its
+Runs the twin `compliant_boundary_long_pockets` of campaigns/discrepancy/discrepancy_twins_long_pockets.toml up to its
 profile stage (every earlier run comes from CACHE), then
   * on real runs: the profile's reference (the fit's own point under the correction re-estimated there) and
     Delta chi2 at compliance 0.009917 mm/kPa (E refitted, the correction re-estimated at the point);
@@ -24,7 +24,7 @@ import numpy as np
 import sweep.discrepancy.workflow as W
 from sweep.discrepancy import twins as T
 from sweep.discrepancy.profile import _Profile
-from sweep.store import write_json_atomic
+from sweep.campaign.store import write_json_atomic
 
 TWIN = "compliant_boundary_long_pockets"
 

@@ -2,7 +2,7 @@
 
 The twins' profiles run on the workflow's emulator, and its interval ends are checked with real runs there
 (report.md).  This script asks the question the twin's pass rests on directly: it replays a twin of
-campaigns/discrepancy_twins_long_pockets.toml from CACHE up to its profile stage (``probe.state_at_profile``)
+campaigns/discrepancy/discrepancy_twins_long_pockets.toml from CACHE up to its profile stage (``probe.state_at_profile``)
 and evaluates the profile at the hidden (true) strength on real runs, as the workflow's profile evaluates a
 point (the others refitted, the discretization correction re-estimated at the point from the fine mesh
 realizations, the others refitted again; Δχ² from the fit's own point under the correction re-estimated
@@ -18,7 +18,7 @@ import json
 import logging
 
 from probe import profile_points, state_at_profile
-from sweep.store import write_json_atomic
+from sweep.campaign.store import write_json_atomic
 
 
 def main(argv=None) -> int:

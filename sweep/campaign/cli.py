@@ -1,0 +1,384 @@
+"""``dchfrac campaign ...`` commands (argparse), added to the main CLI by :func:`add_campaign_commands`.
+
+    dchfrac campaign run SPEC [--jobs N] [--backend loky|dask|ray] [--scheduler ADDR] [--dry-run]
+                              [--retry-failed] [--accept-stale] [--fail-fast] [--timeout S] [--retries N]
+                              [--results DIR]
+    dchfrac campaign status SPEC [--results DIR]       (also: runs made by other code, damaged runs)
+    dchfrac campaign plot SPEC [--results DIR]
+    dchfrac campaign report SPEC [--results DIR] [--html]
+    dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
+    dchfrac campaign columns SPEC [--results DIR] [--timeseries]   (column dictionary: name, unit, meaning)
+    dchfrac campaign prune SPEC [--results DIR]        (keep of each finished run what its label was read from)
+
+``run`` reruns damaged runs and runs made by other solver code (stale); ``--accept-stale`` keeps
+the stale ones and lists them. ``plot``, ``report`` and ``classify`` refuse (exit 1) while runs
+are damaged, naming them.
+
+Also runnable alone: ``python -m sweep.campaign.cli run campaigns/examples/demo.toml``.
+Exit codes: 0 success, 1 failed runs (run), damaged runs (status, plot, report, classify) or errors,
+2 bad arguments or spec, 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from sweep.campaign.logs import LogStream, end_logging, setup_logging
+from sweep.campaign.scheduler import BACKENDS
+
+__all__ = ["add_campaign_commands", "main"]
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("spec", help="campaign spec, a TOML file (see campaigns/)")
+    p.add_argument("--results", default="results", metavar="DIR",
+                   help="results root (default: results); the campaign lives in DIR/<name>/")
+    p.add_argument("--max-runs", type=int, default=None, metavar="N",
+                   help="allow grids of up to N runs (default: spec [run] max_runs, else 10000)")
+
+
+class UsageError(ValueError):
+    """A bad argument (e.g. an unwritable --results): one line on stderr, exit code 2."""
+
+
+def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
+    """Add ``campaign {run,status,plot,report,classify}`` to an argparse subparsers object.
+
+    Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
+    camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
+                                 description="Run and inspect parameter campaigns (campaigns/*.toml).")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune}")
+    sub.required = True
+
+    p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
+    _common(p)
+    p.add_argument("--jobs", "-j", type=int, default=None, help="parallel runs (default: spec [run] jobs or 1; -1 = all cores)")
+    p.add_argument("--backend", choices=BACKENDS, default="loky", help="joblib backend (default loky)")
+    p.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="dask scheduler / ray address (default: a local cluster of --jobs workers)")
+    p.add_argument("--dry-run", action="store_true", help="print the grid size and an estimated cost, run nothing")
+    p.add_argument("--retry-failed", action="store_true", help="rerun runs recorded as failed")
+    p.add_argument("--accept-stale", action="store_true",
+                   help="keep runs made by other solver code (and labels of other classifier code) instead of "
+                        "rerunning them; they are listed")
+    p.add_argument("--fail-fast", action="store_true", help="stop at the first failed run")
+    p.add_argument("--timeout", type=float, default=None, metavar="S",
+                   help="wall-time limit per run, s (default: spec [run] timeout, else none); the run is killed")
+    p.add_argument("--retries", type=int, default=None, help="extra attempts after a failure (default: spec or 0)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines (as -q)")
+    p.set_defaults(func=cmd_run)
+
+    for name, fn, helptext in (
+        ("status", cmd_status, "done, failed (with reasons) and pending runs"),
+        ("plot", cmd_plot, "draw the campaign's diagrams from its table"),
+        ("report", cmd_report, "write a Markdown summary with the figures"),
+        ("classify", cmd_classify, "rerun the classifier on the finished runs (no simulation)"),
+        ("columns", cmd_columns, "the column dictionary of the campaign table: name, unit, dtype, meaning"),
+        ("prune", cmd_prune, "remove the snapshots no label was read from (sweep.campaign.archive); keeps the campaign "
+                             "resumable and its diagrams drawable"),
+    ):
+        q = sub.add_parser(name, help=helptext)
+        _common(q)
+        q.set_defaults(func=fn)
+        if name == "columns":
+            q.add_argument("--timeseries", action="store_true", help="the columns of the runs' timeseries.csv instead")
+        if name == "report":
+            q.add_argument("--html", action="store_true",
+                           help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
+    q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
+    q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
+    q.add_argument("other", help="second campaign: spec TOML or campaign folder")
+    q.add_argument("--results", default="results", metavar="DIR", help="results root (default: results)")
+    q.add_argument("--label", default="regime", help="categorical column compared (default: regime)")
+    q.add_argument("--columns", default="", metavar="A,B",
+                   help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
+    q.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown summary to FILE")
+    q.set_defaults(func=cmd_compare)
+    return camp
+
+
+def _guarded(fn):
+    """Bad spec or arguments -> message on stderr and exit code 2 (no traceback)."""
+    import functools
+
+    @functools.wraps(fn)
+    def wrapper(args) -> int:
+        from sweep.campaign.engine import DamagedRunsError
+        from sweep.campaign.spec import SpecError
+
+        try:
+            return fn(args)
+        except (SpecError, UsageError) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        except ValueError as e:
+            if getattr(args, "campaign_command", None) == "run" and "must be" in str(e):
+                print(f"error: {e}", file=sys.stderr)
+                return 2
+            raise
+        except DamagedRunsError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 1
+        except RuntimeError as e:
+            if "is in use by process" in str(e):
+                print(f"error: {e}", file=sys.stderr)
+                return 2
+            raise
+
+    return wrapper
+
+
+def _spec(args, writes: bool = True):
+    """The validated spec of ``args``; with ``writes``, the campaign folder RESULTS/<name> is checked writable."""
+    from solver.output import check_writable_dir
+    from sweep.campaign.spec import load_spec
+
+    spec = load_spec(args.spec, max_runs=getattr(args, "max_runs", None))
+    if writes:
+        try:
+            check_writable_dir(f"{args.results}/{spec.name}", "--results campaign folder")
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+    return spec
+
+
+def _input_warnings(spec) -> list[str]:
+    """Warnings of ``solver.options.check_run_inputs`` over the grid, each once with its number of runs."""
+    from solver import Parameters, RunOptions
+    from solver.options import check_run_inputs
+    from sweep.campaign.sampler import grid_points
+
+    counts: dict[str, int] = {}
+    for p in grid_points(spec):
+        for w in check_run_inputs(Parameters.from_dict(p.params), RunOptions.from_dict(p.options)):
+            counts[w] = counts.get(w, 0) + 1
+    return [f"{n} run(s): {w}" for w, n in counts.items()]
+
+
+def _fmt_s(s: float) -> str:
+    from sweep.campaign.engine import _hms
+
+    return _hms(s)
+
+
+@_guarded
+def cmd_run(args) -> int:
+    from sweep.campaign.engine import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost, run_campaign
+
+    spec = _spec(args)
+    if args.dry_run:
+        jobs = args.jobs or int(spec.run.get("jobs", 1))
+        est = estimate_cost(spec, args.results, jobs=jobs, retry_failed=args.retry_failed,
+                            accept_stale=args.accept_stale)
+        print(f"campaign {spec.name}: {est['grid_size']} runs in the grid ({est['done']} done, "
+              f"{est['failed']} failed, {est['pending']} pending, {est['stale']} made by other code to rerun, "
+              f"{est['damaged']} damaged)")
+        for h, d in sorted(est["by_mesh_size"].items()):
+            print(f"  h = {h:g} mm: {d['runs']} runs, {d['sim_s']:.1f} simulated s x {d['wall_s_per_sim_s']:.3g} "
+                  f"wall s per simulated s ({d['source']}) + {d['runs']} x {est['per_run_overhead_s']:.3g} s per run "
+                  f"({est['per_run_overhead_source']}) = {_fmt_s(d['wall_s'])} CPU")
+        if jobs > 1:
+            print(f"  (each rate x {est['shared_run_factor']:.3g}, a run beside {jobs - 1} other(s) against alone: "
+                  f"{est['shared_run_factor_source']})")
+        print(f"estimated cost of the runs to do: {_fmt_s(est['cpu_s'])} CPU, about {_fmt_s(est['wall_s'])} "
+              f"wall on {jobs} job(s)")
+        for w in _input_warnings(spec):
+            print(f"warning: {w}")
+        if any(d["source"] == "default" for d in est["by_mesh_size"].values()):
+            print(f"  (no {args.results}/bench/bench.json: default {DEFAULT_WALL_S_PER_SIM_S_H2:g} wall s per "
+                  f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")
+        return 0
+    timeout = "spec" if args.timeout is None else args.timeout
+    try:
+        res = run_campaign(spec, args.results, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
+                           timeout=timeout, retries=args.retries, fail_fast=args.fail_fast,
+                           retry_failed=args.retry_failed, accept_stale=args.accept_stale,
+                           progress=None if args.quiet else LogStream("dchfrac.campaign"))
+    except KeyboardInterrupt:
+        logging.getLogger("dchfrac.campaign").warning("interrupted: finished runs are recorded; rerun the same command to resume")
+        return 130
+    print(f"campaign {spec.name}: {res.n_points} runs, {res.n_executed} executed now "
+          f"({res.n_ok} ok, {res.n_failed} failed), {res.n_skipped} not executed (already recorded or cancelled)")
+    _print_provenance(res)
+    for k, reason in res.failures:
+        print(f"  failed {k}: {reason}")
+    if res.aborted:
+        print("stopped at the first failure (--fail-fast)")
+    for p in res.table_paths:
+        print(f"table: {p}")
+    return 1 if res.n_failed else 0
+
+
+def _print_provenance(res) -> None:
+    """What ``campaign run`` did about stale and damaged runs."""
+    if res.stale_reused:
+        print(f"  reused {len(res.stale_reused)} run(s) made by other solver code (--accept-stale): "
+              + " ".join(res.stale_reused))
+    if res.stale_rerun:
+        print(f"  reran {len(res.stale_rerun)} run(s) made by other solver code")
+    if res.damaged_rerun:
+        print(f"  reran {len(res.damaged_rerun)} damaged run(s): " + " ".join(res.damaged_rerun))
+    if res.reclassified:
+        print(f"  reclassified {len(res.reclassified)} run(s) labelled by other classifier code")
+
+
+@_guarded
+def cmd_status(args) -> int:
+    from sweep.campaign.accounting import campaign_throughput
+    from sweep.campaign.engine import code_counts, plan_campaign, sampler_status
+
+    spec = _spec(args, writes=False)
+    plan = plan_campaign(spec, args.results)
+    print(f"campaign {spec.name}: {len(plan.points)} runs: {len(plan.done)} done, {len(plan.failed)} failed, "
+          f"{len(plan.pending)} pending, {len(plan.stale)} made by other code (stale), {len(plan.damaged)} damaged"
+          f"  ({plan.store.dir})")
+    counts = code_counts(plan)
+    print(f"  current code: solver {plan.code_hash}, classifier {plan.classifier_hash}; stored runs by code: "
+          + ", ".join(f"{h}{' (current)' if h == plan.code_hash else ''}: {n}" for h, n in counts.items()))
+    print("  " + campaign_throughput(plan.store.records()).text())
+    if plan.misclassified:
+        print(f"  {len(plan.misclassified)} run(s) labelled by other classifier code (`campaign run` reclassifies)")
+    if plan.stale:
+        print(f"  `campaign run` reruns the {len(plan.stale)} stale run(s); `--accept-stale` keeps them")
+    for p, k in plan.failed:
+        swept = ", ".join(f"{a}={v}" for a, v in p.swept.items())
+        print(f"  failed {k} ({swept}): {plan.records[k].get('reason')}")
+    st = sampler_status(spec, args.results)
+    if st is not None:
+        unc = "not yet measured (fewer than two labels)" if st["uncertainty"] is None else \
+            f"{st['uncertainty']:.2f} x tolerance (largest half-width of the boundary's band)"
+        print(f"{st['sampler']} sampler: round {st['round']}, {st['runs_used']}/{st['budget']} runs of the budget "
+              f"({st['pending']} pending), boundary uncertainty {unc}")
+        for pair, v in sorted(st["uncertainty_by_pair"].items()):
+            print(f"  {pair}: {v:.2f} x tolerance")
+        print(f"  stopped: {st['reason']}" if st["stopped"] else "  running: rerun `campaign run` to continue")
+    if plan.damaged:
+        print(plan.damage_text())
+        return 1
+    return 0
+
+
+@_guarded
+def cmd_plot(args) -> int:
+    from sweep.campaign.engine import plot_campaign
+
+    spec = _spec(args)
+    figs = plot_campaign(spec, args.results)
+    if not figs:
+        print(f"campaign {spec.name}: nothing to plot (no finished runs or no diagrams in the spec)")
+    for f in figs:
+        print(f"figure: {f}")
+    return 0
+
+
+@_guarded
+def cmd_report(args) -> int:
+    from sweep.campaign.engine import write_report
+
+    spec = _spec(args)
+    path = write_report(spec, args.results)
+    print(f"report: {path}")
+    if getattr(args, "html", False):
+        from sweep.campaign.report_html import write_html_report
+
+        print(f"report: {write_html_report(spec, args.results)}")
+    return 0
+
+
+@_guarded
+def cmd_classify(args) -> int:
+    from sweep.campaign.engine import reclassify
+
+    from sweep.campaign.engine import plan_campaign
+
+    spec = _spec(args)
+    n = reclassify(spec, args.results)
+    print(f"reclassified {n} runs")
+    plan = plan_campaign(spec, args.results, accept_stale=True, verify=False)
+    errors = [(k, plan.records[k]["metrics"]["classify_error"]) for _, k in plan.done
+              if "classify_error" in (plan.records[k].get("metrics") or {})]
+    for k, e in errors:
+        print(f"  no label for {k}: {e}", file=sys.stderr)
+    return 1 if errors else 0
+
+
+@_guarded
+def cmd_prune(args) -> int:
+    from sweep.campaign.archive import prune_campaign
+
+    spec = _spec(args)
+    try:
+        rep = prune_campaign(spec, args.results)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    print(f"pruned {len(rep.pruned)} runs, {rep.bytes_freed / 2**20:.1f} MiB freed; {len(rep.skipped)} left as they were")
+    for k, why in rep.skipped.items():
+        print(f"  {k}: {why}", file=sys.stderr)
+    return 0
+
+
+@_guarded
+def cmd_columns(args) -> int:
+    from sweep.campaign.columns import column_dictionary, timeseries_dictionary
+    from sweep.campaign.load import load_campaign
+
+    spec = _spec(args)
+    if args.timeseries:
+        cols = timeseries_dictionary()
+    else:
+        try:
+            table = load_campaign(spec, args.results)
+        except FileNotFoundError:
+            table = None
+        if table is None or table.empty:
+            print(f"campaign {spec.name}: no finished runs yet, so no table", file=sys.stderr)
+            return 1
+        cols = column_dictionary(table)
+    width = max(len(n) for n in cols["name"])
+    uw = max(len(u) for u in cols["unit"])
+    for name, unit, meaning in zip(cols["name"], cols["unit"], cols["meaning"]):
+        print(f"{name:<{width}}  {unit:<{uw}}  {meaning}")
+    return 0
+
+
+@_guarded
+def cmd_compare(args) -> int:
+    from solver.output import check_writable_dir
+    from sweep.campaign.compare import compare_campaigns
+    from sweep.campaign.store import write_text_atomic
+
+    if args.out is not None:
+        try:
+            check_writable_dir(str(Path(args.out).resolve().parent), "--out folder")
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+    columns = tuple(c.strip() for c in args.columns.split(",") if c.strip())
+    try:
+        c = compare_campaigns(args.spec, args.other, args.results, label=args.label, columns=columns)
+    except (ValueError, FileNotFoundError) as e:
+        raise UsageError(str(e)) from None
+    text = c.markdown()
+    print(text)
+    if args.out is not None:
+        write_text_atomic(args.out, text + "\n")
+    return 0
+
+
+def main(argv=None) -> int:
+    """Standalone entry point: the ``campaign`` subcommands without the ``dchfrac campaign`` prefix."""
+    parser = argparse.ArgumentParser(prog="python -m sweep.campaign.cli")
+    sub = parser.add_subparsers(dest="cmd")
+    add_campaign_commands(sub)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(["campaign", *argv])
+    setup_logging()
+    try:
+        return int(args.func(args))
+    finally:
+        end_logging()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

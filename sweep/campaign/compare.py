@@ -1,0 +1,160 @@
+"""Compare two campaigns run over the same points: the same grid with two model options, or two meshes.
+
+    from sweep.campaign.compare import compare_campaigns
+    c = compare_campaigns("campaigns/studies/nf_vs_nb_h2_wall.toml", "campaigns/studies/nf_vs_nb_h2_wall_floor.toml")
+    c.pairs            # one row per matched point: swept values, status_a/_b, regime_a/_b, <column>_a/_b
+    c.label_table      # cross-tabulation of the labels of the points finished in both (rows: a, columns: b)
+    print(c.markdown())
+
+Points are matched on the swept parameters the two campaigns share (their values compared to 12 significant
+digits), never on derived columns such as N_f, whose scale (dp_cri) each campaign estimates from its own runs.
+Units are those of the compared columns (mm, s, kPa; ``columns.csv`` beside each table).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["CampaignComparison", "compare_campaigns"]
+
+_DIGITS = 12
+
+
+@dataclass(frozen=True)
+class CampaignComparison:
+    """The matched points of campaigns ``a`` and ``b`` (folder names), label by label.
+
+    pairs : pandas DataFrame, one row per point present in both: the shared swept values, ``status_a``,
+        ``status_b``, ``<label>_a``, ``<label>_b`` and ``<column>_a``, ``<column>_b`` for each compared column.
+    only_a, only_b : points of one campaign without a counterpart (pandas DataFrames of swept values).
+    on : the swept names matched on; label : the label column; columns : the compared numeric columns.
+    """
+
+    a: str
+    b: str
+    on: tuple
+    label: str
+    columns: tuple
+    pairs: object
+    only_a: object
+    only_b: object
+
+    @property
+    def both_ok(self):
+        """The matched points finished (status ok) in both campaigns."""
+        p = self.pairs
+        return p[(p["status_a"] == "ok") & (p["status_b"] == "ok")]
+
+    @property
+    def label_table(self):
+        """Cross-tabulation of the labels of the points finished in both (rows: a, columns: b)."""
+        import pandas as pd
+
+        ok = self.both_ok
+        return pd.crosstab(ok[f"{self.label}_a"].astype(str), ok[f"{self.label}_b"].astype(str))
+
+    @property
+    def status_table(self):
+        """Cross-tabulation of the run statuses over every matched point (rows: a, columns: b)."""
+        import pandas as pd
+
+        return pd.crosstab(self.pairs["status_a"].astype(str), self.pairs["status_b"].astype(str))
+
+    def agreement(self) -> tuple[int, int]:
+        """(points whose labels agree, points finished in both)."""
+        ok = self.both_ok
+        same = (ok[f"{self.label}_a"].astype(str) == ok[f"{self.label}_b"].astype(str)).sum()
+        return int(same), int(len(ok))
+
+    def column_changes(self):
+        """Per compared column, over the points finished in both: median and largest |b - a| and the median of
+        b / a (pandas DataFrame indexed by column; the column's own unit)."""
+        import numpy as np
+        import pandas as pd
+
+        ok, rows = self.both_ok, {}
+        for c in self.columns:
+            xa = pd.to_numeric(ok[f"{c}_a"], errors="coerce").to_numpy(float)
+            xb = pd.to_numeric(ok[f"{c}_b"], errors="coerce").to_numpy(float)
+            m = np.isfinite(xa) & np.isfinite(xb)
+            d = np.abs(xb[m] - xa[m])
+            ratio = xb[m][xa[m] != 0] / xa[m][xa[m] != 0]
+            rows[c] = {"n": int(m.sum()), "median_abs_change": float(np.median(d)) if d.size else np.nan,
+                       "max_abs_change": float(d.max()) if d.size else np.nan,
+                       "median_ratio_b_over_a": float(np.median(ratio)) if ratio.size else np.nan}
+        return pd.DataFrame.from_dict(rows, orient="index")
+
+    def markdown(self) -> str:
+        """A Markdown summary: matched points, statuses, label agreement and table, column changes."""
+        same, n = self.agreement()
+        lines = [f"# `{self.a}` against `{self.b}`", "",
+                 f"Matched on {', '.join(self.on)}: {len(self.pairs)} points in both, {len(self.only_a)} only in "
+                 f"`{self.a}`, {len(self.only_b)} only in `{self.b}`.", "",
+                 "## Status (rows: a, columns: b)", "", _md_table(self.status_table), "",
+                 f"## {self.label} (points finished in both; rows: a, columns: b)", "",
+                 f"{same} of {n} labels agree.", "", _md_table(self.label_table) if n else "(none)", ""]
+        if self.columns:
+            lines += ["## Compared columns (points finished in both; |b - a| in the column's unit)", "",
+                      _md_table(self.column_changes().round(4)), ""]
+        return "\n".join(lines)
+
+
+def _md_table(df) -> str:
+    head = ["", *map(str, df.columns)]
+    rows = [[str(i), *map(str, r)] for i, r in zip(df.index, df.to_numpy().tolist())]
+    return "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head),
+                      *["| " + " | ".join(r) + " |" for r in rows]])
+
+
+def _matching_key(table, on):
+    """One hashable key per row: the swept values rounded to ``_DIGITS`` significant digits."""
+    import numpy as np
+
+    cols = []
+    for n in on:
+        v = table[n].to_numpy()
+        try:
+            v = np.array([float(f"{float(x):.{_DIGITS - 1}e}") for x in v])
+        except (TypeError, ValueError):
+            v = v.astype(str)
+        cols.append(v)
+    return list(zip(*cols)) if cols else []
+
+
+def _frame(source, root, label, columns):
+    """The table of one campaign, its folder name and its swept names; refuses missing columns."""
+    from sweep.campaign.load import _swept_names, campaign_dir, load_campaign
+
+    d = campaign_dir(source, root)
+    table = load_campaign(source, root)
+    missing = [c for c in (label, *columns) if c not in table.columns]
+    if missing:
+        raise ValueError(f"campaign {d.name!r} has no column {missing[0]!r}: `dchfrac campaign columns` lists them")
+    return table, d.name, _swept_names(Path(d), table)
+
+
+def compare_campaigns(a, b, root="results", *, label: str = "regime", columns=()) -> CampaignComparison:
+    """Match the runs of campaigns ``a`` and ``b`` point by point.
+
+    a, b : campaign folders, spec TOML paths or CampaignSpecs (folders under ``root``).
+    label : the categorical column compared (default ``regime``; e.g. ``fracturing``).
+    columns : numeric columns compared too (e.g. ``("crack_length", "front_radius_mean")``, mm).
+    Raises ValueError when the campaigns share no swept parameter or lack a named column.
+    """
+    import pandas as pd
+
+    columns = tuple(columns)
+    ta, name_a, on_a = _frame(a, root, label, columns)
+    tb, name_b, on_b = _frame(b, root, label, columns)
+    on = tuple(n for n in on_a if n in on_b)
+    if not on:
+        raise ValueError(f"campaigns {name_a!r} and {name_b!r} share no swept parameter "
+                         f"({name_a}: {on_a or 'none'}; {name_b}: {on_b or 'none'}): nothing to match on")
+    keep = ["status", label, *columns]
+    left = ta[list(on) + keep].assign(_k=_matching_key(ta, on))
+    right = tb[keep].assign(_k=_matching_key(tb, on))
+    pairs = left.merge(right, on="_k", suffixes=("_a", "_b"), how="inner")
+    only_a = left[~left["_k"].isin(set(right["_k"]))][list(on)].reset_index(drop=True)
+    only_b = tb[~right["_k"].isin(set(left["_k"]))][list(on)].reset_index(drop=True)
+    pairs = pairs.drop(columns="_k").reset_index(drop=True)
+    return CampaignComparison(name_a, name_b, on, label, columns, pairs, only_a, only_b)

@@ -1,0 +1,134 @@
+"""Load a campaign's results into pandas: one row per run, and the time series of all its runs.
+
+    from sweep import load_campaign, load_timeseries
+    d = load_campaign("campaigns/examples/demo.toml")          # or the campaign folder results/demo
+    d[d.fracturing]                                   # nullable boolean: failed runs are NA
+    ts = load_timeseries("results/demo")              # long frame: key, swept values, status, t, p_inj, ...
+
+Units mm, s, kPa; the unit and meaning of every column are in ``columns.csv`` beside the table
+(``dchfrac campaign columns SPEC`` prints them).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+__all__ = ["load_campaign", "load_timeseries", "campaign_dir"]
+
+
+def campaign_dir(source, root="results") -> Path:
+    """The campaign folder of ``source``: a campaign folder, a spec TOML path or a CampaignSpec (``root/<name>``)."""
+    from sweep.campaign.spec import CampaignSpec, load_spec
+
+    if isinstance(source, CampaignSpec):
+        return Path(root) / source.name
+    p = Path(source)
+    if p.is_dir():
+        return p
+    if p.is_file():
+        return Path(root) / load_spec(p).name
+    raise FileNotFoundError(f"campaign {str(source)!r} not found: give a campaign folder or a spec TOML file")
+
+
+def load_campaign(source, root="results"):
+    """One row per finished run of a campaign, typed (pandas DataFrame).
+
+    source : campaign folder (holding ``table.parquet`` or ``table.csv``), spec TOML path or CampaignSpec;
+        with a spec, the folder is ``root/<name>`` and the table is built from the run records when it has
+        not been written yet.
+    Columns take their dictionary dtypes: Float64, Int64, boolean (NA for failed runs), string, and
+    Python lists for list columns (``crack_tip_angles_deg``, ``snapshot_times``, ``blocks``).
+    ``run_dir`` is relative to the campaign folder, which is ``df.attrs["campaign_dir"]``.
+    """
+    import pandas as pd
+
+    from sweep.campaign.columns import typed_table
+
+    d = campaign_dir(source, root)
+    if (d / "table.parquet").is_file():
+        df = pd.read_parquet(d / "table.parquet")
+    elif (d / "table.csv").is_file():
+        df = pd.read_csv(d / "table.csv")
+    elif not isinstance(source, (str, os.PathLike)) or Path(source).is_file():
+        from sweep.campaign.engine import as_spec, build_table
+
+        df = build_table(as_spec(source), root)
+    else:
+        raise FileNotFoundError(f"no table.parquet or table.csv in {d}")
+    df = typed_table(_relative_run_dirs(df), _dictionary(d, df))
+    df.attrs["campaign_dir"] = str(d)
+    return df
+
+
+def _dictionary(d: Path, df):
+    """The column dictionary written beside the table, else the one made from the declarations."""
+    import pandas as pd
+
+    from sweep.campaign.columns import column_dictionary
+
+    f = d / "columns.csv"
+    if f.is_file():
+        written = pd.read_csv(f, keep_default_na=False)
+        if set(df.columns) <= set(written["name"]):
+            return written
+    return column_dictionary(df)
+
+
+def _relative_run_dirs(df):
+    """Absolute run folders (tables written before run_dir became relative) -> ``runs/<key>``."""
+    if "run_dir" not in df.columns:
+        return df
+    df = df.copy()
+    df["run_dir"] = [f"runs/{Path(v).name}" if isinstance(v, str) and os.path.isabs(v) else v for v in df["run_dir"]]
+    return df
+
+
+def _swept_names(d: Path, table) -> list[str]:
+    """The swept columns of a campaign table, from its column dictionary (else its spec copy)."""
+    import pandas as pd
+
+    f = d / "columns.csv"
+    if f.is_file():
+        cols = pd.read_csv(f, keep_default_na=False)
+        if "swept" in cols.columns:
+            return [n for n, s in zip(cols["name"], cols["swept"]) if str(s) == "True" and n in table.columns]
+    if (d / "spec.toml").is_file():
+        from sweep.campaign.spec import load_spec
+
+        try:
+            return [n for n in load_spec(d / "spec.toml").axis_names if n in table.columns]
+        except Exception:  # noqa: BLE001 - an old spec copy: key the frame by run only
+            return []
+    return []
+
+
+def load_timeseries(source, root="results", *, status: str | None = None):
+    """The time series of every run of a campaign in one long frame (pandas DataFrame).
+
+    source : as for :func:`load_campaign`. status : keep only runs with this status ("ok", "failed"),
+    None keeps every run that wrote a time series (a failed run's series ends where it failed).
+    Columns: ``key``, the swept values (named as the spec's axes), ``status``, then the columns of
+    ``timeseries.csv`` (t in s, p_inj in kPa, radii in mm, ...; ``sweep.campaign.columns.timeseries_dictionary``).
+    """
+    import pandas as pd
+
+    table = load_campaign(source, root)
+    d = Path(table.attrs["campaign_dir"])
+    swept = _swept_names(d, table)
+    frames = []
+    for _, row in table.iterrows():
+        f = d / str(row["run_dir"]) / "timeseries.csv"
+        if (status is not None and row["status"] != status) or not f.is_file():
+            continue
+        ts = pd.read_csv(f)
+        keys = {"key": row["key"], **{n: row[n] for n in swept}, "status": row["status"]}
+        frames.append(ts.assign(**keys)[[*keys, *ts.columns]])
+    if not frames:
+        return pd.DataFrame(columns=["key", *swept, "status", "t"])
+    out = pd.concat(frames, ignore_index=True)
+    for c in ("key", "status"):
+        out[c] = out[c].astype("string")
+    for n in swept:
+        out[n] = out[n].astype(table[n].dtype)
+    out.attrs["campaign_dir"] = str(d)
+    return out

@@ -1,0 +1,41 @@
+"""The campaigns/ folders as the README describes them: every spec parses, and every committed campaign result
+(a results/<name>/ folder with a table) belongs to a spec of that name."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sweep.campaign.spec import load_spec
+from sweep.discrepancy.twins import load_twin_campaign
+
+ROOT = Path(__file__).resolve().parents[1]
+CAMPAIGNS = ROOT / "campaigns"
+FOLDERS = ("examples", "paper", "studies", "discrepancy")
+SPECS = sorted(p.relative_to(CAMPAIGNS).as_posix() for p in CAMPAIGNS.rglob("*.toml"))
+
+
+def test_every_spec_is_in_one_of_the_documented_folders():
+    assert SPECS, "no campaign specs found"
+    outside = [s for s in SPECS if s.split("/")[0] not in FOLDERS or s.count("/") != 1]
+    assert not outside, f"campaign specs outside campaigns/{{{','.join(FOLDERS)}}}/: {outside}"
+
+
+@pytest.mark.parametrize("rel", [s for s in SPECS if not s.startswith("discrepancy/")])
+def test_every_campaign_spec_parses(rel):
+    spec = load_spec(CAMPAIGNS / rel)
+    assert spec.name
+
+
+@pytest.mark.parametrize("rel", [s for s in SPECS if s.startswith("discrepancy/")])
+def test_every_twin_campaign_parses(rel):
+    camp = load_twin_campaign(CAMPAIGNS / rel)
+    assert camp["twin"] and camp["conditions"]
+
+
+def test_every_committed_campaign_table_has_its_spec():
+    names = {load_spec(CAMPAIGNS / s).name for s in SPECS if not s.startswith("discrepancy/")}
+    tables = sorted(d.name for d in (ROOT / "results").iterdir() if (d / "table.csv").is_file())
+    assert tables, "no committed campaign tables under results/"
+    orphans = [t for t in tables if t not in names]
+    assert not orphans, f"results/<name>/table.csv without a campaign spec of that name: {orphans}"
