@@ -3,7 +3,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweep import label_agreement as la
+from sweep.studies import label_agreement as la
 
 
 def _runs(lengths_by_real):

@@ -18,7 +18,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 import test_boundary_sampler as T  # noqa: E402  (the oracles, the driver and the error measure of the tests)
-from sweep.regimes.diagrams import separatrix_profile_interval  # noqa: E402
+from sweep.regimes.separatrix import separatrix_profile_interval  # noqa: E402
 
 CASES = {"separatrix_sharp": (T.CA_AXES, T.separatrix_sharp, T._sep_truth, {"cement": 0.1, "eta_o": 0.1}),
          "separatrix_fuzzy": (T.CA_AXES, T.separatrix_fuzzy, T._sep_truth, {"cement": 0.1, "eta_o": 0.1}),

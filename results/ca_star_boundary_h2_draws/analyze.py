@@ -2,7 +2,7 @@
 
 1. Label agreement over the porosity draws (column ``seed``) at L_min = 4 mm: the share of points whose draws all
    carry the same label, and the spread of the crack length (max - min over the draws) per point.
-2. The separatrix Ca*_c = A exp(B C) (sweep.regimes.diagrams.separatrix_profile_interval) on each seed alone and on the
+2. The separatrix Ca*_c = A exp(B C) (sweep.regimes.separatrix.separatrix_profile_interval) on each seed alone and on the
    draws pooled; the verdict is "B > 0 at 2 sigma" on the pooled fit.
 3. The pooled fit at L_min = 2, 3, 4, 5, 6 mm, reported whole (not the verdict).
 
@@ -16,7 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sweep import label_agreement as la
+from sweep.studies import label_agreement as la
 from sweep.campaign.load import load_campaign
 
 L_PROTOCOL = 4.0  # mm, the campaign's [classify] min_crack_length

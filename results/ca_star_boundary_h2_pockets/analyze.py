@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from sweep import label_agreement as la
+from sweep.studies import label_agreement as la
 from sweep.campaign.load import load_campaign
 
 L_PROTOCOL = 4.0  # mm, the campaign's [classify] min_crack_length

@@ -15,7 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sweep import label_agreement as la
+from sweep.studies import label_agreement as la
 from sweep.campaign.load import load_campaign
 
 L_PROTOCOL = 6.0  # mm, the campaign's [classify] min_crack_length

@@ -230,6 +230,8 @@ class BoundarySampler:
         if s.initial == "grid":
             combos = expand_block(block)
             return tuple(tuple(round_sig(float(c[(a.target, a.name)]), _COORD_DIGITS) for a in block.axes) for c in combos)
+        # Latin hypercube drawn here, not by scipy.stats.qmc.LatinHypercube: the replay regenerates this design
+        # from the seed to match the committed campaigns' runs, and scipy's draws other points for the same seed
         rng = np.random.default_rng([s.seed, 0])
         n, d = s.n_initial, len(axes)
         U = np.stack([(rng.permutation(n) + rng.uniform(size=n)) / n for _ in range(d)], axis=1) * 2.0 - 1.0

@@ -944,7 +944,7 @@ def _fields_plot(spec, store, table, g, path) -> list[Path]:
 
 def _phase_diagram(spec, table, g, path) -> list[Path]:
     """The paper's diagrams through sweep.regimes.diagrams (ok runs only); PNG (+ the diagram's formats)."""
-    from sweep import diagrams as dg
+    from sweep.regimes import diagrams as dg
 
     ok = table[table["status"] == "ok"]
     kind = g["kind"]
@@ -976,7 +976,7 @@ def _boundary_figure(spec, store: ResultsStore, table):
     order) and the table with an ``order`` column (the order the sampler chose each run)."""
     import pandas as pd
 
-    from sweep import diagrams as dg
+    from sweep.regimes import diagrams as dg
     from sweep.campaign.boundary import BoundarySampler
     from sweep.regimes.regime_model import boundary_band
     from sweep.campaign.spec import round_sig
