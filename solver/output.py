@@ -311,6 +311,13 @@ def write_xdmf(run_dir, data_format: str | None = None) -> Path:
 
     data_format : "hdf5" (the arrays in ``fields.h5`` beside the .xdmf), "xml" (inline) or None / "auto"
     (hdf5 with h5py installed). Both files are written under temporary names and renamed, the .h5 first.
+
+    Written here, not by ``meshio.xdmf.TimeSeriesWriter`` (meshio 5.3.5), which cannot express three things
+    of this layout: the heavy data beside the .xdmf (it opens ``<stem>.h5`` in the current working folder,
+    meshio issue #1442), one temporal collection without a separate static mesh grid (it always writes the mesh
+    as a second grid of the domain, which VTK/ParaView readers show beside the series), and compressed
+    datasets under a temporary name.  meshio's ``TimeSeriesReader`` reads the result back exactly
+    (tests/test_fields_output.py).
     """
     fmt = xdmf_format(data_format)
     run_dir = Path(run_dir)
