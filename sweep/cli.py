@@ -329,8 +329,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=cmd_report)
     from .campaign.cli import add_campaign_commands
     from .discrepancy.cli import add_discrepancy_commands
+    from .studies.protocols import add_judge_command
 
     add_campaign_commands(sub)
+    add_judge_command(sub)
     add_discrepancy_commands(sub)
     for leaf in _leaf_parsers(ap):
         if leaf is not ap:
