@@ -14,7 +14,7 @@ the longest crack (mm) at or before the judged time, read two ways:
 and fits Ca*_c = A exp(B C) at each (phi_open, L_min) with the protocol's fit
 (``sweep.studies.threshold_sensitivity.separatrix_grid``).  Units: mm, s, %.
 
-    python results/fidelity/longest_crack_separatrix.py FOLDER [--table CSV] --l-min 3 4 5 --out FILE.json --md FILE.md
+    python results/archive/fidelity/longest_crack_separatrix.py FOLDER [--table CSV] --l-min 3 4 5 --out FILE.json --md FILE.md
 
 FOLDER: a boundary campaign's results folder with ``runs/`` (each with timeseries.csv and params.toml) and
 ``crack_history.csv``; ``--table``: its table.csv (default FOLDER/table.csv).

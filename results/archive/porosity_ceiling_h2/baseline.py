@@ -1,7 +1,7 @@
 """The baseline of campaigns/studies/porosity_ceiling_h2.toml (its point and options without a ceiling) rerun on this code,
-as the quantities of results/fidelity/wall_seal.py, printed as JSON (units mm, s, kPa).
+as the quantities of results/archive/fidelity/wall_seal.py, printed as JSON (units mm, s, kPa).
 
-    python results/porosity_ceiling_h2/baseline.py > baseline_current_code.json
+    python results/archive/porosity_ceiling_h2/baseline.py > baseline_current_code.json
 """
 import json, sys
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1] / "fidelity"))

@@ -8,7 +8,7 @@ outflow through r_o as a fraction of the injected volume at 1, 2 s and at the en
 pressure (kPa) and the porosity (-) averaged over rings at the radii RADII and r_o - WALL (mm), and the smallest
 porosity within 2 mm of r_o.  Units: mm, s, kPa.
 
-    python results/fidelity/wall_seal.py STORE/wall_seal_h2 --out wall_seal.json [--md wall_seal.md]
+    python results/archive/fidelity/wall_seal.py STORE/wall_seal_h2 --out wall_seal.json [--md wall_seal.md]
 """
 from __future__ import annotations
 

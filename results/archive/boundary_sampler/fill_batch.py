@@ -4,8 +4,8 @@
 per core is about rounds x the run time).  ``coverage``: how often the separatrix's 95 % profile intervals of A and
 B hold the truth on the fuzzy answer (batch 4, degree 2, tolerance 0.1, as the default-suite test).
 
-    python results/boundary_sampler/fill_batch.py runs --seeds 20 --out results/boundary_sampler/fill_batch.json
-    python results/boundary_sampler/fill_batch.py coverage --seeds 200 --out results/boundary_sampler/fill_batch_coverage.json
+    python results/archive/boundary_sampler/fill_batch.py runs --seeds 20 --out results/archive/boundary_sampler/fill_batch.json
+    python results/archive/boundary_sampler/fill_batch.py coverage --seeds 200 --out results/archive/boundary_sampler/fill_batch_coverage.json
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ PHI_OPEN, the number of cracks at phi_open = 0.99 and L_min = 4 mm, the largest 
 the phi >= 0.99 crack region, the range of the damage (element mean of d) and of the volumetric strain eps_v, the
 largest porosity, and the time the run was classified at.  Units: mm, s; d, phi, eps_v dimensionless.
 
-    python results/fidelity/crack_history.py STORE/CAMPAIGN --out crack_history.csv [--summary summary.md]
+    python results/archive/fidelity/crack_history.py STORE/CAMPAIGN --out crack_history.csv [--summary summary.md]
 """
 from __future__ import annotations
 
