@@ -50,6 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .output import atomic_write_text
+
 __all__ = ["Sym", "Tracer", "FormsKernel", "forms_kernel", "cache_dir"]
 
 _CMP = {"lt": "<", "le": "<=", "gt": ">", "ge": ">="}
@@ -667,9 +669,7 @@ def _load_module(src: str):
         try:  # a read-only cache directory falls back to a private temporary one
             d.mkdir(parents=True, exist_ok=True)
             if not path.exists() or path.read_text() != src:
-                tmp = d / f".forms_{h}.{os.getpid()}.{threading.get_ident()}.tmp"
-                tmp.write_text(src)
-                os.replace(tmp, path)
+                atomic_write_text(path, src)
             break
         except OSError:
             continue

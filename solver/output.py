@@ -18,6 +18,7 @@ While a run is in progress ``summary.json`` says ``"status": "running"`` and
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import platform
@@ -69,19 +70,29 @@ SNAPSHOT_FIELDS = {
 }
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
+@contextlib.contextmanager
+def atomic_path(path):
+    """The project's one atomic write: yields a temporary path beside ``path`` (same folder, so the rename
+    stays on one file system); when the block ends without error the file is made readable (0644) and renamed
+    onto ``path``, so a reader never sees a partial file; on error the temporary file is removed.  Creates the
+    parent folder."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name + ".")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.name + ".", suffix=path.suffix)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
+        yield Path(tmp)
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
-    except BaseException:
+    finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
-        raise
+
+
+def atomic_write_bytes(path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (``atomic_path``)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def check_writable_dir(path, what: str = "output folder") -> Path:
@@ -109,7 +120,8 @@ def check_writable_dir(path, what: str = "output folder") -> Path:
     return path
 
 
-def atomic_write_text(path: Path, text: str) -> None:
+def atomic_write_text(path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically (``atomic_path``)."""
     atomic_write_bytes(path, text.encode())
 
 
@@ -152,12 +164,9 @@ class RunWriter:
         self.snap_dir.mkdir(exist_ok=True)
         for old in self.snap_dir.glob("snap_*.npz"):
             old.unlink()
-        tmp = self.dir / ".params.toml.tmp"
-        params.to_toml(tmp)
-        os.replace(tmp, self.dir / "params.toml")
-        tmp = self.dir / ".options.toml.tmp"
-        options.to_toml(tmp)
-        os.replace(tmp, self.dir / "options.toml")
+        for name, obj in (("params.toml", params), ("options.toml", options)):
+            with atomic_path(self.dir / name) as tmp:
+                obj.to_toml(tmp)
         self._summary({"status": "running", "reason": None, "complete": False})
         atomic_write_text(self.dir / "log.txt", "")
 
@@ -302,6 +311,13 @@ def write_xdmf(run_dir, data_format: str | None = None) -> Path:
 
     data_format : "hdf5" (the arrays in ``fields.h5`` beside the .xdmf), "xml" (inline) or None / "auto"
     (hdf5 with h5py installed). Both files are written under temporary names and renamed, the .h5 first.
+
+    Written here, not by ``meshio.xdmf.TimeSeriesWriter`` (meshio 5.3.5), which cannot express three things
+    of this layout: the heavy data beside the .xdmf (it opens ``<stem>.h5`` in the current working folder,
+    meshio issue #1442), one temporal collection without a separate static mesh grid (it always writes the mesh
+    as a second grid of the domain, which VTK/ParaView readers show beside the series), and compressed
+    datasets under a temporary name.  meshio's ``TimeSeriesReader`` reads the result back exactly
+    (tests/test_fields_output.py).
     """
     fmt = xdmf_format(data_format)
     run_dir = Path(run_dir)
@@ -311,9 +327,8 @@ def write_xdmf(run_dir, data_format: str | None = None) -> Path:
     frames = _xdmf_frames(pts, snaps)
     path, h5 = run_dir / "fields.xdmf", run_dir / "fields.h5"
     if fmt == "hdf5":
-        tmp = run_dir / f".fields.h5.{os.getpid()}.tmp"
-        _write_h5(tmp, pts3, tri, frames)
-        os.replace(tmp, h5)
+        with atomic_path(h5) as tmp:
+            _write_h5(tmp, pts3, tri, frames)
     import io
 
     buf = io.BytesIO()

@@ -8,12 +8,12 @@ from ``solver.output.SNAPSHOT_FIELDS``.
 """
 from __future__ import annotations
 
-import os
-import uuid
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+
+from solver.output import atomic_path
 
 __all__ = ["ANIMATABLE", "animation_writer", "build_animation", "animate_run", "parse_fields"]
 
@@ -108,12 +108,6 @@ def animate_run(run_dir, fields: Sequence[str] = ("S", "phi", "d", "p"), out=Non
     path = Path(out) if out is not None else run_dir / f"animation{suffix}"
     fig, update, n = build_animation(run_dir, fields)
     anim = animation.FuncAnimation(fig, update, frames=n, blit=False)
-    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}{suffix}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
+    with atomic_path(path) as tmp:
         anim.save(tmp, writer=animation.writers[writer_name](fps=fps), dpi=120)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path

@@ -329,8 +329,14 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=cmd_report)
     from .campaign.cli import add_campaign_commands
     from .discrepancy.cli import add_discrepancy_commands
+    from .studies.closure import add_closure_command
+    from .studies.cracks import add_cracks_command
+    from .studies.protocols import add_judge_command
 
     add_campaign_commands(sub)
+    add_judge_command(sub)
+    add_closure_command(sub)
+    add_cracks_command(sub)
     add_discrepancy_commands(sub)
     for leaf in _leaf_parsers(ap):
         if leaf is not ap:

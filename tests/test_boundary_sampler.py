@@ -11,7 +11,7 @@ pair of labels between the true and the fitted boundaries, in tolerance units, <
 the runs of the grid that reaches the same tolerance (spacing 2 x tolerance on every axis: a boundary
 between two neighbours of different labels is then within one tolerance of their midpoint); and, on the
 separatrix, sharp and fuzzy, the 95 % profile intervals of A and B
-(sweep.regimes.diagrams.separatrix_profile_interval) cover the truth in >= 90 % of seeds.
+(sweep.regimes.separatrix.separatrix_profile_interval) cover the truth in >= 90 % of seeds.
 
 Seed counts of the coverage claim, from the binomial law of the number of seeds covered: with the
 sharp separatrix the intervals bound the separating separatrices and are conservative, 20 seeds and
@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from sweep.campaign.boundary import BoundarySampler
 from sweep.campaign.engine import _numbers
-from sweep.regimes.diagrams import separatrix_profile_interval
+from sweep.regimes.separatrix import separatrix_profile_interval
 from sweep.regimes.regime_model import unit_grid
 from sweep.campaign.spec import SpecError, spec_from_dict
 

@@ -39,3 +39,11 @@ def test_every_committed_campaign_table_has_its_spec():
     assert tables, "no committed campaign tables under results/"
     orphans = [t for t in tables if t not in names]
     assert not orphans, f"results/<name>/table.csv without a campaign spec of that name: {orphans}"
+
+
+def test_no_script_outside_the_archive():
+    """A script a result depends on is package code (tested, a `dchfrac` subcommand) or sits in results/archive/."""
+    scripts = sorted(str(f.relative_to(ROOT)) for ext in ("*.py", "*.sh") for f in (ROOT / "results").rglob(ext)
+                     if "archive" not in f.relative_to(ROOT / "results").parts[:1]
+                     and f.relative_to(ROOT / "results").parts[0] != "bench")
+    assert not scripts, f"untested scripts outside results/archive/: {scripts}"

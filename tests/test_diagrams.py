@@ -6,13 +6,8 @@ import pandas as pd
 import pytest
 
 from sweep.regimes.classify import REGIMES
-from sweep.regimes.diagrams import (
-    REGIME_STYLE,
-    fit_exponential_separatrix,
-    plot_ca_star_vs_cement,
-    plot_nf_vs_nb,
-    regime_map,
-)
+from sweep.regimes.diagrams import REGIME_STYLE, plot_ca_star_vs_cement, plot_nf_vs_nb, regime_map
+from sweep.regimes.separatrix import fit_exponential_separatrix
 
 A_TRUE, B_TRUE = 1e7, 1.5  # Ca*_c = A exp(B C), C in %
 

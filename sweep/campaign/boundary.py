@@ -27,7 +27,7 @@ Campaign TOML::
     smoothness = 0.3            # prior sd ratio per extra degree (curvature is a priori small)
     confidence = 0.95           # of the boundary's uncertainty band
     fill_batch = false          # true: when the picks' bands leave fewer than `batch` candidates, halve the
-                                #   bands until the round is full (fewer rounds; see results/boundary_sampler)
+                                #   bands until the round is full (fewer rounds; see results/archive/boundary_sampler)
 
 Each round fits :func:`sweep.regimes.regime_model.fit_regime_model` to the labelled runs, measures the
 boundary-location uncertainty (z sigma_loc on the MAP boundaries, in tolerance units) and,
@@ -38,7 +38,7 @@ within half a tolerance of a sampled one. While the band is wide (the first roun
 cover every candidate, and the round runs fewer than ``batch`` points while a core waits. ``fill_batch``
 then halves the exclusion radii (never below half a tolerance) and picks again, so that every round runs
 ``batch`` points. It is off by default: it changes the designs, and with them the coverage of the separatrix
-intervals on fuzzy labels (results/boundary_sampler/README.md).
+intervals on fuzzy labels (results/archive/boundary_sampler/README.md).
 
 The prior sd of the classifier's slopes is the inverse of the regimes' transition width. It is not
 fixed: each fit weighs a grid of prior sds by their evidence (marginal likelihood of the labels), and
@@ -230,6 +230,8 @@ class BoundarySampler:
         if s.initial == "grid":
             combos = expand_block(block)
             return tuple(tuple(round_sig(float(c[(a.target, a.name)]), _COORD_DIGITS) for a in block.axes) for c in combos)
+        # Latin hypercube drawn here, not by scipy.stats.qmc.LatinHypercube: the replay regenerates this design
+        # from the seed to match the committed campaigns' runs, and scipy's draws other points for the same seed
         rng = np.random.default_rng([s.seed, 0])
         n, d = s.n_initial, len(axes)
         U = np.stack([(rng.permutation(n) + rng.uniform(size=n)) / n for _ in range(d)], axis=1) * 2.0 - 1.0

@@ -62,16 +62,14 @@ def swept_label(row, names: Iterable[str]) -> str:
 
 def save_figure(fig, path, formats: Sequence[str] = ("png", VECTOR_FORMAT)) -> list[Path]:
     """Save ``fig`` as ``path`` with each suffix of ``formats`` (PNG at ``DPI``), atomically; returns the paths."""
-    import os
-    import uuid
+    from solver.output import atomic_path
 
     path = Path(path)
     out = []
     for fmt in formats:
         p = path.with_suffix(f".{fmt}")
-        tmp = p.with_name(f".{p.stem}.{uuid.uuid4().hex[:8]}.{fmt}")
-        fig.savefig(tmp, dpi=DPI, bbox_inches="tight", format=fmt)
-        os.replace(tmp, p)
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=DPI, bbox_inches="tight", format=fmt)
         out.append(p)
     return out
 

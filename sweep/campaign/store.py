@@ -31,6 +31,8 @@ import uuid
 from pathlib import Path
 from typing import Any, Mapping
 
+from solver.output import atomic_path
+from solver.output import atomic_write_text as write_text_atomic  # the project's one atomic writer
 from sweep.campaign.spec_model import canonical_json
 
 __all__ = ["run_key", "KEY_FORMAT", "current_code_hash", "current_classifier_hash", "file_manifest", "verify_run", "ResultsStore", "write_json_atomic", "write_text_atomic", "to_json"]
@@ -82,14 +84,6 @@ def _default(o):
 def to_json(obj) -> str:
     """JSON text (numpy scalars/arrays converted; NaN kept as NaN)."""
     return json.dumps(obj, indent=1, sort_keys=True, default=_default)
-
-
-def write_text_atomic(path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same folder, then rename."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def write_json_atomic(path, obj) -> None:
@@ -291,9 +285,8 @@ class ResultsStore:
         from sweep.campaign.columns import arrow_schema
 
         table = pa.Table.from_pandas(typed, schema=arrow_schema(typed, dictionary), preserve_index=False)
-        tmp = self.table_parquet.with_name(f".table.{uuid.uuid4().hex[:8]}.parquet")
-        pq.write_table(table, tmp)
-        os.replace(tmp, self.table_parquet)
+        with atomic_path(self.table_parquet) as tmp:
+            pq.write_table(table, tmp)
 
     # -- single-writer lock ----------------------------------------------------
     def acquire_lock(self) -> None:

@@ -86,9 +86,9 @@ def main(argv=None) -> int:
         return 2
     text = markdown(c)
     if a.out:
-        from sweep.campaign.store import write_text_atomic
+        from solver.output import atomic_write_text
 
-        write_text_atomic(Path(a.out), text)
+        atomic_write_text(Path(a.out), text)
     else:
         print(text, end="")
     return 0

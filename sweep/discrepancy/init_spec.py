@@ -132,7 +132,7 @@ def starting_spec(data: MeasuredData, folder) -> str:
 def write_starting_spec(measured, out, force: bool = False) -> Path:
     """Validate the measured-data folder ``measured``, write its starting SPEC to ``out`` (atomically; an
     existing file only with ``force``) and check that it loads.  Returns the path."""
-    from sweep.campaign.store import write_text_atomic
+    from solver.output import atomic_write_text
 
     from .spec import spec_from_dict
 
@@ -144,5 +144,5 @@ def write_starting_spec(measured, out, force: bool = False) -> Path:
     import tomllib
 
     spec_from_dict(tomllib.loads(text))          # what is written loads as written
-    write_text_atomic(out, text)
+    atomic_write_text(out, text)
     return out

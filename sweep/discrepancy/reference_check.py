@@ -95,7 +95,8 @@ def run_reference_check(check: ReferenceCheck, models: dict, out_dir, cache_dir,
     each model's value, and per model the gap |model − paper| of :data:`GAP_QUANTITIES`.
     """
     from sweep.studies.reference import paper_reported, reference_report
-    from sweep.campaign.store import write_json_atomic, write_text_atomic
+    from solver.output import atomic_write_text
+    from sweep.campaign.store import write_json_atomic
 
     from .forward import SolverForward, finished
 
@@ -120,7 +121,7 @@ def run_reference_check(check: ReferenceCheck, models: dict, out_dir, cache_dir,
     res = {"conditions": check.conditions, "h": check.h, "t_end": check.t_end, "dt_max": check.dt_max,
            "status": status, "quantities": rows, "gap_to_paper": gaps, "models": models}
     write_json_atomic(out / "reference_check.json", res)
-    write_text_atomic(out / "reference_check.md", _markdown(res, list(models)))
+    atomic_write_text(out / "reference_check.md", _markdown(res, list(models)))
     return res
 
 

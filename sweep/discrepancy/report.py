@@ -409,9 +409,9 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     """Write report.json, report.md and (optionally) the figures into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    from sweep.campaign.store import write_text_atomic   # a killed run never leaves a truncated report
+    from solver.output import atomic_write_text   # a killed run never leaves a truncated report
 
-    write_text_atomic(out / "report.json", json.dumps(report, indent=1) + "\n")
+    atomic_write_text(out / "report.json", json.dumps(report, indent=1) + "\n")
     figs = []
     if figures:
         try:
@@ -430,5 +430,5 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     for cap, f in figs:
         L += [f"![{cap}]({f})" if f else cap, ""]
     L += _METHOD
-    write_text_atomic(out / "report.md", "\n".join(L) + "\n")
+    atomic_write_text(out / "report.md", "\n".join(L) + "\n")
     return out

@@ -141,10 +141,11 @@ def main(argv=None) -> int:
     md = coverage_markdown(rows, summary)
     print(md)
     if a.out:
-        from sweep.campaign.store import write_json_atomic, write_text_atomic
+        from solver.output import atomic_write_text
+        from sweep.campaign.store import write_json_atomic
 
         write_json_atomic(Path(a.out), {"rows": rows, **summary})
-        write_text_atomic(Path(a.out).with_suffix(".md"), md)
+        atomic_write_text(Path(a.out).with_suffix(".md"), md)
     return 0
 
 

@@ -234,7 +234,8 @@ def _write_summary_entry(path: Path, name: str, entry: dict) -> None:
     """Merge one twin's entry into ``summary.json`` under an exclusive lock, written atomically: several twin
     processes may share a results folder, and a killed one must never leave a truncated summary."""
     import fcntl
-    import os
+
+    from solver.output import atomic_write_text
 
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path.with_suffix(".lock"), "w") as lk:
@@ -242,9 +243,7 @@ def _write_summary_entry(path: Path, name: str, entry: dict) -> None:
         summary = json.loads(path.read_text()) if path.is_file() else {}
         summary[name] = entry
         _link_resolutions(summary)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(summary, indent=1) + "\n")
-        os.replace(tmp, path)
+        atomic_write_text(path, json.dumps(summary, indent=1) + "\n")
 
 
 def _link_resolutions(summary: dict) -> None:

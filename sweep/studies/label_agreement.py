@@ -5,7 +5,7 @@ campaign that reruns the same points on other realizations asks how much of the 
 
 * :func:`agreement` — per point with every realization done, whether all carry the same label, and the spread of
   the crack length (max − min over the realizations);
-* :func:`separatrix` — the fit Ca*_c = A exp(B C) (:func:`sweep.regimes.diagrams.separatrix_profile_interval`) on a set of
+* :func:`separatrix` — the fit Ca*_c = A exp(B C) (:func:`sweep.regimes.separatrix.separatrix_profile_interval`) on a set of
   runs, or the reason none can be fitted;
 * :func:`judge` — both, per realization and pooled, with the pooled fit over a scan of L_min;
 * :func:`figure` — one panel per realization and one of the share of realizations that fracture;
@@ -26,7 +26,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from sweep.regimes.diagrams import separatrix_profile_interval
+from sweep.regimes.separatrix import separatrix_profile_interval
 from sweep.campaign.store import write_json_atomic
 
 __all__ = ["fracturing", "agreement", "separatrix", "judge", "figure", "report", "longest", "crack_summary",

@@ -5,7 +5,7 @@ touches the cavity) reaches farther than ``min_crack_length`` (L_min) from the i
 constant per element (P1 displacements give a constant volumetric strain, Eq. (phi)), so the crack tip moves
 by whole elements, and a label can hinge on whether one element ahead of the tip passes phi_open.  This module
 re-classifies the stored runs of a campaign on a grid of (phi_open, L_min) fixed by the caller, fits the
-separatrix Ca*_c = A exp(B C) of each grid point (``sweep.regimes.diagrams.separatrix_profile_interval``) and reports
+separatrix Ca*_c = A exp(B C) of each grid point (``sweep.regimes.separatrix.separatrix_profile_interval``) and reports
 every grid point: nothing is chosen from the grid.
 
 Units: lengths mm, C in %, Ca* dimensionless, porosity dimensionless.  Usage::
@@ -26,7 +26,8 @@ import numpy as np
 import pandas as pd
 
 from sweep.regimes.classify import classify_run
-from sweep.campaign.store import write_json_atomic, write_text_atomic
+from solver.output import atomic_write_text
+from sweep.campaign.store import write_json_atomic
 
 __all__ = ["ThresholdGrid", "crack_lengths", "separatrix_grid", "to_markdown", "main"]
 
@@ -85,7 +86,7 @@ def separatrix_grid(lengths: pd.DataFrame, grid: ThresholdGrid, level: float = 0
 
     Each entry: phi_open, l_min (mm), n_fracturing, n, B (1/%), B_interval, A, excludes_zero (the
     ``level`` profile interval of B lies above 0), or ``error`` when the labels cannot be fitted (one class)."""
-    from sweep.regimes.diagrams import separatrix_profile_interval
+    from sweep.regimes.separatrix import separatrix_profile_interval
 
     out = []
     for po in grid.phi_open:
@@ -142,7 +143,7 @@ def main(argv=None) -> int:
                                     "l_min": list(grid.l_min)}, "level": a.level, "fits": fits,
                                     "lengths": lengths.to_dict(orient="records")})
     if a.md:
-        write_text_atomic(Path(a.md), to_markdown(fits, lengths))
+        atomic_write_text(Path(a.md), to_markdown(fits, lengths))
     print(to_markdown(fits, lengths))
     return 0
 

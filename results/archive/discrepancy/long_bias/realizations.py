@@ -3,9 +3,9 @@ w_i = 50 mm/s, the long_floor campaign's base) against the mean of the correctio
 seeds 1-6, dt_max = 0.01 s) at beta = 60 and at the twin's refit 37.3: RMS difference over the 40 times in noise
 units per observable, and the seed-to-seed spread.
 
-    python results/discrepancy/long_bias/realizations.py CACHE data OUT_data.json     # the data run
-    python results/discrepancy/long_bias/realizations.py CACHE 60 OUT_60.json         # six realizations at beta = 60
-    python results/discrepancy/long_bias/realizations.py CACHE 37.3 OUT_37.3.json     # and at 37.3
+    python results/archive/discrepancy/long_bias/realizations.py CACHE data OUT_data.json     # the data run
+    python results/archive/discrepancy/long_bias/realizations.py CACHE 60 OUT_60.json         # six realizations at beta = 60
+    python results/archive/discrepancy/long_bias/realizations.py CACHE 37.3 OUT_37.3.json     # and at 37.3
 
 realizations.json holds the comparison (made from the three outputs).
 """

@@ -20,8 +20,8 @@ initiation): the realization scatter (the sd over seeds), beta's signal (the see
 ratio, the data seed 11's distance from the other six (in their sd), and how much the discretization correction
 (fine mean minus coarse default mesh) changes between beta = 35 and 60.  Units mm, s, kPa.
 
-    python results/discrepancy/tip_refined/probe.py CACHE OUT.json [--jobs 2]   # the runs, then the tables
-    python results/discrepancy/tip_refined/probe.py --tables OUT.json            # the tables from OUT.json
+    python results/archive/discrepancy/tip_refined/probe.py CACHE OUT.json [--jobs 2]   # the runs, then the tables
+    python results/archive/discrepancy/tip_refined/probe.py --tables OUT.json            # the tables from OUT.json
 """
 import json
 import sys

@@ -1,6 +1,6 @@
 """Mesh-seed realizations of the wall-graded runs (Galerkin f_graded, SUPG fc_supg_graded) at h = 2 mm to 2 s.
 
-    python results/fidelity/scheme_convergence/seeds_run.py RUNS_ROOT/fid_seeds_h2
+    python results/archive/fidelity/scheme_convergence/seeds_run.py RUNS_ROOT/fid_seeds_h2
 """
 import sys
 from pathlib import Path

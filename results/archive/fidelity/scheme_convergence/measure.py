@@ -4,7 +4,7 @@ Measures the run folders named below with ``sweep.studies.fidelity.measure`` (p_
 where the water is: ``water_placement``) and writes ``scheme_convergence.json``, ``scheme_convergence.md`` and
 ``S_fields.png`` (S at 0.5, 1 and 2 s) here.  Units mm, s, kPa.
 
-    python results/fidelity/scheme_convergence/measure.py RUNS_ROOT
+    python results/archive/fidelity/scheme_convergence/measure.py RUNS_ROOT
 
 RUNS_ROOT holds the run folders (made by ``sweep.studies.fidelity.run_variant`` for the h series, by
 ``seeds_run.py`` for the seeds); the folders are not committed.

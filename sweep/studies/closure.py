@@ -1,5 +1,6 @@
 """The closing probes (campaigns/studies/wall_seal_h2.toml, wall_open_h2.toml, porosity_ceiling_h2.toml,
-wall_compliance_h2.toml, damage_viscosity_closure_h2.toml): per run, the quantities their headers read.
+wall_compliance_h2.toml, damage_viscosity_closure_h2.toml, broken_skeleton_closure_h2.toml): per run, the quantities
+their headers read.
 
 For each finished run of the campaign store: from the time series, the crack (``open_tip_radius - r_inner``, mm)
 at its largest and at the judged time, the time of the largest, the largest nodal damage (-) at those two times,
@@ -8,18 +9,25 @@ outflow through r_o as a fraction of the injected volume at 1, 2 s and at the en
 pressure (kPa) and the porosity (-) averaged over rings at the radii RADII and r_o - WALL (mm), and the smallest
 porosity within 2 mm of r_o.  Units: mm, s, kPa.
 
-    python results/fidelity/wall_seal.py STORE/wall_seal_h2 --out wall_seal.json [--md wall_seal.md]
+    dchfrac closure STORE/wall_seal_h2 --out wall_seal.json [--md wall_seal_tables.md]
+
+The run folders (``runs/<key>`` with ``record.json``, ``timeseries.csv`` and the snapshots) stay in the campaign's
+store; the committed JSON and tables of each probe's results folder are this command's output.
 """
 from __future__ import annotations
 
-import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from solver.output import atomic_write_text
 from sweep.regimes.classify import list_snapshots
+
+__all__ = ["RADII", "WALL", "series_row", "ring_profiles", "run_summary", "campaign_summaries", "to_markdown",
+           "add_closure_command"]
 
 RADII = (6.0, 10.0, 20.0, 30.0, 40.0, 45.0)   # mm, ring centres (half-width 1 mm)
 WALL = ((3.0, 0.5), (1.0, 0.5), (0.2, 0.1))   # mm inside r_o: ring centres near the wall and their half-widths
@@ -46,9 +54,14 @@ def series_row(ts: pd.DataFrame, r_i: float, t_judged: float) -> dict:
     return row
 
 
+def _mean(values: np.ndarray) -> float:
+    """Mean of a ring's values; NaN for a ring that holds no node (or element centroid)."""
+    return float(values.mean()) if values.size else float("nan")
+
+
 def ring_profiles(run_dir: Path, r_o: float) -> list[dict]:
-    """Per snapshot: ring means of p (nodal) and phi (per element, at its centroid) at RADII and the smallest
-    element phi within 2 mm of r_o."""
+    """Per snapshot after t = 0: ring means of p (nodal, kPa) and phi (per element, at its centroid) at RADII and
+    at r_o - WALL (mm), and the smallest element phi within 2 mm of r_o."""
     with np.load(run_dir / "snapshots" / "mesh.npz") as m:
         pts, tris = np.asarray(m["points"], float), np.asarray(m["triangles"], np.int64)
     r, r_el = np.hypot(*pts.T), np.hypot(*pts[tris].mean(axis=1).T)
@@ -61,13 +74,14 @@ def ring_profiles(run_dir: Path, r_o: float) -> list[dict]:
         row = {"t": float(t), "phi_min_wall": float(phi[r_el > r_o - 2.0].min())}
         rings = [(rc, 1.0) for rc in RADII] + [(r_o - w, half) for w, half in WALL]
         for rc, half in rings:
-            row[f"p@{rc:g}"] = float(p[np.abs(r - rc) <= half].mean())
-            row[f"phi@{rc:g}"] = float(phi[np.abs(r_el - rc) <= half].mean())
+            row[f"p@{rc:g}"] = _mean(p[np.abs(r - rc) <= half])
+            row[f"phi@{rc:g}"] = _mean(phi[np.abs(r_el - rc) <= half])
         rows.append(row)
     return rows
 
 
 def run_summary(run_dir: Path) -> dict:
+    """One finished run folder of a campaign store: its parameters of the probes, label, time series and rings."""
     rec = json.loads((run_dir / "record.json").read_text())
     p = rec["params"]
     ts = pd.read_csv(run_dir / "timeseries.csv")
@@ -79,7 +93,8 @@ def run_summary(run_dir: Path) -> dict:
             **series_row(ts, p["r_inner"], float(t_judged)), "rings": ring_profiles(run_dir, p["r_outer"])}
 
 
-def _markdown(runs: list[dict]) -> str:
+def to_markdown(runs: list[dict]) -> str:
+    """The runs' table and each run's ring table (Markdown)."""
     cols = ["porosity_floor", "permeability_floor", "porosity_ceiling", "beta", "outer_compliance", "label", "t_judged", "crack_longest", "t_longest", "crack_judged", "max_damage_longest", "max_damage_judged", "p_inj_1s",
             "p_inj_2s", "p_inj_end", "outflow_frac_1s", "outflow_frac_2s", "outflow_frac_end"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
@@ -96,24 +111,36 @@ def _markdown(runs: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("campaign_dir", type=Path)
-    ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--md", type=Path)
-    a = ap.parse_args(argv)
+def campaign_summaries(campaign_dir: Path) -> list[dict]:
+    """:func:`run_summary` of every ok run of a campaign store's ``runs/``, ordered by the probes' parameters."""
     runs = []
-    for d in sorted((a.campaign_dir / "runs").iterdir()):
+    for d in sorted((Path(campaign_dir) / "runs").iterdir()):
         rec = d / "record.json"
         if not d.name.startswith(".") and rec.is_file() and json.loads(rec.read_text()).get("status") == "ok":
             runs.append(run_summary(d))
     runs.sort(key=lambda r: (r["porosity_floor"], r["permeability_floor"] or 0.0, r["porosity_ceiling"] or 0.0,
                              r["outer_compliance"] or 0.0, r["beta"] or 0.0))
-    a.out.write_text(json.dumps(runs, indent=1))
+    return runs
+
+
+def cmd_closure(a) -> int:
+    if not (Path(a.campaign_dir) / "runs").is_dir():
+        print(f"dchfrac closure: {a.campaign_dir}: no runs/ folder (allowed: a campaign store's folder with its run "
+              "folders)", file=sys.stderr)
+        return 2
+    runs = campaign_summaries(a.campaign_dir)
+    atomic_write_text(a.out, json.dumps(runs, indent=1))
     if a.md:
-        a.md.write_text(_markdown(runs))
+        atomic_write_text(a.md, to_markdown(runs))
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def add_closure_command(subparsers):
+    """``dchfrac closure CAMPAIGN_DIR --out F.json [--md F.md]``."""
+    c = subparsers.add_parser("closure", help="the closing probes' per-run quantities (crack, p_inj, outflow, rings)",
+                              description=__doc__.split("\n\n")[0])
+    c.add_argument("campaign_dir", type=Path, help="the campaign's store folder (with runs/)")
+    c.add_argument("--out", type=Path, required=True, help="JSON, one entry per ok run")
+    c.add_argument("--md", type=Path, help="Markdown tables")
+    c.set_defaults(func=cmd_closure)
+    return c

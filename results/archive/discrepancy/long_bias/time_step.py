@@ -1,8 +1,8 @@
 """Does the correction's time step explain the long twins' low beta?  The data mesh (h = 3, seed 11) at the
 correction's step dt_max = 0.01 s with beta = B, against the data (dt_max = 0.005 s, beta = 60) of
-results/discrepancy/long_bias/probe.json: RMS difference over the 40 times in noise units per observable.
+results/archive/discrepancy/long_bias/probe.json: RMS difference over the 40 times in noise units per observable.
 
-    python results/discrepancy/long_bias/time_step.py BETA DT_MAX CACHE      # prints one JSON line
+    python results/archive/discrepancy/long_bias/time_step.py BETA DT_MAX CACHE      # prints one JSON line
 """
 import json
 import sys

@@ -13,7 +13,7 @@ Prints and writes ``covariance_variants.json``: per variant and set of condition
 sd, median standard error and RMS z of the six check realizations, and the data seeds' estimates.  RMS z near 1
 is a calibrated error model.  Units: β kPa·s.
 
-    python results/discrepancy/long_bias/covariance_variants.py
+    python results/archive/discrepancy/long_bias/covariance_variants.py
 """
 import dataclasses
 import json

@@ -13,7 +13,7 @@ The twins' data runs (seeds 11 and 12, dt_max = 0.005 s, β = 60, noise-free; se
 solver ada0fb1caa3269e8) are estimated against all six.  Estimates outside [37.3, 60] extrapolate
 the linear model.  Units: β in kPa·s; observables kPa, mm.
 
-    python results/discrepancy/long_bias/leave_one_out.py      # writes leave_one_out.json beside it
+    python results/archive/discrepancy/long_bias/leave_one_out.py      # writes leave_one_out.json beside it
 
 Each condition with curves in curves/ is studied alone, and all of them together (one vector; the realization
 covariance per condition × observable, its correlation time pooled over conditions as in the workflow).

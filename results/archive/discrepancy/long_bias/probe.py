@@ -2,8 +2,8 @@
 campaign's base and observation times; each pair of runs differs in one setting, and the difference of their
 observables is printed in units of the twin's measurement noise (RMS over the 40 times).  Units mm, s, kPa.
 
-    python results/discrepancy/long_bias/probe.py CACHE OUT.json      # the runs, then the tables
-    python results/discrepancy/long_bias/probe.py --tables OUT.json    # the tables again from OUT.json
+    python results/archive/discrepancy/long_bias/probe.py CACHE OUT.json      # the runs, then the tables
+    python results/archive/discrepancy/long_bias/probe.py --tables OUT.json    # the tables again from OUT.json
 
 CACHE: a folder of forward-run caches (run folders keyed by parameters and options; the twin campaign's own
 data cache is reused when given).

@@ -4,8 +4,8 @@
 per core is about rounds x the run time).  ``coverage``: how often the separatrix's 95 % profile intervals of A and
 B hold the truth on the fuzzy answer (batch 4, degree 2, tolerance 0.1, as the default-suite test).
 
-    python results/boundary_sampler/fill_batch.py runs --seeds 20 --out results/boundary_sampler/fill_batch.json
-    python results/boundary_sampler/fill_batch.py coverage --seeds 200 --out results/boundary_sampler/fill_batch_coverage.json
+    python results/archive/boundary_sampler/fill_batch.py runs --seeds 20 --out results/archive/boundary_sampler/fill_batch.json
+    python results/archive/boundary_sampler/fill_batch.py coverage --seeds 200 --out results/archive/boundary_sampler/fill_batch_coverage.json
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
 import test_boundary_sampler as T  # noqa: E402  (the oracles, the driver and the error measure of the tests)
-from sweep.regimes.diagrams import separatrix_profile_interval  # noqa: E402
+from sweep.regimes.separatrix import separatrix_profile_interval  # noqa: E402
 
 CASES = {"separatrix_sharp": (T.CA_AXES, T.separatrix_sharp, T._sep_truth, {"cement": 0.1, "eta_o": 0.1}),
          "separatrix_fuzzy": (T.CA_AXES, T.separatrix_fuzzy, T._sep_truth, {"cement": 0.1, "eta_o": 0.1}),

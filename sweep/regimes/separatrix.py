@@ -1,0 +1,216 @@
+"""Where porous invasion meets fracturing on the Ca*–C diagram (Sec. 3.6): the separatrix Ca*_c = A exp(B C).
+
+Two fits of the same logistic model of the labels: ``fit_exponential_separatrix`` (penalized maximum likelihood,
+delta-method covariance of A and B) and ``separatrix_profile_interval`` (Jeffreys-penalized profile-likelihood
+intervals, honest on separable labels); ``unlocated_reason`` says when the labels do not locate the line.
+C in % (cement ratio), Ca* dimensionless.  Drawing lives in ``sweep.regimes.diagrams``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .numbers import logistic_fit
+
+__all__ = [
+    "ExponentialSeparatrix",
+    "fit_exponential_separatrix",
+    "SeparatrixInterval",
+    "separatrix_profile_interval",
+    "unlocated_reason",
+]
+
+class ExponentialSeparatrix(NamedTuple):
+    """Ca*_c(C) = A exp(B C); cov: 2x2 covariance of (A, B) (delta method).
+
+    Also: ``sigma_A``, ``sigma_B``, ``cov_lnA_B`` (covariance of (ln A, B), in which the
+    fit is close to Gaussian), ``separable`` (labels perfectly separated: then cov
+    reflects the ridge penalty, not a sampling uncertainty).
+    """
+
+    A: float
+    B: float
+    cov: np.ndarray
+    cov_lnA_B: np.ndarray | None = None
+    separable: bool = False
+
+    @property
+    def sigma_A(self) -> float:
+        return float(math.sqrt(max(self.cov[0, 0], 0.0)))
+
+    @property
+    def sigma_B(self) -> float:
+        return float(math.sqrt(max(self.cov[1, 1], 0.0)))
+
+    def __call__(self, C: Any) -> Any:
+        """Ca*_c at cement ratio C (%)."""
+        return self.A * np.exp(self.B * np.asarray(C, dtype=float))
+
+
+def fit_exponential_separatrix(C: Any, ca_star: Any, fracturing: Any,
+                               ridge: float = 1e-3) -> ExponentialSeparatrix:
+    """Fit Ca*_c = A exp(B C) separating porous invasion from fracturing.
+
+    Logistic regression of ``fracturing`` on (C, ln Ca*) (scipy.optimize, no sklearn):
+    logit P = b0 + b1 C + b2 ln Ca*; the 50 % boundary is ln Ca* = -(b0 + b1 C)/b2, so
+    A = exp(-b0/b2), B = -b1/b2, with covariance by the delta method from the inverse
+    Hessian. C in %, Ca* dimensionless (> 0), fracturing bools. Needs both outcomes and
+    fracturing increasing with Ca* (b2 > 0).
+    """
+    Ca = np.asarray(C, dtype=float).ravel()
+    cs = np.asarray(ca_star, dtype=float).ravel()
+    fr = np.asarray(fracturing).astype(bool).ravel()
+    if not (Ca.size == cs.size == fr.size) or Ca.size < 3:
+        raise ValueError(f"C, ca_star, fracturing lengths=({Ca.size}, {cs.size}, {fr.size}): "
+                         "must be equal and >= 3")
+    if not np.all(np.isfinite(Ca)):
+        raise ValueError("C: contains non-finite values; all must be finite (%)")
+    if not np.all(np.isfinite(cs)) or np.any(cs <= 0):
+        raise ValueError("ca_star: must be finite and > 0")
+    fit = logistic_fit(np.c_[Ca, np.log(cs)], fr, ridge=ridge)
+    b0, b1, b2 = fit.beta
+    if b2 <= 0:
+        raise ValueError("fracturing: does not increase with Ca* (fitted coefficient <= 0); "
+                         "no separatrix Ca*_c(C)")
+    lnA, B = -b0 / b2, -b1 / b2
+    J = np.array([[-1.0 / b2, 0.0, b0 / b2**2],
+                  [0.0, -1.0 / b2, b1 / b2**2]])
+    cov_lnAB = J @ fit.cov @ J.T
+    A = float(np.exp(lnA))
+    D = np.diag([A, 1.0])
+    return ExponentialSeparatrix(A=A, B=float(B), cov=D @ cov_lnAB @ D, cov_lnA_B=cov_lnAB,
+                                 separable=fit.separable)
+
+
+class SeparatrixInterval(NamedTuple):
+    """Profile-likelihood intervals of the separatrix Ca*_c = A exp(B C) at ``level``.
+
+    A (-) and B (1/%) are the penalized maximum-likelihood values; ``A_interval``, ``B_interval`` their
+    intervals (each parameter profiled over the other and the transition's sharpness); ``sharpness`` the
+    fitted logistic slope s per unit of ln Ca* (-); ``separable``: every label lies on its side of the
+    fitted separatrix (the data alone then bound s from below only; the Jeffreys penalty keeps it finite).
+    """
+
+    A: float
+    B: float
+    A_interval: tuple[float, float]
+    B_interval: tuple[float, float]
+    level: float
+    separable: bool
+    sharpness: float = math.nan
+
+
+def _sep_objective(phi, M, X, y):
+    """Negative Jeffreys-penalized log-likelihood of the logistic model z = X theta at theta = M phi, and
+    its gradient in phi. Penalty: 0.5 log det of the full model's Fisher information X' W X (Firth 1993);
+    its gradient gives the modified score X' (y - p + h (1/2 - p)), h the hat values."""
+    theta = M @ phi
+    z = X @ theta
+    p = 0.5 * (1.0 + np.tanh(0.5 * z))
+    w = np.maximum(p * (1.0 - p), 1e-300)
+    info = (X * w[:, None]).T @ X
+    sign, logdet = np.linalg.slogdet(info)
+    if sign <= 0:
+        return math.inf, np.zeros_like(phi)
+    h = w * np.einsum("ni,ij,nj->n", X, np.linalg.inv(info), X)
+    nll = float(np.sum(np.logaddexp(0.0, z) - y * z)) - 0.5 * logdet
+    return nll, -(M.T @ (X.T @ (y - p + h * (0.5 - p))))
+
+
+def _sep_fisher(phi, M, X, y):
+    """Fisher information of the likelihood part in phi: the trust region's model Hessian."""
+    z = X @ (M @ phi)
+    p = 0.5 * (1.0 + np.tanh(0.5 * z))
+    XM = X @ M
+    return (XM * (p * (1.0 - p))[:, None]).T @ XM
+
+
+def _sep_min(X, y, M):
+    """Minimum negative penalized log-likelihood over theta = M phi, and theta at the minimum (Newton trust
+    region on the Fisher information, from a unit sharpness). The Jeffreys penalty keeps the minimum finite
+    on separable labels."""
+    from scipy.optimize import minimize
+
+    phi0 = np.linalg.lstsq(M, np.r_[1.0, np.zeros(X.shape[1] - 1)], rcond=None)[0]
+    res = minimize(_sep_objective, phi0, args=(M, X, y), jac=True, hess=_sep_fisher, method="trust-exact",
+                   options={"gtol": 1e-8, "maxiter": 500})
+    return float(res.fun), M @ res.x
+
+
+def _profile_bounds(rise, v0: float, step: float) -> tuple[float, float]:
+    """Where rise(v) (< 0 at v0) crosses 0 on each side: doubling steps, then Brent."""
+    from scipy.optimize import brentq
+
+    out = []
+    for sgn in (-1.0, 1.0):
+        inner, d = v0, step
+        while (r := rise(v0 + sgn * d)) < 0 and d < 1e3 * step:
+            inner, d = v0 + sgn * d, 2.0 * d
+        out.append(brentq(rise, inner, v0 + sgn * d, xtol=0.01 * step) if r >= 0 else v0 + sgn * d)
+    return min(out), max(out)
+
+
+def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: float = 0.95) -> SeparatrixInterval:
+    """Fit Ca*_c = A exp(B C) with profile-likelihood intervals of A and B (scipy only).
+
+    Model: P(fracturing) = expit(s (ln Ca* - ln A - B C)), s > 0 the transition's sharpness per unit of
+    ln Ca*; linear in theta = (s, s B, s ln A). The likelihood carries Jeffreys' prior (Firth's penalty
+    0.5 log det I(theta)), the reference prior of the model, with no scale to choose: on labels that a
+    separatrix separates, the unpenalized likelihood grows without bound as s grows and its profile
+    shrinks to the separating separatrices, whatever the true transition width; the penalty keeps s
+    finite and the profile honest (Heinze and Schemper 2002: profile penalized likelihood intervals).
+    ln A fixed (theta_3 = v theta_1) or B fixed (theta_2 = v theta_1) is a linear constraint on theta,
+    so each profile point is a fit in a plane of theta. The interval is where twice the penalized
+    profile's rise stays below the chi-square(1) quantile of ``level``. C in %, Ca* > 0 (-),
+    fracturing bools (both outcomes needed).
+    """
+    from scipy.stats import chi2
+
+    Cc = np.asarray(C, float).ravel()
+    L = np.log(np.asarray(ca_star, float).ravel())
+    y = np.asarray(fracturing).astype(bool).astype(float).ravel()
+    if not (Cc.size == L.size == y.size) or Cc.size < 3 or y.min() == y.max():
+        raise ValueError("C, ca_star, fracturing: need equal lengths >= 3 and both outcomes")
+    if not 0 < level < 1:
+        raise ValueError(f"level={level!r}: must be in (0, 1)")
+    X = np.c_[L, -Cc, -np.ones_like(L)]
+    full, th = _sep_min(X, y, np.eye(3))
+    if not th[0] > 0:
+        raise ValueError("fracturing: does not increase with Ca* (fitted sharpness <= 0); no separatrix Ca*_c(C)")
+    B_hat, lnA_hat = th[1] / th[0], th[2] / th[0]
+    thr = chi2.ppf(level, 1) / 2.0
+
+    def rise_lnA(v):
+        return _sep_min(X, y, np.array([[1.0, 0.0], [0.0, 1.0], [v, 0.0]]))[0] - full - thr
+
+    def rise_B(v):
+        return _sep_min(X, y, np.array([[1.0, 0.0], [v, 0.0], [0.0, 1.0]]))[0] - full - thr
+
+    span_L, span_C = max(np.ptp(L), 1e-6), max(np.ptp(Cc), 1e-6)
+    lo_a, hi_a = _profile_bounds(rise_lnA, lnA_hat, 0.02 * span_L)
+    b_iv = _profile_bounds(rise_B, B_hat, 0.02 * span_L / span_C)
+    separable = bool(np.all((X @ th > 0) == (y > 0.5)))
+    return SeparatrixInterval(float(np.exp(lnA_hat)), float(B_hat), (float(np.exp(lo_a)), float(np.exp(hi_a))),
+                              b_iv, level, separable, float(th[0]))
+
+
+def unlocated_reason(sep, C, cs, fr) -> str | None:
+    """Why the labels do not locate the separatrix Ca*_c(C) (None when they do); the line is then not drawn.
+
+    Two cases: the line stays above or below every sampled Ca* over the sampled C (an extrapolation), or it
+    separates no better than the base rate, i.e. the runs it puts on the wrong side (fracturing below it,
+    porous invasion above) are at least as many as the minority regime's runs, so calling every run the
+    majority regime would do as well and the line carries no information about where the regimes meet."""
+    line = sep(np.linspace(C.min(), C.max(), 50))
+    head = f"the fitted line (A = {sep.A:.3g}, B = {sep.B:.3g} /%)"
+    if np.all(line < cs.min()) or np.all(line > cs.max()):
+        return f"{head} lies outside the sampled Ca* range [{cs.min():.3g}, {cs.max():.3g}] over C: the labels do not locate it"
+    wrong = int(np.sum((cs >= sep(C)) != fr))
+    minority = int(min(fr.sum(), (~fr).sum()))
+    if wrong >= minority:
+        major = "fracturing" if fr.sum() > (~fr).sum() else "porous invasion"
+        return (f"{head} puts {wrong} of {fr.size} runs on the wrong side, no fewer than calling every run "
+                f"{major} ({minority}): the labels do not locate it")
+    return None
