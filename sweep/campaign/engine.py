@@ -364,9 +364,12 @@ def _extra_points(plan: Plan):
 def write_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None) -> list[Path]:
     """Rebuild the campaign table from the run records and write it: table.csv, table.parquet and its column
     dictionary columns.csv (``ResultsStore.write_table``)."""
+    from sweep.campaign.replicates import write_points
+
     spec = as_spec(spec)
     df = build_table(spec, root, code_hash=code_hash, plan=plan)
-    return ResultsStore(root, spec.name).write_table(df, swept=spec.axis_names)
+    store = ResultsStore(root, spec.name)
+    return store.write_table(df, swept=spec.axis_names) + write_points(spec, df, store)
 
 
 # ---------------------------------------------------------------------------
