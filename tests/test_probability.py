@@ -90,3 +90,16 @@ def test_diagram_draws_only_a_significant_separatrix(tmp_path):
     noise = reps.assign(fracturing=rng.random(len(reps)) < 0.5)
     out = plot_probability_diagram(noise, tmp_path / "noise", formats=(), smooth=False)
     assert out["band"] is None and "not significant" in out["no_fit_reason"]
+
+
+def test_nf_vs_nb_probabilities_groups_replicates(tmp_path):
+    from sweep.regimes.probability import plot_nf_vs_nb_probabilities
+
+    df = pd.DataFrame({"N_b": [0.1] * 3 + [10.0] * 3 + [5.0], "N_f": [2.0] * 3 + [0.5] * 3 + [-1.0],
+                       "regime": ["invasive_fracturing", "invasive_fracturing", "viscous_fingering"]
+                       + ["uniform_invasion"] * 3 + ["uniform_invasion"]})
+    out = plot_nf_vs_nb_probabilities(df, tmp_path / "nfnb", dp_cri=1e4, formats=())
+    pts = out["points"].set_index("N_b")
+    assert out["n_dropped"] == 1 and out["paths"][0].exists()
+    assert pts.loc[0.1, "top"] == "invasive_fracturing" and pts.loc[0.1, "p_top"] == pytest.approx(2 / 3)
+    assert bool(pts.loc[0.1, "mixed"]) and not bool(pts.loc[10.0, "mixed"]) and pts.loc[10.0, "n"] == 3

@@ -93,6 +93,12 @@ def test_replicate_runs_aggregates_resume_and_loaders(tmp_path):
     cols = pd.read_csv(tmp_path / "reps" / "points_columns.csv", keep_default_na=False).set_index("name")
     assert cols.loc["crack_length_mean", "unit"] == "mm" and cols.loc["p_fracturing", "unit"] == "-"
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "reps" / "points.csv"), pts, check_dtype=False)
+    # the campaign's Ca*-C diagram is the probability diagram (replicates grouped per point)
+    from sweep.campaign.engine import plot_campaign
+
+    spec = _spec({"porosity_seed": 4}, diagrams=[{"kind": "ca_star_vs_cement", "formats": []}])
+    paths = plot_campaign(spec, tmp_path, table=table.assign(run_dir=""))
+    assert [p.name for p in paths] == ["ca_star_vs_cement.png"] and paths[0].exists()
 
 
 def test_point_table_of_a_table_without_labels_columns():

@@ -947,7 +947,7 @@ def _fields_plot(spec, store, table, g, path) -> list[Path]:
 
 def _phase_diagram(spec, table, g, path) -> list[Path]:
     """The paper's diagrams through sweep.regimes.diagrams (ok runs only); PNG (+ the diagram's formats)."""
-    from sweep import diagrams as dg
+    from sweep.regimes import diagrams as dg
 
     ok = table[table["status"] == "ok"]
     kind = g["kind"]
@@ -967,6 +967,7 @@ def _phase_diagram(spec, table, g, path) -> list[Path]:
         if "dp_cri" in ok.columns and len(ok):
             kw["dp_cri"] = float(ok["dp_cri"].iloc[0])
         fn = dg.plot_nf_vs_nb
+    fn, kw = _replicated_diagram(spec, kind, fn, kw)
     if ok.empty or any(c not in ok.columns for c in need):
         return []
     res = fn(ok.reset_index(drop=True), path, **kw)
@@ -979,7 +980,7 @@ def _boundary_figure(spec, store: ResultsStore, table):
     order) and the table with an ``order`` column (the order the sampler chose each run)."""
     import pandas as pd
 
-    from sweep import diagrams as dg
+    from sweep.regimes import diagrams as dg
     from sweep.campaign.boundary import BoundarySampler
     from sweep.regimes.regime_model import boundary_band
     from sweep.campaign.spec import round_sig
@@ -998,6 +999,19 @@ def _boundary_figure(spec, store: ResultsStore, table):
     res = dg.plot_boundary_sampling(st.model, pts, store.figures_dir / "boundary.png", band=boundary_band(st.model),
                                     title=title)
     return [Path(p) for p in res["paths"]], table
+
+
+def _replicated_diagram(spec, kind, fn, kw):
+    """With ``[replicates]``, the diagrams of label probabilities (sweep.regimes.probability) replace the one-run-per-
+    point diagrams: (function, keyword arguments)."""
+    from sweep.campaign.replicates import replicate_count
+    from sweep.regimes import probability as pr
+
+    if replicate_count(spec) == 1:
+        return fn, kw
+    keep = {"title", "formats"} | ({"dp_cri"} if kind == "nf_vs_nb" else set())
+    return (pr.plot_probability_diagram if kind == "ca_star_vs_cement" else pr.plot_nf_vs_nb_probabilities,
+            {k: v for k, v in kw.items() if k in keep})
 
 
 def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None,

@@ -30,7 +30,7 @@ from typing import Any, NamedTuple, Sequence
 import numpy as np
 
 __all__ = ["wilson_interval", "replicate_points", "SeparatrixBand", "separatrix_band", "separatrix_significance",
-           "fit_probability_map", "plot_probability_diagram"]
+           "fit_probability_map", "plot_probability_diagram", "plot_nf_vs_nb_probabilities"]
 
 
 def wilson_interval(k: Any, n: Any, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
@@ -282,3 +282,57 @@ def _shade_smooth(ax, model, cmap, n: int = 120) -> None:
     ax.pcolormesh(GX, GY, P, cmap=cmap, vmin=0, vmax=1, alpha=0.35, shading="auto", zorder=0, rasterized=True)
     if P.min() < 0.5 < P.max():
         ax.contour(GX, GY, P, levels=[0.5], colors="0.2", linewidths=1.0, linestyles="dashed", zorder=1)
+
+
+def plot_nf_vs_nb_probabilities(df: Any, out_path: str | Path, *, dp_cri: float | None = None, title: str | None = None,
+                                formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
+    """N_f-N_b diagram (Sec. 3.8) of regime probabilities from replicate runs.
+
+    df: one row per run with ``N_b``, ``N_f`` (-, > 0) and ``regime``; runs at equal (N_b, N_f) are one point's
+    replicates. Each point takes the symbol and colour of its most probable regime (``REGIME_STYLE``), its opacity
+    that regime's share of the replicates, a black ring when the replicates' regimes disagree and the label
+    "k/n" (replicates in the most probable regime). Dashed lines N_f = 1 and N_b = 1. ``dp_cri`` (kPa) goes in the
+    title. Writes PNG plus ``formats``; returns {"paths", "points" (DataFrame: N_b, N_f, n, top, p_top, mixed),
+    "n_dropped"}.
+    """
+    import pandas as pd
+
+    from .classify import REGIMES
+    from .diagrams import REGIME_STYLE, _new_figure, _require, _save
+
+    _require(df, ("N_b", "N_f", "regime"), "plot_nf_vs_nb_probabilities")
+    nb, nf = df["N_b"].astype(float), df["N_f"].astype(float)
+    ok = nb.gt(0) & nf.gt(0) & df["regime"].isin(REGIMES)
+    d = pd.DataFrame({"N_b": nb[ok].round(12), "N_f": nf[ok].round(12), "regime": df["regime"][ok].astype(str)})
+    rows = []
+    for (b, f), g in d.groupby(["N_b", "N_f"], sort=False):
+        counts = g["regime"].value_counts()
+        rows.append({"N_b": b, "N_f": f, "n": int(len(g)), "top": counts.index[0], "k_top": int(counts.iloc[0]),
+                     "p_top": float(counts.iloc[0] / len(g)), "mixed": bool(len(counts) > 1)})
+    pts = pd.DataFrame(rows, columns=["N_b", "N_f", "n", "top", "k_top", "p_top", "mixed"])
+    fig = _new_figure((6.0, 5.0))
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    for r in REGIMES:
+        m = pts["top"] == r
+        st = REGIME_STYLE[r]
+        for _, p in pts[m].iterrows():
+            ax.scatter([p["N_b"]], [p["N_f"]], marker=st["marker"], color=st["color"], alpha=max(p["p_top"], 0.15),
+                       s=70 if st["marker"] == "*" else 40, zorder=3)
+        if m.any():
+            ax.scatter([], [], marker=st["marker"], color=st["color"], label=st["label"])
+    mx = pts[pts["mixed"]]
+    ax.scatter(mx["N_b"], mx["N_f"], s=140, facecolors="none", edgecolors="k", linewidth=0.9, zorder=4,
+               label=f"replicates disagree ({len(mx)} of {len(pts)} points)")
+    for _, p in pts.iterrows():
+        ax.annotate(f"{p['k_top']}/{p['n']}", (p["N_b"], p["N_f"]), xytext=(4, -7), textcoords="offset points",
+                    fontsize=5, zorder=5)
+    ax.axhline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    ax.axvline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    ax.set_xlabel("branching number $N_b$")
+    ax.set_ylabel("fracturing number $N_f$")
+    t = (title or "") + ("" if dp_cri is None else f"\n$\\delta p_{{cri}}$ = {dp_cri:.3g} kPa")
+    ax.set_title(t.strip() + "\nsymbol: most probable regime; opacity: its share of the replicates", fontsize=8)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
+    return {"paths": _save(fig, out_path, formats), "points": pts, "n_dropped": int((~ok).sum())}
