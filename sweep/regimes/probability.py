@@ -209,8 +209,8 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
     df: one row per run with columns ``x`` (C, %), ``y`` (Ca*, > 0) and ``label`` (bool); rows with a missing
     value are dropped (``n_dropped``). Each point is coloured by its fraction of fracturing replicates (blue 0
     to orange 1), its size grows with the replicate count, and a black ring marks the points whose replicates
-    disagree. The background is the smooth classifier's P(fracturing) with its 0.5 contour (dashed, when
-    ``smooth``). The separatrix and its ``level`` band are drawn only when the fit is significant at ``alpha``
+    disagree. The background is the smooth classifier's P(fracturing) with its 0.5 contour (dashed) and the edge of
+    that contour's 95 % band (dotted), when ``smooth``. The separatrix and its ``level`` band are drawn only when the fit is significant at ``alpha``
     (:func:`separatrix_significance`); otherwise the figure says why. ``truth``: optional callable C -> Ca*_c
     drawn dotted (a known boundary). Writes PNG plus ``formats``; returns {"paths", "points", "band",
     "no_fit_reason", "n_dropped"}.
@@ -229,6 +229,8 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
     cmap = LinearSegmentedColormap.from_list("p_frac", [BLUE, "#f7f7f7", ORANGE])
     if smooth and fr.any() and (~fr).any():
         _shade_smooth(ax, fit_probability_map(C, cs, fr), cmap)
+        ax.plot([], [], ls="--", color="0.2", lw=1.0, label="smooth classifier: P(fracturing) = 0.5")
+        ax.plot([], [], ls=":", color="0.2", lw=0.7, label="its 95 % band (edge)")
     band, why = _band_or_reason(C, cs, fr, level, alpha)
     if band is not None:
         e = np.exp
@@ -274,14 +276,28 @@ def _band_or_reason(C, cs, fr, level, alpha):
 
 
 def _shade_smooth(ax, model, cmap, n: int = 120) -> None:
-    """The smooth classifier's P(fracturing) as a faint background and its 0.5 contour dashed."""
+    """The smooth classifier's P(fracturing) as a faint background, its 0.5 contour dashed and that contour's
+    Laplace band (``boundary_band``: within z sigma_loc of an estimated boundary point) dotted at its edge."""
+    from scipy.spatial import cKDTree
+
+    from .regime_model import boundary_band
+
     ax0, ax1 = model.axes
     u = np.linspace(-1.0, 1.0, n)
     GX, GY = np.meshgrid(ax0.from_u(u), ax1.from_u(u))
     P = model.proba(np.c_[GX.ravel(), GY.ravel()])[:, list(model.labels).index("fracturing")].reshape(GX.shape)
     ax.pcolormesh(GX, GY, P, cmap=cmap, vmin=0, vmax=1, alpha=0.35, shading="auto", zorder=0, rasterized=True)
-    if P.min() < 0.5 < P.max():
-        ax.contour(GX, GY, P, levels=[0.5], colors="0.2", linewidths=1.0, linestyles="dashed", zorder=1)
+    if not P.min() < 0.5 < P.max():
+        return
+    ax.contour(GX, GY, P, levels=[0.5], colors="0.2", linewidths=1.0, linestyles="dashed", zorder=1)
+    band = boundary_band(model)
+    if len(band["U"]):
+        tol = np.array([ax0.tol_per_u, ax1.tol_per_u])
+        UX, UY = np.meshgrid(u, u)
+        dist, j = cKDTree(band["U"] * tol).query(np.c_[UX.ravel(), UY.ravel()] * tol)
+        inside = (dist <= band["half"][j]).reshape(GX.shape).astype(float)
+        if 0 < inside.mean() < 1:
+            ax.contour(GX, GY, inside, levels=[0.5], colors="0.2", linewidths=0.7, linestyles="dotted", zorder=1)
 
 
 def plot_nf_vs_nb_probabilities(df: Any, out_path: str | Path, *, dp_cri: float | None = None, title: str | None = None,
