@@ -88,3 +88,11 @@ def test_campaign_with_replicated_boundary_writes_its_points(tmp_path):
 def test_bad_replicated_boundary_specs(kw, match):
     with pytest.raises(SpecError, match=match):
         _spec(**kw)
+
+
+def test_replicate_settings_need_replicates():
+    d = {"name": "b", "base": {"eta_w": 1e-6, "kbar": 0.0015}, "options": {"h": 4.0},
+         "axes": {"cement": {"linear": [0.5, 3.0, 3]}, "eta_o": {"log": [0.01, 10.0, 3]}},
+         "sampler": {"kind": "boundary", "budget": 20, "tolerance": 0.1, "band_tolerance": 0.3}}
+    with pytest.raises(SpecError, match=r"sampler\.band_tolerance: a setting of the boundary sampler with replicates"):
+        spec_from_dict(d)

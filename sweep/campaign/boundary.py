@@ -211,6 +211,9 @@ class BoundarySampler:
     # -- configuration -----------------------------------------------------------------------
     def _config(self, spec: CampaignSpec) -> _Config:
         s = parse_settings({k: v for k, v in spec.sampler.items() if k != "kind"})
+        if not spec.replicates and (extra := sorted(set(spec.sampler) & set(replicate_sampler.REPLICATE_SAMPLER_KEYS))):
+            raise SpecError(f"{spec.source}: sampler.{extra[0]}: a setting of the boundary sampler with replicates; "
+                            "add [replicates] porosity_seed = N (N >= 1) or remove it")
         if len(spec.blocks) != 1:
             raise SpecError(f"{spec.source}: blocks: the boundary sampler takes one set of [axes], not [[blocks]]")
         block = spec.blocks[0]
