@@ -64,6 +64,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from sweep.regimes.regime_model import AxisScale, RegimeModel, boundary_band, boundary_uncertainty, fit_regime_model
+from sweep.campaign import replicate_sampler
 from sweep.campaign.sampler import Point, resolve_point
 from sweep.campaign.spec_model import CampaignSpec, SpecError, expand_block, round_sig
 
@@ -130,6 +131,9 @@ _CHECKS: dict[str, tuple] = {
 
 def parse_settings(settings: Mapping[str, Any]) -> BoundarySettings:
     """Validate the ``[sampler]`` table (without ``kind``); SpecError names ``sampler.<key>``."""
+    from sweep.campaign.replicate_sampler import split_settings
+
+    settings, _ = split_settings(settings)   # the replicate allocation's keys (sweep.campaign.replicate_sampler)
     allowed = [f.name for f in fields(BoundarySettings)]
     for k in settings:
         if k not in allowed:
@@ -207,6 +211,9 @@ class BoundarySampler:
     # -- configuration -----------------------------------------------------------------------
     def _config(self, spec: CampaignSpec) -> _Config:
         s = parse_settings({k: v for k, v in spec.sampler.items() if k != "kind"})
+        if not spec.replicates and (extra := sorted(set(spec.sampler) & set(replicate_sampler.REPLICATE_SAMPLER_KEYS))):
+            raise SpecError(f"{spec.source}: sampler.{extra[0]}: a setting of the boundary sampler with replicates; "
+                            "add [replicates] porosity_seed = N (N >= 1) or remove it")
         if len(spec.blocks) != 1:
             raise SpecError(f"{spec.source}: blocks: the boundary sampler takes one set of [axes], not [[blocks]]")
         block = spec.blocks[0]
@@ -239,10 +246,14 @@ class BoundarySampler:
 
     # -- the sampler interface ---------------------------------------------------------------
     def initial(self, spec: CampaignSpec) -> list[Point]:
+        if spec.replicates:   # replicates where the label is uncertain: sweep.campaign.replicate_sampler
+            return replicate_sampler.initial(self, spec)
         cfg = self._config(spec)
         return [self._point(spec, cfg, c, i) for i, c in enumerate(cfg.initial)]
 
     def refine(self, spec: CampaignSpec, table) -> list[Point]:
+        if spec.replicates:
+            return replicate_sampler.refine(self, spec, table)
         cfg = self._config(spec)
         st = self._replay(cfg, table)
         n0 = st.runs_used - len(st.rounds[-1])
@@ -251,11 +262,15 @@ class BoundarySampler:
 
     def state(self, spec: CampaignSpec, table) -> dict:
         """The campaign's standing as a JSON-able dict (see :meth:`BoundaryState.to_dict`)."""
+        if spec.replicates:
+            return replicate_sampler.state(self, spec, table)
         cfg = self._config(spec)
         return self._replay(cfg, table).to_dict(cfg.axes)
 
     def replay(self, spec: CampaignSpec, table) -> BoundaryState:
         """The full state, with the classifier fitted to every labelled run of the sequence."""
+        if spec.replicates:
+            return replicate_sampler.replay(self, spec, table)
         cfg = self._config(spec)
         st = self._replay(cfg, table)
         X, y = _labelled(st)

@@ -364,9 +364,12 @@ def _extra_points(plan: Plan):
 def write_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None) -> list[Path]:
     """Rebuild the campaign table from the run records and write it: table.csv, table.parquet and its column
     dictionary columns.csv (``ResultsStore.write_table``)."""
+    from sweep.campaign.replicates import write_points
+
     spec = as_spec(spec)
     df = build_table(spec, root, code_hash=code_hash, plan=plan)
-    return ResultsStore(root, spec.name).write_table(df, swept=spec.axis_names)
+    store = ResultsStore(root, spec.name)
+    return store.write_table(df, swept=spec.axis_names) + write_points(spec, df, store)
 
 
 # ---------------------------------------------------------------------------
@@ -964,6 +967,7 @@ def _phase_diagram(spec, table, g, path) -> list[Path]:
         if "dp_cri" in ok.columns and len(ok):
             kw["dp_cri"] = float(ok["dp_cri"].iloc[0])
         fn = dg.plot_nf_vs_nb
+    fn, kw = _replicated_diagram(spec, kind, fn, kw)
     if ok.empty or any(c not in ok.columns for c in need):
         return []
     res = fn(ok.reset_index(drop=True), path, **kw)
@@ -995,6 +999,19 @@ def _boundary_figure(spec, store: ResultsStore, table):
     res = dg.plot_boundary_sampling(st.model, pts, store.figures_dir / "boundary.png", band=boundary_band(st.model),
                                     title=title)
     return [Path(p) for p in res["paths"]], table
+
+
+def _replicated_diagram(spec, kind, fn, kw):
+    """With ``[replicates]``, the diagrams of label probabilities (sweep.regimes.probability) replace the one-run-per-
+    point diagrams: (function, keyword arguments)."""
+    from sweep.campaign.replicates import replicate_count
+    from sweep.regimes import probability as pr
+
+    if replicate_count(spec) == 1:
+        return fn, kw
+    keep = {"title", "formats"} | ({"dp_cri"} if kind == "nf_vs_nb" else set())
+    return (pr.plot_probability_diagram if kind == "ca_star_vs_cement" else pr.plot_nf_vs_nb_probabilities,
+            {k: v for k, v in kw.items() if k in keep})
 
 
 def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None,

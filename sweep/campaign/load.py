@@ -30,7 +30,7 @@ def campaign_dir(source, root="results") -> Path:
     raise FileNotFoundError(f"campaign {str(source)!r} not found: give a campaign folder or a spec TOML file")
 
 
-def load_campaign(source, root="results"):
+def load_campaign(source, root="results", *, points: bool = False):
     """One row per finished run of a campaign, typed (pandas DataFrame).
 
     source : campaign folder (holding ``table.parquet`` or ``table.csv``), spec TOML path or CampaignSpec;
@@ -39,9 +39,14 @@ def load_campaign(source, root="results"):
     Columns take their dictionary dtypes: Float64, Int64, boolean (NA for failed runs), string, and
     Python lists for list columns (``crack_tip_angles_deg``, ``snapshot_times``, ``blocks``).
     ``run_dir`` is relative to the campaign folder, which is ``df.attrs["campaign_dir"]``.
+    points : the per-point table of a campaign with replicates instead (``sweep.campaign.replicates.load_points``).
     """
     import pandas as pd
 
+    if points:
+        from sweep.campaign.replicates import load_points
+
+        return load_points(source, root)
     from sweep.campaign.columns import typed_table
 
     d = campaign_dir(source, root)

@@ -117,7 +117,9 @@ class GridSampler:
             raise SpecError(f"sampler: the grid sampler takes no settings, got {sorted(settings)}")
 
     def initial(self, spec: CampaignSpec) -> list[Point]:
-        return grid_points(spec)
+        from sweep.campaign.replicates import expand_replicates
+
+        return expand_replicates(spec, grid_points(spec))
 
     def refine(self, spec: CampaignSpec, table) -> list[Point]:
         return []

@@ -43,6 +43,9 @@ Format (all tables optional except ``name``)::
                                         # the regime boundary is least certain (sweep.campaign.boundary: budget,
                                         # tolerance, seed, batch, ...; axes linear/log/range bounds)
 
+    [replicates]                        # runs per point (sweep.campaign.replicates): porosity draws
+    porosity_seed = 5                   # seed = base seed + 0..4; optional mesh_seed = M crossed with them
+
     [classify]                          # keyword arguments of classify_run
 
     [[diagrams]]
@@ -64,6 +67,7 @@ from typing import Any, Mapping
 
 # the data model lives in sweep.campaign.spec_model (below the samplers, which build on it); its public names are this
 # module's too, so that a spec's reader needs one import
+from sweep.campaign.replicates import check_replicates
 from sweep.campaign.spec_model import (Axis, Block, CampaignSpec, SpecError, evaluate_expression, expression_names, is_number,
                               grid_size, option_fields, parameter_fields, round_sig)
 
@@ -116,7 +120,7 @@ def _fail(where: str, msg: str):
 
 _TOP_KEYS = {
     "name", "description", "paper", "base", "derived", "options", "axes", "mode", "zip",
-    "blocks", "sampler", "classify", "diagrams", "run",
+    "blocks", "sampler", "classify", "diagrams", "run", "replicates",
 }
 _BLOCK_KEYS = {"label", "base", "options", "axes", "mode", "zip"}
 _RUN_KEYS = {"timeout", "retries", "runner", "jobs", "isolate", "max_runs"}
@@ -357,13 +361,15 @@ def _spec_from_dict(d, source, max_runs) -> CampaignSpec:
         _fail("diagrams", f"expected an array of tables, got {diagrams!r}")
     for i, g in enumerate(diagrams):
         _check_diagram(f"diagrams[{i}]", g, pfields, ofields)
-    size = sum(grid_size(b) for b in blocks)
+    replicates = check_replicates(d.get("replicates"), top, blocks, derived)
+    size = sum(grid_size(b) for b in blocks) * math.prod(replicates.values())
     if size > limit:
         _too_many("axes" if d.get("blocks") is None else "blocks", size, limit)
     spec = CampaignSpec(
         name=name, description=str(d.get("description", "")), paper=str(d.get("paper", "")),
         params=dict(top.params), options=dict(top.options), derived=dict(derived), blocks=blocks,
         sampler=sampler, classify=dict(classify), diagrams=tuple(diagrams), run=dict(run), source=source,
+        replicates=replicates,
     )
     samplers()[sampler["kind"]]().initial(spec)  # expands and validates every initial point (raises SpecError)
     return spec

@@ -91,6 +91,7 @@ class CampaignSpec:
     diagrams: tuple[Mapping[str, Any], ...] = ()
     run: Mapping[str, Any] = field(default_factory=dict)
     source: str = "<dict>"
+    replicates: Mapping[str, int] = field(default_factory=dict)   # sweep.campaign.replicates: runs per point
 
     @property
     def axis_names(self) -> tuple[str, ...]:

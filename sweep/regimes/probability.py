@@ -1,0 +1,354 @@
+"""Probabilistic regime boundaries: label probabilities from replicate runs, the fracturing separatrix with its
+confidence band, a smooth classifier's 0.5 contour, and the diagram that shows them (numpy + scipy only).
+
+Replicates are runs at the same point of the plane that differ only in the porosity draw (or the mesh seed).
+Their labels are Bernoulli draws of the point's label probability p. This module estimates p per point
+(Wilson score interval), and over the plane by two models:
+
+* **the exponential separatrix** Ca*_c(C) = A exp(B C) (Sec. 3.6, Eq. modified_capillary_number's map) as the
+  0.5 contour of P(fracturing) = expit(s (ln Ca* - ln A - B C)), fitted with Jeffreys' prior exactly as
+  :func:`sweep.regimes.diagrams.separatrix_profile_interval` (whose optimizer this module reuses).  Its **band**
+  at C0 is the profile-likelihood interval of ln Ca*_c(C0): the values v for which the best fit constrained
+  to pass through (C0, v) stays within chi2_q(level)/2 of the best fit.  With q = 2 (``simultaneous``, the
+  default) the band is the projection of the joint confidence region of the line (ln A, B), so it covers the
+  whole true line at once with probability ``level`` (asymptotically), not just each C0 alone.
+  **Significance**: the penalized likelihood-ratio test of the separatrix model against a constant
+  probability (2 degrees of freedom: B and s); a separatrix whose test does not reject at ``alpha`` is never
+  drawn (the labels do not show that the plane orders them).
+* **a smooth classifier**: :func:`sweep.regimes.regime_model.fit_regime_model` (a logistic fit on a cubic
+  Legendre basis with a smoothness prior whose scale is weighed by its evidence), the non-parametric check of
+  the straight line; its 0.5 contour and its Laplace band (``boundary_band``).
+
+Units: C in % (cement volume ratio), Ca* dimensionless (> 0); logarithms natural unless said (decades).
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, NamedTuple, Sequence
+
+import numpy as np
+
+__all__ = ["wilson_interval", "replicate_points", "SeparatrixBand", "separatrix_band", "separatrix_significance",
+           "fit_probability_map", "plot_probability_diagram", "plot_nf_vs_nb_probabilities"]
+
+
+def wilson_interval(k: Any, n: Any, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+    """Wilson score interval of a binomial probability from k successes in n trials (arrays broadcast).
+
+    (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n), z the two-sided normal quantile of ``level``;
+    n = 0 gives [0, 1]. Dimensionless."""
+    from scipy.stats import norm
+
+    k, n = np.asarray(k, float), np.asarray(n, float)
+    if np.any(k < 0) or np.any(k > n) or not 0 < level < 1:
+        raise ValueError(f"k={k!r}, n={n!r}, level={level!r}: need 0 <= k <= n and level in (0, 1)")
+    z = float(norm.ppf(0.5 + 0.5 * level))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p = k / n
+        mid = (p + z * z / (2 * n)) / (1 + z * z / n)
+        half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    lo = np.where(n > 0, np.clip(mid - half, 0.0, 1.0), 0.0)
+    hi = np.where(n > 0, np.clip(mid + half, 0.0, 1.0), 1.0)
+    return lo, hi
+
+
+def replicate_points(x: Any, y: Any, label: Any, level: float = 0.95) -> dict[str, np.ndarray]:
+    """Group runs by their point (x, y) (equal values, 12 significant digits): per point ``x``, ``y``, ``n`` runs,
+    ``k`` runs labelled True, ``p`` = k/n, the Wilson interval ``lo``, ``hi`` at ``level``, and ``mixed`` (the
+    replicates disagree: 0 < k < n). Units those of x and y."""
+    x, y = np.asarray(x, float).ravel(), np.asarray(y, float).ravel()
+    lab = np.asarray(label).astype(bool).ravel()
+    if not x.size == y.size == lab.size:
+        raise ValueError(f"x, y, label lengths=({x.size}, {y.size}, {lab.size}): must be equal")
+    keys = np.array([float(f"{a:.12g}") for a in x]), np.array([float(f"{b:.12g}") for b in y])
+    uniq, inv = np.unique(np.c_[keys], axis=0, return_inverse=True)
+    inv = inv.ravel()
+    n = np.bincount(inv, minlength=len(uniq)).astype(int)
+    k = np.bincount(inv, weights=lab.astype(float), minlength=len(uniq)).astype(int)
+    lo, hi = wilson_interval(k, n, level)
+    return {"x": uniq[:, 0], "y": uniq[:, 1], "n": n, "k": k, "p": k / np.maximum(n, 1), "lo": lo, "hi": hi,
+            "mixed": (k > 0) & (k < n)}
+
+
+# --------------------------------------------------------------------------- the separatrix and its band
+class SeparatrixBand(NamedTuple):
+    """The separatrix Ca*_c(C) = A exp(B C) and its band.
+
+    ``C`` (m,) the cement ratios (%) where the band is evaluated; ``center``, ``lo``, ``hi`` (m,) ln Ca*_c and its
+    band (natural log); ``level``; ``simultaneous`` (band from the 2-parameter region: it covers the whole line at
+    ``level``); A (-), B (1/%), ``sharpness`` s per unit of ln Ca*; ``lr`` the penalized likelihood-ratio statistic
+    against a constant probability and ``p_value`` (chi2 with 2 degrees of freedom); ``significant`` = p_value <
+    ``alpha``; ``n`` labels."""
+
+    C: np.ndarray
+    center: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    level: float
+    simultaneous: bool
+    A: float
+    B: float
+    sharpness: float
+    lr: float
+    p_value: float
+    significant: bool
+    n: int
+
+    @property
+    def half_width_decades(self) -> np.ndarray:
+        """Half the band's width at each C, in decades of Ca*."""
+        return 0.5 * (self.hi - self.lo) / math.log(10.0)
+
+    def covers(self, ln_ca_c: Any) -> bool:
+        """Whether the band holds the line ln Ca*_c (values at ``C``) at every C."""
+        v = np.asarray(ln_ca_c, float)
+        return bool(np.all((v >= self.lo) & (v <= self.hi)))
+
+
+def _design(C, ca_star, fracturing):
+    from .diagrams import _sep_min  # the Jeffreys-penalized optimizer of separatrix_profile_interval
+
+    Cc = np.asarray(C, float).ravel()
+    cs = np.asarray(ca_star, float).ravel()
+    y = np.asarray(fracturing).astype(bool).astype(float).ravel()
+    if not (Cc.size == cs.size == y.size) or Cc.size < 3:
+        raise ValueError(f"C, ca_star, fracturing lengths=({Cc.size}, {cs.size}, {y.size}): must be equal and >= 3")
+    if not (np.all(np.isfinite(Cc)) and np.all(np.isfinite(cs)) and np.all(cs > 0)):
+        raise ValueError("C, ca_star: must be finite, Ca* > 0")
+    return np.c_[np.log(cs), -Cc, -np.ones_like(Cc)], y, _sep_min
+
+
+def separatrix_significance(C: Any, ca_star: Any, fracturing: Any) -> tuple[float, float]:
+    """(LR, p-value) of the penalized likelihood-ratio test of P = expit(s (ln Ca* - ln A - B C)) against a
+    constant P (Jeffreys' prior in both, as the fit; chi2 with 2 degrees of freedom). One outcome only: (0, 1)."""
+    from scipy.stats import chi2
+
+    X, y, sep_min = _design(C, ca_star, fracturing)
+    if y.min() == y.max():
+        return 0.0, 1.0
+    full, _ = sep_min(X, y, np.eye(3))
+    null, _ = sep_min(X, y, np.array([[0.0], [0.0], [1.0]]))
+    lr = max(2.0 * (null - full), 0.0)
+    return float(lr), float(chi2.sf(lr, 2))
+
+
+def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95, simultaneous: bool = True,
+                    at: Any = None, n_grid: int = 13, alpha: float = 0.05) -> SeparatrixBand:
+    """Fit the separatrix and its profile-likelihood band of ln Ca*_c (see the module docstring).
+
+    C (%), ca_star (-, > 0), fracturing (bools, both outcomes). ``at``: the C values of the band (default
+    ``n_grid`` values over the sampled range). ``simultaneous``: threshold chi2_2(level)/2 (the whole line),
+    else chi2_1(level)/2 (each C alone). Raises ValueError when fracturing does not increase with Ca*.
+    """
+    from scipy.stats import chi2
+
+    from .diagrams import _profile_bounds
+
+    if not 0 < level < 1:
+        raise ValueError(f"level={level!r}: must be in (0, 1)")
+    X, y, sep_min = _design(C, ca_star, fracturing)
+    if y.min() == y.max():
+        raise ValueError("fracturing: needs both outcomes to locate a separatrix")
+    full, th = sep_min(X, y, np.eye(3))
+    if not th[0] > 0:
+        raise ValueError("fracturing: does not increase with Ca* (fitted sharpness <= 0); no separatrix")
+    lr, pv = separatrix_significance(C, ca_star, fracturing)
+    Cc = -X[:, 1]
+    grid = np.linspace(Cc.min(), Cc.max(), n_grid) if at is None else np.atleast_1d(np.asarray(at, float))
+    thr = chi2.ppf(level, 2 if simultaneous else 1) / 2.0
+    lnA, B = th[2] / th[0], th[1] / th[0]
+    center = lnA + B * grid
+    wald = _wald_half(X, th, grid, math.sqrt(2.0 * thr))
+    lo, hi = np.empty_like(grid), np.empty_like(grid)
+    for i, c0 in enumerate(grid):
+        step = max(0.5 * wald[i], 1e-3 * max(float(np.ptp(X[:, 0])), 1e-6))
+        def rise(v, c0=c0):  # the line through (c0, v): theta_3 = v theta_1 - c0 theta_2
+            return sep_min(X, y, np.array([[1.0, 0.0], [0.0, 1.0], [v, -c0]]))[0] - full - thr
+        lo[i], hi[i] = _profile_bounds(rise, float(center[i]), step)
+    return SeparatrixBand(grid, center, lo, hi, level, simultaneous, float(math.exp(lnA)), float(B), float(th[0]),
+                          lr, pv, bool(pv < alpha), int(y.size))
+
+
+def _wald_half(X, th, grid, z):
+    """Delta-method half-widths z sd(ln Ca*_c(C)) at ``grid`` from the Fisher information at theta: the profile
+    search's first step (its scale), not the band."""
+    p = 0.5 * (1.0 + np.tanh(0.5 * (X @ th)))
+    cov = np.linalg.pinv((X * (p * (1.0 - p))[:, None]).T @ X)
+    # v = (theta_3 + C theta_2) / theta_1
+    J = np.stack([-(th[2] + grid * th[1]) / th[0] ** 2, grid / th[0], np.full_like(grid, 1.0 / th[0])], axis=1)
+    return z * np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", J, cov, J), 0.0))
+
+
+# --------------------------------------------------------------------------- the smooth classifier
+def fit_probability_map(C: Any, ca_star: Any, fracturing: Any, *, tolerance: tuple[float, float] = (0.1, 0.1),
+                        bounds: tuple | None = None, degree: int = 3, confidence: float = 0.95):
+    """The smooth classifier of P(fracturing) over (C %, Ca* on a log axis): ``fit_regime_model`` with labels
+    "porous_invasion" / "fracturing", the boundary sampler's prior (prior sd 8 per tolerance unit of the finest
+    axis, its scale weighed by evidence over a factor 64). ``tolerance`` (% , decades) sets the band's units;
+    ``bounds`` ((C_lo, C_hi), (Ca_lo, Ca_hi)) default the data's range. Returns the RegimeModel."""
+    from .regime_model import AxisScale, fit_regime_model
+
+    Cc, cs = np.asarray(C, float).ravel(), np.asarray(ca_star, float).ravel()
+    y = np.where(np.asarray(fracturing).astype(bool).ravel(), "fracturing", "porous_invasion")
+    (c0, c1), (a0, a1) = bounds or ((Cc.min(), Cc.max()), (cs.min(), cs.max()))
+    axes = (AxisScale("cement", float(c0), float(c1), False, tolerance[0]),
+            AxisScale("Ca_star", float(a0), float(a1), True, tolerance[1]))
+    prior_sd = 8.0 * max(a.tol_per_u for a in axes)
+    return fit_regime_model(np.c_[Cc, cs], y, axes, degree=degree, prior_sd=prior_sd, prior_span=64.0,
+                            confidence=confidence, labels=("porous_invasion", "fracturing"))
+
+
+# --------------------------------------------------------------------------- the diagram
+def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement", y: str = "Ca_star",
+                             label: str = "fracturing", level: float = 0.95, alpha: float = 0.05,
+                             smooth: bool = True, title: str | None = None, truth: Any = None,
+                             formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
+    """Ca*-C diagram of label probabilities from replicate runs.
+
+    df: one row per run with columns ``x`` (C, %), ``y`` (Ca*, > 0) and ``label`` (bool); rows with a missing
+    value are dropped (``n_dropped``). Each point is coloured by its fraction of fracturing replicates (blue 0
+    to orange 1), its size grows with the replicate count, and a black ring marks the points whose replicates
+    disagree. The background is the smooth classifier's P(fracturing) with its 0.5 contour (dashed) and the edge of
+    that contour's 95 % band (dotted), when ``smooth``. The separatrix and its ``level`` band are drawn only when the fit is significant at ``alpha``
+    (:func:`separatrix_significance`); otherwise the figure says why. ``truth``: optional callable C -> Ca*_c
+    drawn dotted (a known boundary). Writes PNG plus ``formats``; returns {"paths", "points", "band",
+    "no_fit_reason", "n_dropped"}.
+    """
+    from matplotlib.colors import LinearSegmentedColormap
+
+    from .diagrams import BLUE, ORANGE, _new_figure, _require, _save
+
+    _require(df, (x, y, label), "plot_probability_diagram")
+    lab = df[label]
+    ok = df[x].notna() & df[y].notna() & lab.notna() & (df[y].astype(float) > 0)
+    C, cs, fr = df[x][ok].to_numpy(float), df[y][ok].to_numpy(float), lab[ok].astype(bool).to_numpy()
+    pts = replicate_points(C, cs, fr, level)
+    fig = _new_figure((5.8, 4.6))
+    ax = fig.add_subplot(1, 1, 1)
+    cmap = LinearSegmentedColormap.from_list("p_frac", [BLUE, "#f7f7f7", ORANGE])
+    if smooth and fr.any() and (~fr).any():
+        _shade_smooth(ax, fit_probability_map(C, cs, fr), cmap)
+        ax.plot([], [], ls="--", color="0.2", lw=1.0, label="smooth classifier: P(fracturing) = 0.5")
+        ax.plot([], [], ls=":", color="0.2", lw=0.7, label="its 95 % band (edge)")
+    band, why = _band_or_reason(C, cs, fr, level, alpha)
+    if band is not None:
+        e = np.exp
+        ax.fill_between(band.C, e(band.lo), e(band.hi), color="0.5", alpha=0.35, lw=0, zorder=1,
+                        label=f"{level:.0%} band of Ca*$_c$" + (" (whole line)" if band.simultaneous else ""))
+        ax.plot(band.C, e(band.center), "k-", lw=1.4, zorder=2,
+                label=f"Ca*$_c$ = A exp(B C): A = {band.A:.3g}, B = {band.B:.3g} /% (p = {band.p_value:.2g})")
+    else:
+        ax.text(0.5, -0.30, "no separatrix drawn: " + why, transform=ax.transAxes, fontsize=6.5, va="top",
+                ha="center", wrap=True)
+    if truth is not None:
+        cc = np.linspace(C.min(), C.max(), 100)
+        ax.plot(cc, truth(cc), "k:", lw=1.2, zorder=2, label="true boundary")
+    sc = ax.scatter(pts["x"], pts["y"], c=pts["p"], cmap=cmap, vmin=0, vmax=1, s=14 + 10 * pts["n"],
+                    edgecolor="0.3", linewidth=0.4, zorder=3)
+    m = pts["mixed"]
+    ax.scatter(pts["x"][m], pts["y"][m], s=14 + 10 * pts["n"][m] + 40, facecolors="none", edgecolors="k",
+               linewidth=1.0, zorder=4, label=f"replicates disagree ({int(m.sum())} of {m.size} points)")
+    fig.colorbar(sc, ax=ax, label="fraction of replicates fracturing", fraction=0.046, pad=0.04)
+    ax.set_yscale("log")
+    ax.set_ylim(cs.min() / 10**0.5, cs.max() * 10**0.5)   # the band may leave the sampled range: it is clipped
+    ax.set_xlabel("cement volume ratio C (%)")
+    ax.set_ylabel("modified capillary number Ca*")
+    ax.set_title(title or f"{C.size} runs at {m.size} points (replicates {int(pts['n'].min())}-{int(pts['n'].max())})",
+                 fontsize=8)
+    ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, frameon=False)
+    return {"paths": _save(fig, out_path, formats), "points": pts, "band": band, "no_fit_reason": why,
+            "n_dropped": int((~ok).sum())}
+
+
+def _band_or_reason(C, cs, fr, level, alpha):
+    """(band, None) when the separatrix is significant at ``alpha``, else (None, why)."""
+    if len(C) < 3 or fr.all() or (~fr).all():
+        return None, "both regimes are needed to fit a separatrix"
+    try:
+        band = separatrix_band(C, cs, fr, level=level, alpha=alpha)
+    except ValueError as exc:
+        return None, str(exc)
+    if not band.significant:
+        return None, (f"the fit is not significant (penalized likelihood ratio {band.lr:.2f} against a constant "
+                      f"probability, p = {band.p_value:.2g} >= {alpha:g})")
+    return band, None
+
+
+def _shade_smooth(ax, model, cmap, n: int = 120) -> None:
+    """The smooth classifier's P(fracturing) as a faint background, its 0.5 contour dashed and that contour's
+    Laplace band (``boundary_band``: within z sigma_loc of an estimated boundary point) dotted at its edge."""
+    from scipy.spatial import cKDTree
+
+    from .regime_model import boundary_band
+
+    ax0, ax1 = model.axes
+    u = np.linspace(-1.0, 1.0, n)
+    GX, GY = np.meshgrid(ax0.from_u(u), ax1.from_u(u))
+    P = model.proba(np.c_[GX.ravel(), GY.ravel()])[:, list(model.labels).index("fracturing")].reshape(GX.shape)
+    ax.pcolormesh(GX, GY, P, cmap=cmap, vmin=0, vmax=1, alpha=0.35, shading="auto", zorder=0, rasterized=True)
+    if not P.min() < 0.5 < P.max():
+        return
+    ax.contour(GX, GY, P, levels=[0.5], colors="0.2", linewidths=1.0, linestyles="dashed", zorder=1)
+    band = boundary_band(model)
+    if len(band["U"]):
+        tol = np.array([ax0.tol_per_u, ax1.tol_per_u])
+        UX, UY = np.meshgrid(u, u)
+        dist, j = cKDTree(band["U"] * tol).query(np.c_[UX.ravel(), UY.ravel()] * tol)
+        inside = (dist <= band["half"][j]).reshape(GX.shape).astype(float)
+        if 0 < inside.mean() < 1:
+            ax.contour(GX, GY, inside, levels=[0.5], colors="0.2", linewidths=0.7, linestyles="dotted", zorder=1)
+
+
+def plot_nf_vs_nb_probabilities(df: Any, out_path: str | Path, *, dp_cri: float | None = None, title: str | None = None,
+                                formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
+    """N_f-N_b diagram (Sec. 3.8) of regime probabilities from replicate runs.
+
+    df: one row per run with ``N_b``, ``N_f`` (-, > 0) and ``regime``; runs at equal (N_b, N_f) are one point's
+    replicates. Each point takes the symbol and colour of its most probable regime (``REGIME_STYLE``), its opacity
+    that regime's share of the replicates, a black ring when the replicates' regimes disagree and the label
+    "k/n" (replicates in the most probable regime). Dashed lines N_f = 1 and N_b = 1. ``dp_cri`` (kPa) goes in the
+    title. Writes PNG plus ``formats``; returns {"paths", "points" (DataFrame: N_b, N_f, n, top, p_top, mixed),
+    "n_dropped"}.
+    """
+    import pandas as pd
+
+    from .classify import REGIMES
+    from .diagrams import REGIME_STYLE, _new_figure, _require, _save
+
+    _require(df, ("N_b", "N_f", "regime"), "plot_nf_vs_nb_probabilities")
+    nb, nf = df["N_b"].astype(float), df["N_f"].astype(float)
+    ok = nb.gt(0) & nf.gt(0) & df["regime"].isin(REGIMES)
+    d = pd.DataFrame({"N_b": nb[ok].round(12), "N_f": nf[ok].round(12), "regime": df["regime"][ok].astype(str)})
+    rows = []
+    for (b, f), g in d.groupby(["N_b", "N_f"], sort=False):
+        counts = g["regime"].value_counts()
+        rows.append({"N_b": b, "N_f": f, "n": int(len(g)), "top": counts.index[0], "k_top": int(counts.iloc[0]),
+                     "p_top": float(counts.iloc[0] / len(g)), "mixed": bool(len(counts) > 1)})
+    pts = pd.DataFrame(rows, columns=["N_b", "N_f", "n", "top", "k_top", "p_top", "mixed"])
+    fig = _new_figure((6.0, 5.0))
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    for r in REGIMES:
+        m = pts["top"] == r
+        st = REGIME_STYLE[r]
+        for _, p in pts[m].iterrows():
+            ax.scatter([p["N_b"]], [p["N_f"]], marker=st["marker"], color=st["color"], alpha=max(p["p_top"], 0.15),
+                       s=70 if st["marker"] == "*" else 40, zorder=3)
+        if m.any():
+            ax.scatter([], [], marker=st["marker"], color=st["color"], label=st["label"])
+    mx = pts[pts["mixed"]]
+    ax.scatter(mx["N_b"], mx["N_f"], s=140, facecolors="none", edgecolors="k", linewidth=0.9, zorder=4,
+               label=f"replicates disagree ({len(mx)} of {len(pts)} points)")
+    for _, p in pts.iterrows():
+        ax.annotate(f"{p['k_top']}/{p['n']}", (p["N_b"], p["N_f"]), xytext=(4, -7), textcoords="offset points",
+                    fontsize=5, zorder=5)
+    ax.axhline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    ax.axvline(1.0, color="0.2", ls="--", lw=1.0, zorder=2)
+    ax.set_xlabel("branching number $N_b$")
+    ax.set_ylabel("fracturing number $N_f$")
+    t = (title or "") + ("" if dp_cri is None else f"\n$\\delta p_{{cri}}$ = {dp_cri:.3g} kPa")
+    ax.set_title(t.strip() + "\nsymbol: most probable regime; opacity: its share of the replicates", fontsize=8)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
+    return {"paths": _save(fig, out_path, formats), "points": pts, "n_dropped": int((~ok).sum())}

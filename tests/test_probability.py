@@ -1,0 +1,105 @@
+"""Probabilistic boundaries (sweep.regimes.probability): Wilson intervals, replicate grouping, the separatrix band
+against the profile intervals it generalizes, its significance test, and the diagram's refusal to draw an
+insignificant separatrix."""
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sweep.regimes.diagrams import separatrix_profile_interval
+from sweep.regimes.probability import (plot_probability_diagram, replicate_points, separatrix_band,
+                                       separatrix_significance, wilson_interval)
+
+A_TRUE, B_TRUE, S_TRUE = 1e7, 1.5, 2.0  # Ca*_c = A exp(B C); sharpness per unit of ln Ca*
+
+
+def draw(seed, n=200, s=S_TRUE):
+    rng = np.random.default_rng(seed)
+    C = rng.uniform(0.0, 3.0, n)
+    L = rng.uniform(math.log(1e6), math.log(1e10), n)
+    y = rng.random(n) < 1 / (1 + np.exp(-s * (L - math.log(A_TRUE) - B_TRUE * C)))
+    return C, np.exp(L), y
+
+
+def test_wilson_interval_known_values():
+    z2 = 1.959963984540054 ** 2
+    lo, hi = wilson_interval(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(z2 / (10 + z2), rel=1e-9)       # k = 0: (0, z^2/(n + z^2))
+    lo, hi = wilson_interval([5, 3], [10, 3])
+    assert lo[0] == pytest.approx(1 - hi[0], rel=1e-12)                          # symmetric about 1/2
+    assert (lo[0], hi[0]) == pytest.approx((0.236593, 0.763407), abs=1e-6)      # textbook value
+    assert hi[1] == 1.0 and lo[1] == pytest.approx(3 / (3 + z2), rel=1e-9)
+    lo, hi = wilson_interval(0, 0)
+    assert (float(lo), float(hi)) == (0.0, 1.0)
+    with pytest.raises(ValueError, match="k="):
+        wilson_interval(4, 3)
+
+
+def test_replicate_points_groups_runs():
+    x = [1.0, 1.0, 1.0, 2.0, 2.0, 1.0000000000001]
+    y = [5.0, 5.0, 5.0, 5.0, 5.0, 5.0]
+    pts = replicate_points(x, y, [True, False, True, False, False, True])
+    assert list(pts["n"]) == [4, 2] and list(pts["k"]) == [3, 0]
+    assert list(pts["mixed"]) == [True, False] and pts["p"][0] == 0.75
+
+
+def test_pointwise_band_at_zero_is_the_profile_interval_of_A():
+    """At C = 0 the line is ln A: the pointwise band there is separatrix_profile_interval's interval of A."""
+    C, cs, y = draw(1)
+    band = separatrix_band(C, cs, y, simultaneous=False, at=[0.0, 1.5])
+    ref = separatrix_profile_interval(C, cs, y)
+    assert band.A == pytest.approx(ref.A, rel=1e-5) and band.B == pytest.approx(ref.B, rel=1e-5)
+    assert np.exp(band.lo[0]) == pytest.approx(ref.A_interval[0], rel=0.02)
+    assert np.exp(band.hi[0]) == pytest.approx(ref.A_interval[1], rel=0.02)
+    wide = separatrix_band(C, cs, y, simultaneous=True, at=[0.0, 1.5])
+    assert np.all(wide.lo < band.lo) and np.all(wide.hi > band.hi)    # chi2_2 > chi2_1
+
+
+@pytest.mark.slow
+def test_simultaneous_band_covers_the_true_line():
+    """20 draws: the whole true line inside the simultaneous 95 % band in >= 17 (a 95 % method fails this with
+    probability 0.016)."""
+    at = np.linspace(0.0, 3.0, 5)
+    truth = math.log(A_TRUE) + B_TRUE * at
+    hits = sum(separatrix_band(*draw(seed, n=120), at=at).covers(truth) for seed in range(20))
+    assert hits >= 17
+
+
+def test_significance_detects_order_and_its_absence():
+    C, cs, y = draw(2)
+    lr, p = separatrix_significance(C, cs, y)
+    assert p < 1e-6 and lr > 30
+    rng = np.random.default_rng(5)
+    y0 = rng.random(C.size) < 0.5           # labels independent of the plane (this draw: p = 0.66)
+    lr0, p0 = separatrix_significance(C, cs, y0)
+    assert p0 > 0.2
+    assert separatrix_significance(C, cs, np.ones(C.size, bool)) == (0.0, 1.0)
+
+
+def test_diagram_draws_only_a_significant_separatrix(tmp_path):
+    C, cs, _ = draw(3, n=20)
+    C, cs = np.repeat(C, 3), np.repeat(cs, 3)
+    p = 1 / (1 + np.exp(-S_TRUE * (np.log(cs) - math.log(A_TRUE) - B_TRUE * C)))
+    reps = pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": np.random.default_rng(3).random(60) < p})
+    out = plot_probability_diagram(reps, tmp_path / "sig", formats=())
+    assert out["band"] is not None and out["band"].significant and out["no_fit_reason"] is None
+    assert out["points"]["n"].tolist() == [3] * 20
+    assert out["paths"][0].exists()
+    rng = np.random.default_rng(5)
+    noise = reps.assign(fracturing=rng.random(len(reps)) < 0.5)
+    out = plot_probability_diagram(noise, tmp_path / "noise", formats=(), smooth=False)
+    assert out["band"] is None and "not significant" in out["no_fit_reason"]
+
+
+def test_nf_vs_nb_probabilities_groups_replicates(tmp_path):
+    from sweep.regimes.probability import plot_nf_vs_nb_probabilities
+
+    df = pd.DataFrame({"N_b": [0.1] * 3 + [10.0] * 3 + [5.0], "N_f": [2.0] * 3 + [0.5] * 3 + [-1.0],
+                       "regime": ["invasive_fracturing", "invasive_fracturing", "viscous_fingering"]
+                       + ["uniform_invasion"] * 3 + ["uniform_invasion"]})
+    out = plot_nf_vs_nb_probabilities(df, tmp_path / "nfnb", dp_cri=1e4, formats=())
+    pts = out["points"].set_index("N_b")
+    assert out["n_dropped"] == 1 and out["paths"][0].exists()
+    assert pts.loc[0.1, "top"] == "invasive_fracturing" and pts.loc[0.1, "p_top"] == pytest.approx(2 / 3)
+    assert bool(pts.loc[0.1, "mixed"]) and not bool(pts.loc[10.0, "mixed"]) and pts.loc[10.0, "n"] == 3

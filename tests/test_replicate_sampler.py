@@ -1,0 +1,98 @@
+"""The boundary sampler with replicates (sweep.campaign.replicate_sampler) on a stochastic oracle in the
+(cement, eta_o) plane: replicates go near the boundary, it stops by the band's width, it resumes, and a campaign
+with a fake runner writes the per-point table."""
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sweep.campaign.boundary import BoundarySampler
+from sweep.campaign.engine import run_campaign
+from sweep.campaign.spec import SpecError, spec_from_dict
+from sweep.studies.oracle import StochasticOracle
+
+# Ca* is proportional to eta_o at fixed w_i: the boundary eta_o,c = A exp(B C), in the sampled range
+ORACLE = StochasticOracle(A=0.05, B=1.2, width=0.2, ca_lo=0.01, ca_hi=10.0)
+
+
+def oracle_runner(params, options, run_dir):
+    """The oracle's draw for the point (cement, eta_o) and porosity seed (study seed 0)."""
+    fr = ORACLE.label((params["cement"], params["eta_o"]), params["seed"], 0)
+    return {"status": "ok", "regime": "fracturing" if fr else "porous_invasion", "metrics": {"fracturing": fr}}
+
+
+def _spec(reps=5, axes=None, **sampler):
+    d = {"name": "rep_boundary", "base": {"eta_w": 1e-6, "kbar": 0.0015}, "options": {"h": 4.0},
+         "axes": axes or {"cement": {"linear": [0.5, 3.0, 3]}, "eta_o": {"log": [0.01, 10.0, 3]}},
+         "replicates": {"porosity_seed": reps},
+         "sampler": {"kind": "boundary", "budget": 150, "tolerance": 0.1, "label": "fracturing", "batch": 6,
+                     "band_tolerance": 0.3, **sampler}}
+    return spec_from_dict(d)
+
+
+def drive(spec, stop_after=None):
+    s, rows = BoundarySampler(), []
+    pts = s.initial(spec)
+    while pts:
+        for p in pts[:stop_after]:
+            fr = ORACLE.label((p.params["cement"], p.params["eta_o"]), p.params["seed"], 0)
+            rows.append({"status": "ok", "cement": p.params["cement"], "eta_o": p.params["eta_o"],
+                         "seed": p.params["seed"], "fracturing": fr})
+        if stop_after is not None and len(pts) > stop_after:
+            return s, pd.DataFrame(rows), pts[stop_after:]
+        pts = s.refine(spec, pd.DataFrame(rows))
+    return s, pd.DataFrame(rows), []
+
+
+def test_replicates_go_to_uncertain_points_and_the_band_stops_it():
+    spec = _spec()
+    s, table, _ = drive(spec)
+    st = s.state(spec, table)
+    assert st["stopped"] and st["reason"].startswith("converged") and st["band_half_width_decades"] <= 0.3
+    assert st["runs_used"] == len(table) < 150
+    reps = table.groupby(["cement", "eta_o"])["seed"].agg(["count", "max"]).reset_index()
+    assert reps["max"].max() <= 4 and (reps["count"] == reps["max"] + 1).all()   # seeds 0 .. n-1, none skipped
+    assert (reps["count"] > 1).any() and (reps["count"] == 1).any()
+    dist = np.abs(np.log10(reps["eta_o"]) - ORACLE.line(reps["cement"]))        # decades from the boundary
+    assert dist[reps["count"] > 1].median() < 0.5 * dist[reps["count"] == 1].median()
+
+
+def test_a_killed_round_resumes_to_the_same_runs():
+    spec = _spec()
+    _, full, _ = drive(spec)
+    s, part, left = drive(spec, stop_after=4)          # the first round is cut after 4 of its 9 runs
+    again = s.refine(spec, part)
+    assert [(p.params["cement"], p.params["eta_o"], p.params["seed"]) for p in again] == \
+           [(p.params["cement"], p.params["eta_o"], p.params["seed"]) for p in left]
+    assert len(full) >= 9
+
+
+def test_campaign_with_replicated_boundary_writes_its_points(tmp_path):
+    spec = _spec(budget=30)
+    res = run_campaign(spec, tmp_path, runner=oracle_runner, jobs=1, code_hash="test-rb", progress=None)
+    d = tmp_path / "rep_boundary"
+    st = json.loads((d / "sampler.json").read_text())
+    assert res.n_executed == st["runs_used"] <= 30 and st["stopped"]
+    pts = pd.read_csv(d / "points.csv")
+    assert pts["n_runs"].sum() == st["runs_used"]
+    assert sorted(pts["n_runs"]) == sorted(p["replicates"] for p in st["points"])
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"band_tolerance": 0}, r"sampler\.band_tolerance=0: must be a number > 0"),
+    ({"clear": 0.5}, r"sampler\.clear=0\.5: must be a number in \(0, 0\.5\)"),
+    ({"axes": {"cement": {"linear": [0.5, 3.0, 3]}, "eta_o": {"linear": [0.01, 10.0, 3]}}}, r"second on a log scale"),
+])
+def test_bad_replicated_boundary_specs(kw, match):
+    with pytest.raises(SpecError, match=match):
+        _spec(**kw)
+
+
+def test_replicate_settings_need_replicates():
+    d = {"name": "b", "base": {"eta_w": 1e-6, "kbar": 0.0015}, "options": {"h": 4.0},
+         "axes": {"cement": {"linear": [0.5, 3.0, 3]}, "eta_o": {"log": [0.01, 10.0, 3]}},
+         "sampler": {"kind": "boundary", "budget": 20, "tolerance": 0.1, "band_tolerance": 0.3}}
+    with pytest.raises(SpecError, match=r"sampler\.band_tolerance: a setting of the boundary sampler with replicates"):
+        spec_from_dict(d)
