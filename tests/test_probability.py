@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweep.regimes.diagrams import separatrix_profile_interval
+from sweep.regimes.separatrix import separatrix_profile_interval
 from sweep.regimes.probability import (plot_probability_diagram, replicate_points, separatrix_band,
                                        separatrix_significance, wilson_interval)
 

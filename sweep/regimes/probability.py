@@ -107,7 +107,7 @@ class SeparatrixBand(NamedTuple):
 
 
 def _design(C, ca_star, fracturing):
-    from .diagrams import _sep_min  # the Jeffreys-penalized optimizer of separatrix_profile_interval
+    from .separatrix import _sep_min  # the Jeffreys-penalized optimizer of separatrix_profile_interval
 
     Cc = np.asarray(C, float).ravel()
     cs = np.asarray(ca_star, float).ravel()
@@ -143,7 +143,7 @@ def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.9
     """
     from scipy.stats import chi2
 
-    from .diagrams import _profile_bounds
+    from .separatrix import _profile_bounds
 
     if not 0 < level < 1:
         raise ValueError(f"level={level!r}: must be in (0, 1)")

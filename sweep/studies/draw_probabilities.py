@@ -2,7 +2,7 @@
 probabilities (issue #51): per-point P(fracturing) with Wilson intervals, the separatrix's simultaneous band and its
 significance, and the probability diagram.  No run.  Units: C %, Ca* -, widths in decades of Ca*.
 
-    python results/uncertain_diagrams/draws_h2/analyze.py results/ca_star_boundary_h2_draws --out DIR
+    python -m sweep.studies.draw_probabilities results/ca_star_boundary_h2_draws --out results/uncertain_diagrams/draws_h2
 """
 from __future__ import annotations
 
@@ -19,10 +19,19 @@ from sweep.regimes.probability import plot_probability_diagram, separatrix_band
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m sweep.studies.draw_probabilities", description=__doc__.split("\n\n")[0])
     ap.add_argument("campaign", type=Path)
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args(argv)
+    summary = summarize(a.campaign, a.out)
+    print(json.dumps(summary, indent=1))
+    return 0
+
+
+def summarize(campaign: Path, out: Path) -> dict:
+    """Write ``summary.json``, ``points.csv`` and the probability figure of a replicated campaign's table into
+    ``out``; return the summary."""
+    a = argparse.Namespace(campaign=Path(campaign), out=Path(out))
     t = pd.read_csv(a.campaign / "table.csv")
     t = t[t["status"] == "ok"]
     pts = point_table(t, ["cement", "eta_o"])
@@ -43,8 +52,7 @@ def main(argv=None) -> int:
     }
     write_json_atomic(a.out / "summary.json", summary)
     pts.to_csv(a.out / "points.csv", index=False)
-    print(json.dumps(summary, indent=1))
-    return 0
+    return summary
 
 
 if __name__ == "__main__":
