@@ -15,8 +15,8 @@ its derivatives and the contraction are generated as one kernel from the traced 
 (tests), :class:`SlotSum` the CSR gather of every Jacobian.
 
 Selection: ``DCHFRAC_KERNELS`` = ``auto`` (default: numba when importable), ``numba`` (error if
-it is not installed) or ``numpy``.  numba is an optional extra (``pip install dchfrac[fast]``);
-the code runs without it.  Kernels release the GIL (``nogil``), so the element chunks of
+it is not installed) or ``numpy`` (the fallback path).  numba is a core dependency; the code runs
+without it (numpy kernels).  Kernels release the GIL (``nogil``), so the element chunks of
 :func:`solver.fem.map_chunks` run them on several threads; they are serial inside, so they never
 compete with a campaign's one-solver-per-core parallelism or nest thread pools.
 """
@@ -45,11 +45,11 @@ def backend() -> str:
     """The active kernel backend, ``"numba"`` or ``"numpy"``, from ``DCHFRAC_KERNELS``."""
     v = os.environ.get("DCHFRAC_KERNELS", "auto").strip().lower()
     if v not in _CHOICES:
-        raise ValueError(f"DCHFRAC_KERNELS must be one of {_CHOICES}, got {v!r}")
+        raise ValueError(f"DCHFRAC_KERNELS={v!r} is not allowed: one of {_CHOICES}")
     if v == "numpy":
         return "numpy"
     if v == "numba" and not numba_available():
-        raise ValueError("DCHFRAC_KERNELS='numba' but numba is not installed (pip install numba, or dchfrac[fast])")
+        raise ValueError("DCHFRAC_KERNELS='numba' but numba is not installed (pip install numba)")
     return "numba" if numba_available() else "numpy"
 
 

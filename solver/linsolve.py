@@ -2,7 +2,7 @@
 
 ``factorize(A, kind)`` returns an object with ``solve(b)``.  Backends:
 
-* ``"superlu"`` (default, no extra dependency): scipy's SuperLU called
+* ``"superlu"`` (the fallback, scipy only): scipy's SuperLU called
   directly (``spsolve`` silently switches to UMFPACK when installed).  The
   rows are first equilibrated (each divided by its largest entry: the block
   rows of momentum, mass and chemical potential differ by orders of
@@ -14,8 +14,9 @@
   Threshold pivoting is kept (0.1, not 0), and every solve is checked: if
   the relative residual of a solve exceeds 1e-8 the matrix is refactorized
   with full partial pivoting (COLAMD, threshold 1) and the solve repeated.
-* ``"pypardiso"`` (optional extra ``fast``): MKL PARDISO, picked by
-  ``"auto"`` when importable.  Measured on the coupled Jacobian (7 fields):
+* ``"pypardiso"`` (a core dependency where MKL's wheels install: x86_64 Linux and Windows): MKL PARDISO,
+  picked by ``"auto"`` when importable (``DCHFRAC_LINEAR_SOLVER=superlu`` forces the fallback).
+  Measured on the coupled Jacobian (7 fields):
   h = 2 mm (18,494 unknowns) 0.13 s against SuperLU's 0.41 s, h = 1 mm
   (72,709) 0.78 s against 4.5 s.  The symbolic analysis (ordering and
   symbolic factorization, PARDISO phase 11) depends only on the sparsity
@@ -107,15 +108,38 @@ def _locate_mkl_rt() -> None:
 PARDISO_MIN_SIZE = 2_000
 
 
+#: the environment variable that forces the backend "auto" picks (the fallback path: ``superlu``)
+ENV_VAR = "DCHFRAC_LINEAR_SOLVER"
+ENV_CHOICES = ("auto", "superlu", "pypardiso")
+
+
+def env_choice() -> str:
+    """``DCHFRAC_LINEAR_SOLVER`` (default ``auto``): what ``linear_solver = "auto"`` picks; ValueError naming
+    the variable when its value is not one of ``ENV_CHOICES`` or names a backend that is not installed."""
+    v = os.environ.get(ENV_VAR, "auto").strip().lower() or "auto"
+    if v not in ENV_CHOICES:
+        raise ValueError(f"{ENV_VAR}={v!r} is not allowed: one of {ENV_CHOICES}")
+    if v == "pypardiso" and "pypardiso" not in available_backends():
+        raise ValueError(f"{ENV_VAR}='pypardiso' but pypardiso is not installed (MKL wheels: x86_64 Linux and "
+                         "Windows)")
+    return v
+
+
 def resolve(kind: str, n: int | None = None) -> str:
+    """The backend that factorizes a matrix of ``n`` unknowns under the run option ``linear_solver = kind``:
+    ``"auto"`` is pypardiso when installed (and ``n`` >= ``PARDISO_MIN_SIZE``), else SuperLU, unless
+    ``DCHFRAC_LINEAR_SOLVER`` forces one."""
     if kind == "auto":
+        forced = env_choice()
+        if forced != "auto":
+            return forced
         if n is not None and n < PARDISO_MIN_SIZE:
             return "superlu"
         return "pypardiso" if "pypardiso" in available_backends() else "superlu"
     if kind not in ("superlu", "pypardiso"):
         raise ValueError(f"linear_solver={kind!r} is not one of ('auto', 'superlu', 'pypardiso')")
     if kind == "pypardiso" and "pypardiso" not in available_backends():
-        raise ValueError("linear_solver='pypardiso' but pypardiso is not installed (pip install 'dchfrac[fast]')")
+        raise ValueError("linear_solver='pypardiso' but pypardiso is not installed (MKL wheels: x86_64 Linux and Windows)")
     return kind
 
 

@@ -62,6 +62,7 @@ class SimulationResult:
     rejected_steps: list = field(default_factory=list)
     factorizations: int = 0
     profile: dict | None = None  # wall seconds by phase and part of the run (solver.profiling.Profile.to_dict)
+    path: dict | None = None  # the linear solver, its precision and the kernels that ran (run_path)
 
 
 class Simulation:
@@ -300,13 +301,30 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
 
         progress = StepProgress(options.t_end)
     prof = profiling.Profile()
+    path = {}
     with profiling.activate(prof), one_openblas_thread():
         status, reason, rows, snaps, rejected, nfact = _run(params, options, out_dir, mesh, phi0, progress, t_wall,
-                                                            warnings)
+                                                            warnings, path)
     ts = pd.DataFrame(rows)
     wall = time.perf_counter() - t_wall
     return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact,
-                            profile=prof.to_dict())
+                            profile=prof.to_dict(), path=path)
+
+
+def run_path(sim: "Simulation | None", options: RunOptions) -> dict:
+    """The computational path of a run (recorded in ``summary.json``): the sparse solver that factorizes its
+    Jacobian, the factors' precision and the element kernels (:mod:`solver.paths`); without ``sim`` (the set-up
+    failed) the path a run-sized problem would take."""
+    from . import kernels
+
+    if sim is not None:
+        return {"linear_solver": sim.solver_kind, "linear_precision": sim.precision, "kernels": kernels.backend()}
+    try:
+        kind = linsolve.resolve(options.linear_solver, 10**6)
+        return {"linear_solver": kind, "linear_precision": linsolve.resolve_precision(options.linear_precision, kind),
+                "kernels": kernels.backend()}
+    except ValueError as exc:
+        return {"error": str(exc)}
 
 
 def one_openblas_thread():
@@ -324,10 +342,11 @@ def one_openblas_thread():
     return ThreadpoolController().select(internal_api="openblas").limit(limits=1)
 
 
-def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=()):
+def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=(), path=None):
     """Set up, run the time loop and write the run folder; returns (status, reason, rows, snapshots,
-    rejected steps, factorizations)."""
+    rejected steps, factorizations); fills ``path`` with the run's :func:`run_path`."""
     rows, snaps, rejected = [], [], []
+    sim = None
     status, reason = "ok", None
     fact0 = linsolve.STATS["factorizations"]
     with phase("output"):
@@ -348,10 +367,12 @@ def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=()):
         if writer:
             writer.log(traceback.format_exc())
     nfact = linsolve.STATS["factorizations"] - fact0
+    if path is not None:
+        path.update(run_path(sim, options))
     if writer:
         with phase("output"):
             writer.finish(pd.DataFrame(rows), status, reason, time.perf_counter() - t_wall, rows[-1]["t"] if rows else 0.0,
-                          rejected, nfact, xdmf=options.write_xdmf)
+                          rejected, nfact, xdmf=options.write_xdmf, path=run_path(sim, options))
     if progress:
         progress.close()
     return status, reason, rows, snaps, rejected, nfact

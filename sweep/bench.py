@@ -258,10 +258,12 @@ def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None
     with the run options ``options`` (default none), and the h = 1 refactorization time measured in the same
     process; written as JSON to ``out_path``."""
     from solver import linsolve
+    from solver.paths import active_path, describe
 
     result = {"machine": {"python": platform.python_version(), "cpu_count": os.cpu_count(), "platform": platform.platform(),
                           "load_average_1_5_15": list(os.getloadavg()) if hasattr(os, "getloadavg") else None},
-              "backend": linsolve.resolve("auto", 10**6), "runs": []}
+              "backend": linsolve.resolve("auto", 10**6), "active_path": active_path(), "runs": []}
+    print(f"bench: {describe()}", flush=True)
     print("bench: h = 1 mm refactorization (yardstick) ...", flush=True)
     result["h1_refactorization"] = _refactorization_h1()
     for h in sizes:
@@ -298,11 +300,14 @@ def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> di
     """Run the benchmarks and write them as JSON to ``out_path``; returns the dict."""
     from solver import linsolve
 
+    from solver.paths import active_path, describe
+
     backends = linsolve.available_backends()
     sizes = [2.0, 1.0] if quick else [2.0, 1.0, 0.5]
+    print(f"bench: {describe()}", flush=True)
     result = {"machine": {"python": platform.python_version(), "cpu_count": __import__("os").cpu_count(),
                           "platform": platform.platform()},
-              "backends_available": backends, "newton_iteration": []}
+              "active_path": active_path(), "backends_available": backends, "newton_iteration": []}
     for h in sizes:
         LOG.info(f"bench: one Newton iteration at h = {h} mm ...")
         result["newton_iteration"].append(_newton_iteration(h, backends))

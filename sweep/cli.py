@@ -241,7 +241,9 @@ def version_text() -> str:
     code_hash = getattr(solver, "code_hash", None)
     if callable(code_hash):
         text += f" (code {code_hash()})"
-    return text
+    from solver.paths import describe
+
+    return text + "\n" + describe()
 
 
 class _VersionAction(argparse.Action):
@@ -251,7 +253,10 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
 
     def __call__(self, parser, namespace, values, option_string=None):
-        print(version_text())
+        try:
+            print(version_text())
+        except ValueError as exc:  # an invalid DCHFRAC_KERNELS / DCHFRAC_LINEAR_SOLVER
+            parser.exit(2, f"dchfrac: {exc}\n")
         parser.exit()
 
 
@@ -341,7 +346,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     from .logs import end_logging, setup_logging
 
+    from solver.paths import check_environment
+
     args = build_parser().parse_args(argv)
+    try:  # the path-forcing environment variables: one line before any work
+        check_environment()
+    except ValueError as exc:
+        print(f"dchfrac: {exc}", file=sys.stderr)
+        return 2
     setup_logging(args.verbose, args.less)
     args.logging_configured = True
     try:

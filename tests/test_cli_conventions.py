@@ -22,15 +22,21 @@ from importlib.metadata import version as _dist_version
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_version_names_the_version_and_the_code_hash_when_there_is_one(capsys, monkeypatch):
+def test_version_names_the_version_the_code_hash_and_the_active_path(capsys, monkeypatch):
+    from solver.paths import describe
+
     with pytest.raises(SystemExit) as e:
         main(["--version"])
     assert e.value.code == 0
-    assert capsys.readouterr().out.strip() == f"dchfrac {_dist_version('dchfrac')} (code {solver.code_hash()})"
+    assert capsys.readouterr().out.strip().splitlines() == [
+        f"dchfrac {_dist_version('dchfrac')} (code {solver.code_hash()})", describe()]
     monkeypatch.setattr(solver, "code_hash", lambda: "abc123", raising=False)
+    monkeypatch.setenv("DCHFRAC_LINEAR_SOLVER", "superlu")
     with pytest.raises(SystemExit):
         main(["--version"])
-    assert capsys.readouterr().out.strip() == f"dchfrac {_dist_version('dchfrac')} (code abc123)"
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[0] == f"dchfrac {_dist_version('dchfrac')} (code abc123)"
+    assert out[1].startswith("linear solver superlu") and "DCHFRAC_LINEAR_SOLVER=superlu" in out[1]
 
 
 def test_verbosity_levels_and_flags_anywhere():
