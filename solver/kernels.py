@@ -149,6 +149,12 @@ def _compiled():
     return jit(_forms_jacobian_py), jit(_gather_sum_py), jit(_qp_inputs_py)
 
 
+def compiled_dispatchers() -> tuple:
+    """The numba dispatchers of this module's kernels that every run calls: the CSR gather of the Jacobian
+    (for :mod:`solver.jitcache`'s compile feedback)."""
+    return (_compiled()[1],)
+
+
 # ---------------------------------------------------------------- public entry points
 def forms_jacobian(Ke: np.ndarray, wq: np.ndarray, bary: np.ndarray, G: np.ndarray, terms: list) -> None:
     """Add the element Jacobians of all ``terms`` to ``Ke`` (M, neq, nf, 3, 3), in place (compiled).

@@ -3,6 +3,7 @@
     dchfrac [--version] [-v | -q] COMMAND ...
     dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
     dchfrac params                                   (every parameter: unit, default, allowed range)
+    dchfrac warmup                                   (compile the numba kernels ahead of the first run)
     dchfrac animate RUN [--fields S,phi,d,p] [--out FILE] [--fps 6]
     dchfrac bench [--out results/bench/bench.json] [--quick] [--reference] [--profile [--h H] [--t-end T]]
     dchfrac campaign run|status|plot|report SPEC ...
@@ -159,6 +160,17 @@ def cmd_bench(args) -> int:
         print("dchfrac bench: --h, --t-end and --option apply only with --profile", file=sys.stderr)
         return 2
     run_benchmarks(out, quick=args.quick, reference=args.reference)
+    return 0
+
+
+def cmd_warmup(args) -> int:
+    """Compile (or load) the numba kernels ahead of the first run (solver.jitcache.warmup)."""
+    from solver.jitcache import warmup
+    from solver.paths import describe
+
+    print(describe())
+    res = warmup()
+    print(f"kernels {'compiled' if res['compiled'] else 'already in the cache'} ({res['wall_s']:.0f} s)")
     return 0
 
 
@@ -326,6 +338,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--option", action="append", metavar="KEY=VALUE",
                    help="with --profile: a run option of the profiled runs (repeatable), e.g. anderson_depth=3")
     b.set_defaults(func=cmd_bench)
+    w = sub.add_parser("warmup", help="compile the numba kernels ahead of the first run (about a minute of CPU, once)")
+    w.set_defaults(func=cmd_warmup)
     rp = sub.add_parser("report", help="figures and paper comparison of a reference run or a mesh-convergence set")
     rp.add_argument("kind", choices=["reference", "convergence"])
     rp.add_argument("runs", nargs="+", help="run folder(s)")
