@@ -34,11 +34,10 @@ _CHOICES = ("auto", "numba", "numpy")
 
 @lru_cache(maxsize=None)
 def numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether numba is installed (found without importing it: the import takes a second or more)."""
+    from importlib.util import find_spec
+
+    return find_spec("numba") is not None
 
 
 def backend() -> str:

@@ -269,7 +269,8 @@ def _validate_mesh(mesh):
             raise ValueError(f"mesh has no boundary tag {tag!r}: the model needs 'inner' (injection) and 'outer' edges")
 
 
-def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None, phi0=None, progress: bool = False) -> SimulationResult:
+def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None, phi0=None, progress: bool = False,
+             check_memory: bool = True) -> SimulationResult:
     """Run the coupled model from t = 0 to ``options.t_end`` (s).
 
     Parameters
@@ -285,7 +286,8 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         terminal, periodic INFO lines of the logger ``dchfrac.solver`` otherwise); or a StepProgress.
 
     Inputs that cannot run on the annulus (``solver.options.check_run_inputs``: h too large for it,
-    stop_front_radius outside it) raise ValueError before the run folder is written.
+    stop_front_radius outside it) raise ValueError before the run folder is written, and so does a mesh whose
+    estimated memory exceeds what is available (``solver.budget.check_fits``) unless ``check_memory`` is False.
     """
     from .params import Parameters
 
@@ -295,6 +297,10 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     if not isinstance(options, RunOptions):
         raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
     warnings = check_run_inputs(params, options) if mesh is None else []  # before the run folder is written
+    if mesh is None and check_memory:
+        from .budget import check_fits
+
+        check_fits(params, options)
     t_wall = time.perf_counter()
     if progress is True:
         from .progress import StepProgress

@@ -85,6 +85,10 @@ def _run_inputs(args):
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
     warnings = check_run_inputs(params, options)
+    if not args.force:  # a run that cannot fit in memory: refused before anything is written
+        from solver.budget import check_fits
+
+        check_fits(params, options)
     check_writable_dir(args.out, "--out")
     return params, options, warnings
 
@@ -99,7 +103,12 @@ def cmd_run(args) -> int:
         return 2
     for w in warnings:
         LOG.warning("dchfrac run: warning: %s", w)
-    res = simulate(params, options, out_dir=args.out, progress=not args.quiet and LOG.isEnabledFor(logging.INFO))
+    if LOG.isEnabledFor(logging.INFO):
+        from solver.budget import estimate_run
+
+        LOG.info("dchfrac run: estimate: %s", estimate_run(params, options).line())
+    res = simulate(params, options, out_dir=args.out, progress=not args.quiet and LOG.isEnabledFor(logging.INFO),
+                   check_memory=not args.force)
     ts = res.timeseries
     last = ts.iloc[-1] if len(ts) else None
     print(f"status: {res.status}" + (f" ({res.reason})" if res.reason else ""))
@@ -316,6 +325,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--h", type=float, help="mesh size, mm")
     r.add_argument("--t-end", type=float, help="final time, s")
     r.add_argument("--quiet", action="store_true", help="no progress bar / progress lines")
+    r.add_argument("--force", action="store_true",
+                   help="run even when the estimated memory exceeds what is available (solver.budget)")
     r.set_defaults(func=cmd_run)
     an = sub.add_parser("animate", help="animate a run's snapshots (MP4 with ffmpeg, else GIF)",
                         description="Animate a run folder's snapshots: one panel per field, fixed colour scales, "
