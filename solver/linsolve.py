@@ -10,7 +10,7 @@
   mode and a diagonal pivot threshold of 0.1.  COLAMD rather than minimum
   degree on AᵀA+A: with the threshold pivoting of the coupled Jacobian the
   minimum-degree fill grows as the run goes on and COLAMD's does not
-  (results/bench/README.md, sixth round).
+  (results/archive/bench_rounds.md, sixth round).
   Threshold pivoting is kept (0.1, not 0), and every solve is checked: if
   the relative residual of a solve exceeds 1e-8 the matrix is refactorized
   with full partial pivoting (COLAMD, threshold 1) and the solve repeated.
@@ -146,7 +146,7 @@ def resolve(kind: str, n: int | None = None) -> str:
 def resolve_precision(precision: str | None, kind: str) -> str:
     """The factors' precision for the resolved backend ``kind``: ``precision`` when given, else (None) "single"
     with PARDISO and "double" with SuperLU (whose single-precision factorization is slower than its double
-    one on the coupled Jacobian; results/bench/README.md, sixth round)."""
+    one on the coupled Jacobian; results/archive/bench_rounds.md, sixth round)."""
     if precision is None:
         return "single" if kind == "pypardiso" else "double"
     if precision not in PRECISIONS:
@@ -285,7 +285,7 @@ def _pardiso_solver(precision: str = "double") -> dict:
         # stiffness), pivot perturbation 1e-13 (10), no internal iterative refinement (8, reset before each
         # solve: PARDISO writes the number of steps it made there), refined in solve() only when needed, the
         # two-level factorization (24: 1), with which the substitution uses every core (same fill, and the
-        # same result bitwise run to run; results/bench/README.md, fourth round), and the precision of the
+        # same result bitwise run to run; results/archive/bench_rounds.md, fourth round), and the precision of the
         # factors (28: 1 single, 0 double).
         for i, v in {1: 1, 2: 2, 8: 0, 10: 13, 11: 0, 13: 0, 24: 1, 28: int(precision == "single")}.items():
             s.set_iparm(i, v)

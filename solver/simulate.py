@@ -337,7 +337,7 @@ def one_openblas_thread():
     """A context that holds numpy's and scipy's OpenBLAS thread pools to one thread (threadpoolctl; a no-op
     when it is not installed).  The run's own BLAS calls are small (norms of the Newton vectors, Anderson's
     least squares over a few columns), and idle OpenBLAS workers spinning beside PARDISO's OpenMP threads and
-    the assembly threads take their cores (results/bench/README.md, ninth round).  MKL (PARDISO) keeps its
+    the assembly threads take their cores (results/archive/bench_rounds.md, ninth round).  MKL (PARDISO) keeps its
     threads."""
     try:
         from threadpoolctl import ThreadpoolController
