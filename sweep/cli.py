@@ -160,13 +160,14 @@ def cmd_bench(args) -> int:
             return 2
         try:
             options = _bench_options(args.option or [])
+            compare = _bench_options(args.compare) if args.compare else None
         except ValueError as e:
             print(f"dchfrac bench: {e}", file=sys.stderr)
             return 2
-        run_profile(out, sizes, t_end, options=options)
+        run_profile(out, sizes, t_end, options=options, compare=compare)
         return 0
-    if args.h or args.t_end is not None or args.option:
-        print("dchfrac bench: --h, --t-end and --option apply only with --profile", file=sys.stderr)
+    if args.h or args.t_end is not None or args.option or args.compare:
+        print("dchfrac bench: --h, --t-end, --option and --compare apply only with --profile", file=sys.stderr)
         return 2
     run_benchmarks(out, quick=args.quick, reference=args.reference)
     return 0
@@ -348,6 +349,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, help="with --profile: final time, s (default 2)")
     b.add_argument("--option", action="append", metavar="KEY=VALUE",
                    help="with --profile: a run option of the profiled runs (repeatable), e.g. anderson_depth=3")
+    b.add_argument("--compare", action="append", metavar="KEY=VALUE",
+                   help="with --profile: a variant's run option (repeatable); each size runs base, variant, base, "
+                        "variant side by side in time and reports the wall-time ratio and the change of p_inj")
     b.set_defaults(func=cmd_bench)
     w = sub.add_parser("warmup", help="compile the numba kernels ahead of the first run (about a minute of CPU, once)")
     w.set_defaults(func=cmd_warmup)
