@@ -85,7 +85,7 @@ def _run_inputs(args):
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
     warnings = check_run_inputs(params, options)
-    if not args.force:  # a run that cannot fit in memory: refused before anything is written
+    if not getattr(args, "force", False):  # a run that cannot fit in memory: refused before anything is written
         from solver.budget import check_fits
 
         check_fits(params, options)
