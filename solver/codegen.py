@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import jitcache, kernels
 from .output import atomic_write_text
 
 __all__ = ["Sym", "Tracer", "FormsKernel", "forms_kernel", "cache_dir"]
@@ -664,14 +665,20 @@ def _load_module(src: str):
     name = f"dchfrac_forms_{h}"
     if name in sys.modules:
         return sys.modules[name]
+    failure = None
     for d in (cache_dir(), Path(tempfile.gettempdir()) / f"dchfrac-{os.getuid() if hasattr(os, 'getuid') else 0}" / "kernels"):
         path = d / f"forms_{h}.py"
-        try:  # a read-only cache directory falls back to a private temporary one
+        try:  # a read-only cache directory falls back to a private temporary one, with one warning
             d.mkdir(parents=True, exist_ok=True)
             if not path.exists() or path.read_text() != src:
                 atomic_write_text(path, src)
+            if failure is not None:
+                from .jitcache import warn_unwritable
+
+                warn_unwritable(cache_dir(), d, failure)
             break
-        except OSError:
+        except OSError as exc:
+            failure = failure or exc
             continue
     else:
         raise OSError(f"no writable directory for the generated kernels (tried {cache_dir()} and the temporary directory)")
@@ -706,6 +713,7 @@ class FormsKernel:
             self.residual(U, tri, grads, areas, C, *q, *d, Fe)
         else:
             self.jacobian(U, tri, grads, areas, C, *q, *d, Fe, Ke)
+        jitcache.finished(self.path)
 
 
 _LOCK = threading.RLock()
@@ -739,6 +747,7 @@ def forms_kernel(key, build) -> tuple[FormsKernel, np.ndarray]:
             mod = _load_module(src)
             quads = tuple((np.ascontiguousarray(q.bary, float), np.ascontiguousarray(q.weights, float)) for _, q in traced)
             kern = FormsKernel(mod.residual, mod.jacobian, quads, tuple(nm for nm, _ in tr.data_names), src, mod.__file__)
+            jitcache.announce(kern.path, (mod.residual, mod.jacobian), also=kernels.compiled_dispatchers())
             _BY_SIGNATURE[sig] = kern
         out = (kern, np.array(tr.constants, dtype=float))
         _BY_KEY[key] = out

@@ -15,8 +15,8 @@ its derivatives and the contraction are generated as one kernel from the traced 
 (tests), :class:`SlotSum` the CSR gather of every Jacobian.
 
 Selection: ``DCHFRAC_KERNELS`` = ``auto`` (default: numba when importable), ``numba`` (error if
-it is not installed) or ``numpy``.  numba is an optional extra (``pip install dchfrac[fast]``);
-the code runs without it.  Kernels release the GIL (``nogil``), so the element chunks of
+it is not installed) or ``numpy`` (the fallback path).  numba is a core dependency; the code runs
+without it (numpy kernels).  Kernels release the GIL (``nogil``), so the element chunks of
 :func:`solver.fem.map_chunks` run them on several threads; they are serial inside, so they never
 compete with a campaign's one-solver-per-core parallelism or nest thread pools.
 """
@@ -34,22 +34,21 @@ _CHOICES = ("auto", "numba", "numpy")
 
 @lru_cache(maxsize=None)
 def numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether numba is installed (found without importing it: the import takes a second or more)."""
+    from importlib.util import find_spec
+
+    return find_spec("numba") is not None
 
 
 def backend() -> str:
     """The active kernel backend, ``"numba"`` or ``"numpy"``, from ``DCHFRAC_KERNELS``."""
     v = os.environ.get("DCHFRAC_KERNELS", "auto").strip().lower()
     if v not in _CHOICES:
-        raise ValueError(f"DCHFRAC_KERNELS must be one of {_CHOICES}, got {v!r}")
+        raise ValueError(f"DCHFRAC_KERNELS={v!r} is not allowed: one of {_CHOICES}")
     if v == "numpy":
         return "numpy"
     if v == "numba" and not numba_available():
-        raise ValueError("DCHFRAC_KERNELS='numba' but numba is not installed (pip install numba, or dchfrac[fast])")
+        raise ValueError("DCHFRAC_KERNELS='numba' but numba is not installed (pip install numba)")
     return "numba" if numba_available() else "numpy"
 
 
@@ -147,6 +146,12 @@ def _compiled():
     # the element loop calls the term kernel by its global name: bind the compiled one before compiling
     globals()["_add_term"] = jit(_add_term_py)
     return jit(_forms_jacobian_py), jit(_gather_sum_py), jit(_qp_inputs_py)
+
+
+def compiled_dispatchers() -> tuple:
+    """The numba dispatchers of this module's kernels that every run calls: the CSR gather of the Jacobian
+    (for :mod:`solver.jitcache`'s compile feedback)."""
+    return (_compiled()[1],)
 
 
 # ---------------------------------------------------------------- public entry points

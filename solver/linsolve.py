@@ -2,7 +2,7 @@
 
 ``factorize(A, kind)`` returns an object with ``solve(b)``.  Backends:
 
-* ``"superlu"`` (default, no extra dependency): scipy's SuperLU called
+* ``"superlu"`` (the fallback, scipy only): scipy's SuperLU called
   directly (``spsolve`` silently switches to UMFPACK when installed).  The
   rows are first equilibrated (each divided by its largest entry: the block
   rows of momentum, mass and chemical potential differ by orders of
@@ -10,12 +10,13 @@
   mode and a diagonal pivot threshold of 0.1.  COLAMD rather than minimum
   degree on AᵀA+A: with the threshold pivoting of the coupled Jacobian the
   minimum-degree fill grows as the run goes on and COLAMD's does not
-  (results/bench/README.md, sixth round).
+  (results/archive/bench_rounds.md, sixth round).
   Threshold pivoting is kept (0.1, not 0), and every solve is checked: if
   the relative residual of a solve exceeds 1e-8 the matrix is refactorized
   with full partial pivoting (COLAMD, threshold 1) and the solve repeated.
-* ``"pypardiso"`` (optional extra ``fast``): MKL PARDISO, picked by
-  ``"auto"`` when importable.  Measured on the coupled Jacobian (7 fields):
+* ``"pypardiso"`` (a core dependency where MKL's wheels install: x86_64 Linux and Windows): MKL PARDISO,
+  picked by ``"auto"`` when importable (``DCHFRAC_LINEAR_SOLVER=superlu`` forces the fallback).
+  Measured on the coupled Jacobian (7 fields):
   h = 2 mm (18,494 unknowns) 0.13 s against SuperLU's 0.41 s, h = 1 mm
   (72,709) 0.78 s against 4.5 s.  The symbolic analysis (ordering and
   symbolic factorization, PARDISO phase 11) depends only on the sparsity
@@ -107,22 +108,45 @@ def _locate_mkl_rt() -> None:
 PARDISO_MIN_SIZE = 2_000
 
 
+#: the environment variable that forces the backend "auto" picks (the fallback path: ``superlu``)
+ENV_VAR = "DCHFRAC_LINEAR_SOLVER"
+ENV_CHOICES = ("auto", "superlu", "pypardiso")
+
+
+def env_choice() -> str:
+    """``DCHFRAC_LINEAR_SOLVER`` (default ``auto``): what ``linear_solver = "auto"`` picks; ValueError naming
+    the variable when its value is not one of ``ENV_CHOICES`` or names a backend that is not installed."""
+    v = os.environ.get(ENV_VAR, "auto").strip().lower() or "auto"
+    if v not in ENV_CHOICES:
+        raise ValueError(f"{ENV_VAR}={v!r} is not allowed: one of {ENV_CHOICES}")
+    if v == "pypardiso" and "pypardiso" not in available_backends():
+        raise ValueError(f"{ENV_VAR}='pypardiso' but pypardiso is not installed (MKL wheels: x86_64 Linux and "
+                         "Windows)")
+    return v
+
+
 def resolve(kind: str, n: int | None = None) -> str:
+    """The backend that factorizes a matrix of ``n`` unknowns under the run option ``linear_solver = kind``:
+    ``"auto"`` is pypardiso when installed (and ``n`` >= ``PARDISO_MIN_SIZE``), else SuperLU, unless
+    ``DCHFRAC_LINEAR_SOLVER`` forces one."""
     if kind == "auto":
+        forced = env_choice()
+        if forced != "auto":
+            return forced
         if n is not None and n < PARDISO_MIN_SIZE:
             return "superlu"
         return "pypardiso" if "pypardiso" in available_backends() else "superlu"
     if kind not in ("superlu", "pypardiso"):
         raise ValueError(f"linear_solver={kind!r} is not one of ('auto', 'superlu', 'pypardiso')")
     if kind == "pypardiso" and "pypardiso" not in available_backends():
-        raise ValueError("linear_solver='pypardiso' but pypardiso is not installed (pip install 'dchfrac[fast]')")
+        raise ValueError("linear_solver='pypardiso' but pypardiso is not installed (MKL wheels: x86_64 Linux and Windows)")
     return kind
 
 
 def resolve_precision(precision: str | None, kind: str) -> str:
     """The factors' precision for the resolved backend ``kind``: ``precision`` when given, else (None) "single"
     with PARDISO and "double" with SuperLU (whose single-precision factorization is slower than its double
-    one on the coupled Jacobian; results/bench/README.md, sixth round)."""
+    one on the coupled Jacobian; results/archive/bench_rounds.md, sixth round)."""
     if precision is None:
         return "single" if kind == "pypardiso" else "double"
     if precision not in PRECISIONS:
@@ -261,7 +285,7 @@ def _pardiso_solver(precision: str = "double") -> dict:
         # stiffness), pivot perturbation 1e-13 (10), no internal iterative refinement (8, reset before each
         # solve: PARDISO writes the number of steps it made there), refined in solve() only when needed, the
         # two-level factorization (24: 1), with which the substitution uses every core (same fill, and the
-        # same result bitwise run to run; results/bench/README.md, fourth round), and the precision of the
+        # same result bitwise run to run; results/archive/bench_rounds.md, fourth round), and the precision of the
         # factors (28: 1 single, 0 double).
         for i, v in {1: 1, 2: 2, 8: 0, 10: 13, 11: 0, 13: 0, 24: 1, 28: int(precision == "single")}.items():
             s.set_iparm(i, v)

@@ -55,7 +55,7 @@ class RunOptions:
         step sequence).
     dt_change_target : target change c per step of the saturation S and the damage d with
         ``step_control = "state_change"`` (dimensionless, in (0, 1]).  The time-discretization error of backward
-        Euler is O(c) (``tests/test_step_control.py``); why 0.1: ``results/bench/README.md``, third round.
+        Euler is O(c) (``tests/test_step_control.py``); why 0.1: ``results/archive/bench_rounds.md``, third round.
     dt_grow : largest growth factor of dt from one step to the next (with "iterations", the factor after an
         easy step).
     dt_cut : factor on dt after a rejected step.
@@ -84,7 +84,7 @@ class RunOptions:
         checked to a relative residual of ``solver.linsolve.SINGLE_FORCING`` = 1e-3, refined in mixed precision
         or refactorized in double when they miss it; ``solver.linsolve``).  The converged state meets the same
         tests as with double factors.  None (default): "single" with PARDISO, whose single-precision
-        factorization and substitution are the faster (results/bench/README.md, sixth round), and "double" with
+        factorization and substitution are the faster (results/archive/bench_rounds.md, sixth round), and "double" with
         SuperLU.  Omitted from :meth:`to_dict` when None, as h_inner.
     jacobian_reuse : keep a factorized Jacobian (over Newton iterations, stagger iterations and
         time steps of equal dt) while the Newton updates contract by at least this factor per
@@ -114,7 +114,7 @@ class RunOptions:
         without rejected steps is the plain one to the Newton tolerance, in fewer factorizations; a step that
         diverges in one iteration and not in the other is rejected in one run only, and the runs then differ by
         the time-discretization error.  With "iterations", fewer Newton iterations make the controller choose
-        other steps.  Default 3 (cost and effect: ``results/bench/README.md``).
+        other steps.  Default 3 (cost and effect: ``results/archive/bench_rounds.md``).
     first_stagger_rtol : Newton tolerance of the first stagger iteration of each step (dimensionless, in
         [``newton_rtol``, 0.1]): that iteration only supplies the damage that starts the second, which is always
         made and solved to ``newton_rtol``, so the accepted state meets the same tests (``Simulation.step``).
@@ -122,7 +122,7 @@ class RunOptions:
         p_inj in the first steps) with the number of loose iterations, a discrete function of the parameters:
         the run's outputs are rougher in the parameters, which finite differences (the discrepancy workflow)
         amplify.  So it is off by default (None: every stagger iteration at ``newton_rtol``, the first allowed
-        to end the stagger); for runs that are not differentiated, 1e-3 (``results/bench/README.md``).  Used when
+        to end the stagger); for runs that are not differentiated, 1e-3 (``results/archive/bench_rounds.md``).  Used when
         ``stagger_max_its`` >= 2.  Omitted from :meth:`to_dict` when None, as h_inner.
     """
 

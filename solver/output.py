@@ -5,7 +5,8 @@ Layout of ``run_dir``::
     params.toml, options.toml        inputs (round-trip through Parameters / RunOptions)
     timeseries.csv                   one row per accepted step
     timeseries_columns.csv           its column dictionary: name, unit, meaning (TIMESERIES_COLUMNS)
-    summary.json                     status, reason, wall time, t reached, versions, code_hash, complete
+    summary.json                     status, reason, wall time, t reached, versions, code_hash, complete, path
+                                     (linear solver, precision and kernels that ran)
     log.txt                          rejected steps, warnings, tracebacks
     snapshots/mesh.npz               points (N, 2) mm, triangles (M, 3)
     snapshots/snap_00000.npz ...     t; nodal S, mu, p, d, u; element phi, eps_v, hoop_stress, k, w1_mag
@@ -183,9 +184,11 @@ class RunWriter:
     def write_timeseries(self, df) -> None:
         atomic_write_text(self.dir / "timeseries.csv", df.to_csv(index=False))
 
-    def finish(self, df, status, reason, wall, t_reached, rejected, factorizations, xdmf: bool = True) -> None:
+    def finish(self, df, status, reason, wall, t_reached, rejected, factorizations, xdmf: bool = True,
+               path: dict | None = None) -> None:
         """Final time series and its column dictionary, XDMF (when ``xdmf``: RunOptions.write_xdmf) and the
-        summary, which comes last."""
+        summary, which comes last; ``path``: the linear solver, precision and kernels that ran
+        (:func:`solver.simulate.run_path`)."""
         self.write_timeseries(df)
         rows = ["name,unit,meaning"] + [f'{c},{TIMESERIES_COLUMNS[c][0]},"{TIMESERIES_COLUMNS[c][1]}"'
                                         for c in df.columns if c in TIMESERIES_COLUMNS]
@@ -198,7 +201,7 @@ class RunWriter:
         self._summary({
             "status": status, "reason": reason, "complete": status == "ok",
             "wall_time_s": wall, "t_reached": t_reached, "accepted_steps": int(len(df)),
-            "rejected_steps": len(rejected), "factorizations": int(factorizations),
+            "rejected_steps": len(rejected), "factorizations": int(factorizations), "path": dict(path or {}),
         })
 
     def _summary(self, d: dict) -> None:

@@ -62,6 +62,7 @@ class SimulationResult:
     rejected_steps: list = field(default_factory=list)
     factorizations: int = 0
     profile: dict | None = None  # wall seconds by phase and part of the run (solver.profiling.Profile.to_dict)
+    path: dict | None = None  # the linear solver, its precision and the kernels that ran (run_path)
 
 
 class Simulation:
@@ -268,7 +269,8 @@ def _validate_mesh(mesh):
             raise ValueError(f"mesh has no boundary tag {tag!r}: the model needs 'inner' (injection) and 'outer' edges")
 
 
-def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None, phi0=None, progress: bool = False) -> SimulationResult:
+def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None, phi0=None, progress: bool = False,
+             check_memory: bool = True) -> SimulationResult:
     """Run the coupled model from t = 0 to ``options.t_end`` (s).
 
     Parameters
@@ -284,7 +286,8 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         terminal, periodic INFO lines of the logger ``dchfrac.solver`` otherwise); or a StepProgress.
 
     Inputs that cannot run on the annulus (``solver.options.check_run_inputs``: h too large for it,
-    stop_front_radius outside it) raise ValueError before the run folder is written.
+    stop_front_radius outside it) raise ValueError before the run folder is written, and so does a mesh whose
+    estimated memory exceeds what is available (``solver.budget.check_fits``) unless ``check_memory`` is False.
     """
     from .params import Parameters
 
@@ -294,26 +297,47 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     if not isinstance(options, RunOptions):
         raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
     warnings = check_run_inputs(params, options) if mesh is None else []  # before the run folder is written
+    if mesh is None and check_memory:
+        from .budget import check_fits
+
+        check_fits(params, options)
     t_wall = time.perf_counter()
     if progress is True:
         from .progress import StepProgress
 
         progress = StepProgress(options.t_end)
     prof = profiling.Profile()
+    path = {}
     with profiling.activate(prof), one_openblas_thread():
         status, reason, rows, snaps, rejected, nfact = _run(params, options, out_dir, mesh, phi0, progress, t_wall,
-                                                            warnings)
+                                                            warnings, path)
     ts = pd.DataFrame(rows)
     wall = time.perf_counter() - t_wall
     return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact,
-                            profile=prof.to_dict())
+                            profile=prof.to_dict(), path=path)
+
+
+def run_path(sim: "Simulation | None", options: RunOptions) -> dict:
+    """The computational path of a run (recorded in ``summary.json``): the sparse solver that factorizes its
+    Jacobian, the factors' precision and the element kernels (:mod:`solver.paths`); without ``sim`` (the set-up
+    failed) the path a run-sized problem would take."""
+    from . import kernels
+
+    if sim is not None:
+        return {"linear_solver": sim.solver_kind, "linear_precision": sim.precision, "kernels": kernels.backend()}
+    try:
+        kind = linsolve.resolve(options.linear_solver, 10**6)
+        return {"linear_solver": kind, "linear_precision": linsolve.resolve_precision(options.linear_precision, kind),
+                "kernels": kernels.backend()}
+    except ValueError as exc:
+        return {"error": str(exc)}
 
 
 def one_openblas_thread():
     """A context that holds numpy's and scipy's OpenBLAS thread pools to one thread (threadpoolctl; a no-op
     when it is not installed).  The run's own BLAS calls are small (norms of the Newton vectors, Anderson's
     least squares over a few columns), and idle OpenBLAS workers spinning beside PARDISO's OpenMP threads and
-    the assembly threads take their cores (results/bench/README.md, ninth round).  MKL (PARDISO) keeps its
+    the assembly threads take their cores (results/archive/bench_rounds.md, ninth round).  MKL (PARDISO) keeps its
     threads."""
     try:
         from threadpoolctl import ThreadpoolController
@@ -324,10 +348,11 @@ def one_openblas_thread():
     return ThreadpoolController().select(internal_api="openblas").limit(limits=1)
 
 
-def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=()):
+def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=(), path=None):
     """Set up, run the time loop and write the run folder; returns (status, reason, rows, snapshots,
-    rejected steps, factorizations)."""
+    rejected steps, factorizations); fills ``path`` with the run's :func:`run_path`."""
     rows, snaps, rejected = [], [], []
+    sim = None
     status, reason = "ok", None
     fact0 = linsolve.STATS["factorizations"]
     with phase("output"):
@@ -348,10 +373,12 @@ def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=()):
         if writer:
             writer.log(traceback.format_exc())
     nfact = linsolve.STATS["factorizations"] - fact0
+    if path is not None:
+        path.update(run_path(sim, options))
     if writer:
         with phase("output"):
             writer.finish(pd.DataFrame(rows), status, reason, time.perf_counter() - t_wall, rows[-1]["t"] if rows else 0.0,
-                          rejected, nfact, xdmf=options.write_xdmf)
+                          rejected, nfact, xdmf=options.write_xdmf, path=run_path(sim, options))
     if progress:
         progress.close()
     return status, reason, rows, snaps, rejected, nfact

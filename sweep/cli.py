@@ -3,6 +3,7 @@
     dchfrac [--version] [-v | -q] COMMAND ...
     dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
     dchfrac params                                   (every parameter: unit, default, allowed range)
+    dchfrac warmup                                   (compile the numba kernels ahead of the first run)
     dchfrac animate RUN [--fields S,phi,d,p] [--out FILE] [--fps 6]
     dchfrac bench [--out results/bench/bench.json] [--quick] [--reference] [--profile [--h H] [--t-end T]]
     dchfrac campaign run|status|plot|report SPEC ...
@@ -84,6 +85,10 @@ def _run_inputs(args):
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
     warnings = check_run_inputs(params, options)
+    if not getattr(args, "force", False):  # a run that cannot fit in memory: refused before anything is written
+        from solver.budget import check_fits
+
+        check_fits(params, options)
     check_writable_dir(args.out, "--out")
     return params, options, warnings
 
@@ -98,7 +103,12 @@ def cmd_run(args) -> int:
         return 2
     for w in warnings:
         LOG.warning("dchfrac run: warning: %s", w)
-    res = simulate(params, options, out_dir=args.out, progress=not args.quiet and LOG.isEnabledFor(logging.INFO))
+    if LOG.isEnabledFor(logging.INFO):
+        from solver.budget import estimate_run
+
+        LOG.info("dchfrac run: estimate: %s", estimate_run(params, options).line())
+    res = simulate(params, options, out_dir=args.out, progress=not args.quiet and LOG.isEnabledFor(logging.INFO),
+                   check_memory=not args.force)
     ts = res.timeseries
     last = ts.iloc[-1] if len(ts) else None
     print(f"status: {res.status}" + (f" ({res.reason})" if res.reason else ""))
@@ -150,15 +160,27 @@ def cmd_bench(args) -> int:
             return 2
         try:
             options = _bench_options(args.option or [])
+            compare = _bench_options(args.compare) if args.compare else None
         except ValueError as e:
             print(f"dchfrac bench: {e}", file=sys.stderr)
             return 2
-        run_profile(out, sizes, t_end, options=options)
+        run_profile(out, sizes, t_end, options=options, compare=compare)
         return 0
-    if args.h or args.t_end is not None or args.option:
-        print("dchfrac bench: --h, --t-end and --option apply only with --profile", file=sys.stderr)
+    if args.h or args.t_end is not None or args.option or args.compare:
+        print("dchfrac bench: --h, --t-end, --option and --compare apply only with --profile", file=sys.stderr)
         return 2
     run_benchmarks(out, quick=args.quick, reference=args.reference)
+    return 0
+
+
+def cmd_warmup(args) -> int:
+    """Compile (or load) the numba kernels ahead of the first run (solver.jitcache.warmup)."""
+    from solver.jitcache import warmup
+    from solver.paths import describe
+
+    print(describe())
+    res = warmup()
+    print(f"kernels {'compiled' if res['compiled'] else 'already in the cache'} ({res['wall_s']:.0f} s)")
     return 0
 
 
@@ -241,7 +263,9 @@ def version_text() -> str:
     code_hash = getattr(solver, "code_hash", None)
     if callable(code_hash):
         text += f" (code {code_hash()})"
-    return text
+    from solver.paths import describe
+
+    return text + "\n" + describe()
 
 
 class _VersionAction(argparse.Action):
@@ -251,7 +275,10 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
 
     def __call__(self, parser, namespace, values, option_string=None):
-        print(version_text())
+        try:
+            print(version_text())
+        except ValueError as exc:  # an invalid DCHFRAC_KERNELS / DCHFRAC_LINEAR_SOLVER
+            parser.exit(2, f"dchfrac: {exc}\n")
         parser.exit()
 
 
@@ -299,6 +326,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--h", type=float, help="mesh size, mm")
     r.add_argument("--t-end", type=float, help="final time, s")
     r.add_argument("--quiet", action="store_true", help="no progress bar / progress lines")
+    r.add_argument("--force", action="store_true",
+                   help="run even when the estimated memory exceeds what is available (solver.budget)")
     r.set_defaults(func=cmd_run)
     an = sub.add_parser("animate", help="animate a run's snapshots (MP4 with ffmpeg, else GIF)",
                         description="Animate a run folder's snapshots: one panel per field, fixed colour scales, "
@@ -320,7 +349,12 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--t-end", type=float, help="with --profile: final time, s (default 2)")
     b.add_argument("--option", action="append", metavar="KEY=VALUE",
                    help="with --profile: a run option of the profiled runs (repeatable), e.g. anderson_depth=3")
+    b.add_argument("--compare", action="append", metavar="KEY=VALUE",
+                   help="with --profile: a variant's run option (repeatable); each size runs base, variant, base, "
+                        "variant side by side in time and reports the wall-time ratio and the change of p_inj")
     b.set_defaults(func=cmd_bench)
+    w = sub.add_parser("warmup", help="compile the numba kernels ahead of the first run (about a minute of CPU, once)")
+    w.set_defaults(func=cmd_warmup)
     rp = sub.add_parser("report", help="figures and paper comparison of a reference run or a mesh-convergence set")
     rp.add_argument("kind", choices=["reference", "convergence"])
     rp.add_argument("runs", nargs="+", help="run folder(s)")
@@ -347,7 +381,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     from .campaign.logs import end_logging, setup_logging
 
+    from solver.paths import check_environment
+
     args = build_parser().parse_args(argv)
+    try:  # the path-forcing environment variables: one line before any work
+        check_environment()
+    except ValueError as exc:
+        print(f"dchfrac: {exc}", file=sys.stderr)
+        return 2
     setup_logging(args.verbose, args.less)
     args.logging_configured = True
     try:

@@ -441,7 +441,7 @@ def test_bench_profile_passes_its_run_options(tmp_path, monkeypatch):
     from sweep.cli import main
 
     seen = {}
-    monkeypatch.setattr(sweep.studies.bench, "run_profile", lambda out, sizes, t_end, options=None: seen.update(options=options))
+    monkeypatch.setattr(sweep.studies.bench, "run_profile", lambda out, sizes, t_end, options=None, compare=None: seen.update(options=options))
     assert main(["bench", "--profile", "--out", str(tmp_path / "p.json"), "--option", "anderson_depth=3",
                  "--option", "first_stagger_rtol=1e-3"]) == 0
     assert seen["options"] == {"anderson_depth": 3, "first_stagger_rtol": 1e-3}

@@ -40,3 +40,18 @@ def test_the_shared_run_sets_the_factor_for_more_than_one_job():
     result = {"reference_run_h2": _run(2.0, 13.1), "shared_run_h2": _run(2.0, 20.0, status="failed")}
     _cost_rates(result)
     assert "shared_run_factor" not in result and shared_run_factor(2, result)[1] == "default"
+
+
+def _profiled(wall, p_inj, status="ok"):
+    return {"status": status, "wall_s": wall, "p_inj_end_kPa": p_inj, "newton_iterations": 10, "factorizations": 3}
+
+
+def test_side_by_side_comparison_sums_the_pairs_and_reports_the_change_of_p_inj():
+    from sweep.studies.bench import _comparison
+
+    c = _comparison(2.0, {"jacobian_reuse": 0.5}, [_profiled(10.0, 400.0), _profiled(14.0, 400.0)],
+                    [_profiled(9.0, 400.0004), _profiled(9.0, 400.0004)])
+    assert c["wall_ratio"] == 18.0 / 24.0 and c["status"] == "ok"
+    assert c["p_inj_end_rel_change"] == abs(400.0004 - 400.0) / 400.0
+    failed = _comparison(2.0, {}, [_profiled(10.0, 400.0)], [_profiled(9.0, None, status="failed")])
+    assert failed["status"] == "failed" and failed["wall_ratio"] is None and failed["p_inj_end_rel_change"] is None

@@ -22,15 +22,21 @@ from importlib.metadata import version as _dist_version
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_version_names_the_version_and_the_code_hash_when_there_is_one(capsys, monkeypatch):
+def test_version_names_the_version_the_code_hash_and_the_active_path(capsys, monkeypatch):
+    from solver.paths import describe
+
     with pytest.raises(SystemExit) as e:
         main(["--version"])
     assert e.value.code == 0
-    assert capsys.readouterr().out.strip() == f"dchfrac {_dist_version('dchfrac')} (code {solver.code_hash()})"
+    assert capsys.readouterr().out.strip().splitlines() == [
+        f"dchfrac {_dist_version('dchfrac')} (code {solver.code_hash()})", describe()]
     monkeypatch.setattr(solver, "code_hash", lambda: "abc123", raising=False)
+    monkeypatch.setenv("DCHFRAC_LINEAR_SOLVER", "superlu")
     with pytest.raises(SystemExit):
         main(["--version"])
-    assert capsys.readouterr().out.strip() == f"dchfrac {_dist_version('dchfrac')} (code abc123)"
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[0] == f"dchfrac {_dist_version('dchfrac')} (code abc123)"
+    assert out[1].startswith("linear solver superlu") and "DCHFRAC_LINEAR_SOLVER=superlu" in out[1]
 
 
 def test_verbosity_levels_and_flags_anywhere():
@@ -64,28 +70,51 @@ class _Clock:
 
 def test_progress_lines_off_a_terminal_give_percent_and_eta(caplog):
     clock = _Clock()
-    p = StepProgress(2.0, stream=io.StringIO(), tty=False, every_s=10.0, clock=clock)
+    p = StepProgress(2.0, stream=io.StringIO(), tty=False, every_s=10.0, clock=clock, min_steps=2, min_fraction=0.05)
     with caplog.at_level(logging.INFO, logger="dchfrac.solver"):
+        clock.now += 60.0  # set-up and first step (a compilation): not in the rate
+        p.update(0.1, "dt = 1e-3 s")  # the first report: no rate yet
         clock.now += 10.0
-        p.update(0.5, "dt = 1e-3 s")  # 10 s for a quarter: 30 s to go
+        p.update(0.5)  # 10 s for 0.4 s simulated: 1.5 s left, 37.5 s
         clock.now += 1.0
         p.update(0.6)  # within every_s of the last line: no line
         clock.now += 19.0
-        p.update(1.5)  # 30 s for three quarters: 10 s to go
+        p.update(1.5)  # 30 s for 1.4 s: 0.5 s left, 10.7 s
         p.close()
     lines = [r.getMessage().strip() for r in caplog.records if r.name == "dchfrac.solver"]
-    assert lines == ["25.0% t = 0.5 of 2 s, elapsed 0m10s, ETA 0m30s | dt = 1e-3 s",
-                     "75.0% t = 1.5 of 2 s, elapsed 0m30s, ETA 0m10s"]
+    assert lines == ["5.0% t = 0.1 of 2 s, elapsed 1m00s, ETA -- | dt = 1e-3 s",
+                     "25.0% t = 0.5 of 2 s, elapsed 1m10s, ETA 0m38s",
+                     "75.0% t = 1.5 of 2 s, elapsed 1m30s, ETA 0m11s"]
+
+
+def test_progress_shows_no_eta_before_enough_steps_and_simulated_time():
+    clock = _Clock()
+    p = StepProgress(2.0, stream=io.StringIO(), tty=False, clock=clock)  # defaults: 5 reports, 5 % of t_end
+    t = 0.0
+    for k in range(4):  # 4 reports: too few, whatever the fraction
+        clock.now += 20.0
+        t += 0.2
+        p.update(t)
+        assert "ETA --" in p.line(t)
+    p = StepProgress(2.0, stream=io.StringIO(), tty=False, clock=clock)
+    for k in range(10):  # many tiny first steps: below 5 % of t_end
+        clock.now += 20.0
+        p.update(1e-3 * (k + 1))
+    assert "ETA --" in p.line(1e-2)
+    assert p.eta(1e-2) != p.eta(1e-2)  # NaN
 
 
 def test_progress_bar_on_a_terminal_redraws_in_place():
     clock, out = _Clock(), io.StringIO()
-    p = StepProgress(1.0, stream=out, tty=True, width=10, clock=clock)
+    p = StepProgress(1.0, stream=out, tty=True, width=10, clock=clock, min_steps=2)
+    clock.now += 4.0
+    p.update(0.25)
     clock.now += 4.0
     p.update(0.5)
     p.close()
     text = out.getvalue()
-    assert text.startswith("\r[#####-----]  50.0% t = 0.5 of 1 s") and "ETA 0m04s" in text and text.endswith("\n")
+    assert "\r[#####-----]  50.0% t = 0.5 of 1 s" in text and "ETA 0m08s" in text and text.endswith("\n")
+    assert text.startswith("\r[##--------]  25.0%") and "ETA --" in text.split("\r")[1]
 
 
 def test_run_writes_no_carriage_return_when_not_on_a_terminal(tmp_path):

@@ -253,25 +253,49 @@ def _kernels() -> str:
     return kernels.backend()
 
 
-def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None = None) -> dict:
+def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None = None,
+                compare: dict | None = None) -> dict:
     """``dchfrac bench --profile``: profiled reference runs at each mesh size of ``sizes`` (mm) to ``t_end`` (s),
     with the run options ``options`` (default none), and the h = 1 refactorization time measured in the same
-    process; written as JSON to ``out_path``."""
+    process; written as JSON to ``out_path``.  With ``compare`` (run options of a variant) each size is run as
+    base, variant, base, variant, side by side in time, and ``comparisons`` holds the variant's wall time over the
+    base's (sums of the pairs) and the relative change of p_inj at t_end."""
     from solver import linsolve
+    from solver.paths import active_path, describe
 
     result = {"machine": {"python": platform.python_version(), "cpu_count": os.cpu_count(), "platform": platform.platform(),
                           "load_average_1_5_15": list(os.getloadavg()) if hasattr(os, "getloadavg") else None},
-              "backend": linsolve.resolve("auto", 10**6), "runs": []}
+              "backend": linsolve.resolve("auto", 10**6), "active_path": active_path(), "runs": []}
+    print(f"bench: {describe()}", flush=True)
     print("bench: h = 1 mm refactorization (yardstick) ...", flush=True)
     result["h1_refactorization"] = _refactorization_h1()
     for h in sizes:
         print(f"bench: profiled reference run h = {h:g} mm to {t_end:g} s ...", flush=True)
-        result["runs"].append(profiled_run(h, t_end, options))
+        if compare is None:
+            result["runs"].append(profiled_run(h, t_end, options))
+            continue
+        pair = [profiled_run(h, t_end, {**(options or {}), **(compare if k % 2 else {})}) for k in range(4)]
+        result["runs"] += pair
+        result.setdefault("comparisons", []).append(_comparison(h, compare, pair[0::2], pair[1::2]))
+        print(json.dumps(result["comparisons"][-1]), flush=True)
     if hasattr(os, "getloadavg"):
         result["machine"]["load_average_after"] = list(os.getloadavg())
     _write_json(out_path, result)
     print(json.dumps({r["h_mm"]: r["profile"]["total"]["seconds"] for r in result["runs"]}, indent=2))
     return result
+
+
+def _comparison(h: float, variant: dict, base: list, other: list) -> dict:
+    """The variant's runs against the base's at mesh size h (mm): wall-time ratio of the sums, p_inj at the end
+    (kPa) and its relative change, Newton iterations and factorizations of each."""
+    ok = all(r["status"] == "ok" for r in base + other)
+    p0, p1 = base[0]["p_inj_end_kPa"], other[0]["p_inj_end_kPa"]
+    return {"h_mm": h, "variant": dict(variant), "status": "ok" if ok else "failed",
+            "wall_s_base": [r["wall_s"] for r in base], "wall_s_variant": [r["wall_s"] for r in other],
+            "wall_ratio": sum(r["wall_s"] for r in other) / sum(r["wall_s"] for r in base) if ok else None,
+            "p_inj_end_kPa": [p0, p1], "p_inj_end_rel_change": abs(p1 - p0) / abs(p0) if ok and p0 else None,
+            "newton_iterations": [base[0]["newton_iterations"], other[0]["newton_iterations"]],
+            "factorizations": [base[0]["factorizations"], other[0]["factorizations"]]}
 
 
 def _write_json(out_path, result: dict) -> None:
@@ -298,11 +322,14 @@ def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> di
     """Run the benchmarks and write them as JSON to ``out_path``; returns the dict."""
     from solver import linsolve
 
+    from solver.paths import active_path, describe
+
     backends = linsolve.available_backends()
     sizes = [2.0, 1.0] if quick else [2.0, 1.0, 0.5]
+    print(f"bench: {describe()}", flush=True)
     result = {"machine": {"python": platform.python_version(), "cpu_count": __import__("os").cpu_count(),
                           "platform": platform.platform()},
-              "backends_available": backends, "newton_iteration": []}
+              "active_path": active_path(), "backends_available": backends, "newton_iteration": []}
     for h in sizes:
         LOG.info(f"bench: one Newton iteration at h = {h} mm ...")
         result["newton_iteration"].append(_newton_iteration(h, backends))

@@ -1,4 +1,4 @@
-"""Print the tables of results/bench/README.md, third round, from the JSON files beside this script
+"""Print the tables of results/archive/bench_rounds.md, third round, from the JSON files beside this script
 (each made by ``dchfrac bench --profile --h H --out FILE [--option K=V ...]``).
 
     python results/bench/round3/tables.py

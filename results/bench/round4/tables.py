@@ -1,4 +1,4 @@
-"""Print a before / after table of results/bench/README.md from the JSON files ``{before,after}_h{2,1}.json`` of a
+"""Print a before / after table of results/archive/bench_rounds.md from the JSON files ``{before,after}_h{2,1}.json`` of a
 folder (each made by ``dchfrac bench --profile --h H --out FILE``; default: this script's folder, the fourth
 round), and p_inj(t) of each "after" run against its "before" run and against the committed reference curve.
 

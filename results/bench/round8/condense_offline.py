@@ -7,7 +7,7 @@ factorized Jacobian and its right-hand side, and factorizes it with SuperLU as t
 equilibrated, COLAMD, symmetric mode, pivot threshold 0.1): the full matrix against the Schur complement of the
 projected-gradient unknowns (solver.linsolve._Condensation).  Prints the stored entries, the entries of the
 factors, the factorization time (best of REPEATS) and the relative residual of both solves on the full system.
-The committed figures (results/bench/README.md, eighth round) are from K = 80 at H = 2, T_END = 1 (t about 0.6 s)
+The committed figures (results/archive/bench_rounds.md, eighth round) are from K = 80 at H = 2, T_END = 1 (t about 0.6 s)
 and K = 100 at H = 1, T_END = 1.
 """
 import sys
