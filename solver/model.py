@@ -71,6 +71,7 @@ class Discretization:
     supg_length: np.ndarray | None = None  # (M,) mm, h_e = √(2 A_e) with transport = "supg"; None: no SUPG term
     stab_tau: np.ndarray | None = None  # (M,) mm²/kPa, pressure stabilization τ_e; None: plain Galerkin
     chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
+    outlet: "Outlet | None" = None  # the outflow condition's rows (outer_saturation_bc = "outflow"); None: off
     # arrays reused by every assembly (by name; see _element_matrices)
     workspace: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -112,6 +113,52 @@ def _boundary_couplings(pts, tri, inner_e, outer_e, params, nf: int):
                     vals.append(Lo * loc[a, b] / params.outer_compliance)
     rows, cols, vals = (np.concatenate(x) for x in (rows, cols, vals))
     return rows, cols, vals, L
+
+
+@dataclass(frozen=True)
+class Outlet:
+    """CSR slots of the outlet condition (``outer_saturation_bc = "outflow"``): for each outer node a, the slots
+    of its p row (``src``) and of its S row (``dst``, the same columns in the same order: the block pattern),
+    ``owner`` the position of the slot's node in ``nodes``, and ``diag`` the slots (S_a, S_a)."""
+
+    nodes: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    owner: np.ndarray
+    diag: np.ndarray
+
+
+def _outlet(asm: fem.BlockAssembler, outer_n: np.ndarray, nf: int) -> Outlet:
+    """The :class:`Outlet` slots of the outer nodes."""
+    ptr = asm.indptr.astype(np.int64)
+    starts_p, starts_s = ptr[nf * outer_n + P], ptr[nf * outer_n + S]
+    counts = ptr[nf * outer_n + P + 1] - starts_p
+    owner = np.repeat(np.arange(len(outer_n)), counts)
+    offset = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    return Outlet(nodes=outer_n, src=np.repeat(starts_p, counts) + offset, dst=np.repeat(starts_s, counts) + offset,
+                  owner=owner, diag=asm.diag_slot[nf * outer_n + S])
+
+
+def outlet_water_outflow(disc: Discretization, params, U: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Water leaving each outer node (mm²/s), :func:`solver.physics.outlet_water_flux` of the node's S and total
+    outflow Q_a = −R_p,a, the reaction of its p = 0 row in the unconstrained residual ``R`` (ndof,)."""
+    nf, nodes = disc.n_fields, disc.outlet.nodes
+    return physics.outlet_water_flux(U[nodes, S], -R[nf * nodes + P], params.viscosity_ratio)
+
+
+def _add_outlet(disc: Discretization, params, U: np.ndarray, R: np.ndarray, J) -> None:
+    """Add the outlet's water outflow f(S_a) Q_a⁺ to the S rows of the outer nodes (the boundary term
+    ∫_Γo r w_1·n of the invading balance, lumped on the nodes); J (or None) gets its exact derivative
+    f(S_a) [Q_a > 0] ∂Q_a/∂U + f'(S_a) Q_a⁺ ∂S_a/∂U, with ∂Q_a/∂U = −(the p row of a)."""
+    nf, out = disc.n_fields, disc.outlet
+    Q = -R[nf * out.nodes + P]
+    S_a = ad.Dual.variables([U[out.nodes, S]])[0]
+    f = physics.fractional_flow(S_a, params.viscosity_ratio)
+    R[nf * out.nodes + S] += f.v * np.maximum(Q, 0.0)
+    if J is None:
+        return
+    J.data[out.dst] -= (f.v * (Q > 0.0))[out.owner] * J.data[out.src]
+    J.data[out.diag] += f.d[:, 0] * np.maximum(Q, 0.0)
 
 
 def _dirichlet_conditions(inner_n, outer_n, params, nf: int):
@@ -179,6 +226,7 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
         upwind_length=0.5 * np.sqrt(2.0 * geom.areas) if transport == "upwind" else None,
         supg_length=np.sqrt(2.0 * geom.areas) if transport == "supg" else None,
         stab_tau=pressure_stabilization_tau(pts, tri, params, phi0, pressure_stabilization),
+        outlet=_outlet(asm, outer_n, nf) if params.outer_saturation_bc == "outflow" else None,
     )
 
 
@@ -531,10 +579,12 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
     n = fem.assembly_threads()
     fem.map_chunks(work, (disc.chunks or (slice(0, M),)) if n <= 1 else fem.thread_chunks(M, n))
     R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
-    if not need_jacobian:
-        return R, None
-    J = disc.asm.matrix_field_major(Ke)
-    J.data[disc.boundary_slots] += disc.boundary_vals
+    J = None
+    if need_jacobian:
+        J = disc.asm.matrix_field_major(Ke)
+        J.data[disc.boundary_slots] += disc.boundary_vals
+    if disc.outlet is not None:
+        _add_outlet(disc, params, U, R, J)
     return R, J
 
 

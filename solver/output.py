@@ -39,6 +39,11 @@ TIMESERIES_COLUMNS = {
     "water_outflow_volume": ("mm²", "cumulative invading-fluid outflow through the outer circle"),
     "outflow_volume": ("mm²", "cumulative total outflow through the outer circle"),
     "mass_error": ("-", "relative error of the total mass balance since t = 0"),
+    "water_stored_volume": ("mm²", "invading fluid in the pores as the balance counts it: integral of phi S at the "
+                                   "quadrature points of the scheme"),
+    "water_source_volume": ("mm²", "cumulative second-order invading source c_v integral of phi S d(eps_v)/dt"),
+    "water_mass_error": ("-", "relative error of the invading-fluid balance since t = 0 (inflow - outflow = "
+                              "stored change + source), relative to the injected volume"),
     "mean_damage": ("-", "area-weighted mean damage d"),
     "max_damage": ("-", "largest nodal damage d"),
     "max_hoop_stress": ("kPa", "largest element hoop (circumferential) effective stress"),

@@ -42,7 +42,7 @@ import numpy as np
 POROSITY_FIELDS = ("random", "pockets", "constant")
 MU_OUTER_BCS = ("dirichlet", "zero_flux")
 CH_MOBILITIES = ("harmonic", "oil", "degenerate")
-OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow")
+OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow", "outflow")
 
 
 def _param(default, unit: str, allowed: str, doc: str, choices: tuple = ()):
@@ -117,8 +117,12 @@ class Parameters:
         f"Cahn–Hilliard mobility law, one of {CH_MOBILITIES}: k/η̄ (paper, Eq. M = k/η̄), k/η_o, or 4S(1 − S) "
         "k/η̄ (degenerate)", choices=CH_MOBILITIES)
     outer_saturation_bc: str = _param("dirichlet", "", f"one of {OUTER_SATURATION_BCS}",
-        f"outer condition on the invading phase, one of {OUTER_SATURATION_BCS}: S = 0 (paper, Sec. 3.4) or no "
-        "invading flux (only the defending fluid leaves)", choices=OUTER_SATURATION_BCS)
+        f"outer condition on the invading phase, one of {OUTER_SATURATION_BCS}: \"dirichlet\" S = 0 (the paper, "
+        "Sec. 3.4); \"defending_outflow\" no invading flux (only the defending fluid leaves); \"outflow\" an outlet "
+        "reservoir at p = 0 (Sec. 3.4): each phase leaves with its own Darcy flux, water in the share f(S) of the "
+        "node's outflow once the front has reached r_o (solver.physics.outlet_water_flux), nothing but oil flows "
+        "in; no Cahn–Hilliard flux crosses r_o (pair with mu_outer_bc = \"zero_flux\" for no μ source)",
+        choices=OUTER_SATURATION_BCS)
     volumetric_coupling: float = _param(1.0, "-", ">= 0",
         "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)")
     korteweg_factor: float = _param(1.0, "-", ">= 0",

@@ -159,6 +159,24 @@ def invading_permeability_slope(S, M: float):
 
 
 # ---------------------------------------------------------------- Cahn–Hilliard
+def fractional_flow(S, M: float):
+    """Water's share f = λ_1/(λ_1 + λ_2) = M k_r1 / (M k_r1 + k_r2) of the total Darcy flux (-), M = η_o/η_w
+    (Eq. relative_permeabilities; the absolute permeability cancels).  f(S <= 0) = 0, f(S >= 1) = 1."""
+    kr1, kr2 = relative_permeabilities(S, M)
+    return M * kr1 / (M * kr1 + kr2)
+
+
+def outlet_water_flux(S, Q, M: float):
+    """Water leaving an outlet node (mm²/s per unit cell height): f(S) Q⁺, upwinded from inside the domain.
+
+    ``Q`` (mm²/s) is the node's total outflow, the reaction of its p = 0 condition (Sec. 3.4); where it runs
+    out, each phase leaves with its own Darcy flux, so water leaves in the share :func:`fractional_flow` of the
+    node's saturation S; where it runs in, the outlet reservoir's oil (S = 0) enters and no water.  Before the
+    front reaches the node S = 0 and f = 0: no water leaves.
+    """
+    return fractional_flow(S, M) * np.maximum(Q, 0.0)
+
+
 def harmonic_viscosity(eta_o: float, eta_w: float) -> float:
     """η̄ = 2 η_o η_w / (η_o + η_w), kPa·s: the harmonic mean of Cogswell and Szulczewski (Sec. 2.8)."""
     return 2.0 * eta_o * eta_w / (eta_o + eta_w)
