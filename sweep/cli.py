@@ -74,6 +74,10 @@ def _run_inputs(args):
     from solver.output import check_writable_dir
 
     pdict, odict = _load_config(args.config) if args.config else ({}, {})
+    if getattr(args, "preset", None):
+        from solver.presets import preset_changes
+
+        pdict = {**preset_changes(args.preset), **pdict}
     opt_names = set(RunOptions.__dataclass_fields__)
     for k, v in _split_sets(args.set).items():
         (odict if k in opt_names else pdict)[k] = v
@@ -208,6 +212,12 @@ def cmd_params(args) -> int:
     rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"], r["meaning"]) for r in parameter_table()]
     _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C)",
                 ("name", "unit", "default", "allowed", "meaning"), rows)
+    from solver.presets import preset_changes, preset_description, preset_names
+
+    print()
+    _print_rows("presets (dchfrac run --preset NAME; changes from the defaults above)", ("name", "changes", "what"),
+                [(n, ", ".join(f"{k}={_show(v)}" for k, v in preset_changes(n).items()) or "(none)",
+                  preset_description(n)) for n in preset_names()])
     docs = option_docs()
     rows = [(f.name, OPTION_UNITS.get(f.name, "?"), _show(getattr(RunOptions(), f.name)), docs.get(f.name, ""))
             for f in fields(RunOptions)]
@@ -215,6 +225,12 @@ def cmd_params(args) -> int:
     _print_rows("run options (discretization and outputs; set them like parameters with --set)",
                 ("name", "unit", "default", "meaning"), rows)
     return 0
+
+
+def _preset_names() -> list[str]:
+    from solver.presets import preset_names
+
+    return preset_names()
 
 
 def _show(v) -> str:
@@ -294,6 +310,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run one simulation", epilog=_run_epilog(),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("--config", help="TOML with [parameters] and [options] tables")
+    r.add_argument("--preset", help="named model the parameters start from (--config and --set override it): "
+                                    "one of " + ", ".join(_preset_names()) + " (`dchfrac params` lists them)")
     r.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter or run option (names below)")
     r.add_argument("--out", required=True, help="run folder")
     r.add_argument("--h", type=float, help="mesh size, mm")
