@@ -38,7 +38,9 @@ TIMESERIES_COLUMNS = {
     "water_inflow_volume": ("mm²", "cumulative invading-fluid inflow through the inner circle"),
     "water_outflow_volume": ("mm²", "cumulative invading-fluid outflow through the outer circle"),
     "outflow_volume": ("mm²", "cumulative total outflow through the outer circle"),
-    "mass_error": ("-", "relative error of the total mass balance since t = 0"),
+    "line_stored_volume": ("mm²", "volume stored in the injection line and cavity (line_compliance; 0 when off)"),
+    "mass_error": ("-", "relative error of the total mass balance since t = 0 (injected = stored change + "
+                        "source + outflow + line storage)"),
     "water_stored_volume": ("mm²", "invading fluid in the pores as the balance counts it: integral of phi S at the "
                                    "quadrature points of the scheme"),
     "water_source_volume": ("mm²", "cumulative second-order invading source c_v integral of phi S d(eps_v)/dt"),
