@@ -38,6 +38,9 @@ TIMESERIES_COLUMNS = {
     "water_inflow_volume": ("mm²", "cumulative invading-fluid inflow through the inner circle"),
     "water_outflow_volume": ("mm²", "cumulative invading-fluid outflow through the outer circle"),
     "outflow_volume": ("mm²", "cumulative total outflow through the outer circle"),
+    "stored_volume": ("mm²", "fluid in the pores (and the elastic cell's gap) as the balance counts it: integral of "
+                             "the storage fraction at the quadrature points"),
+    "source_volume": ("mm²", "cumulative second-order volume source c_v integral of phi d(eps_v)/dt"),
     "line_stored_volume": ("mm²", "volume stored in the injection line and cavity (line_compliance; 0 when off)"),
     "mass_error": ("-", "relative error of the total mass balance since t = 0 (injected = stored change + "
                         "source + outflow + line storage)"),

@@ -556,6 +556,8 @@ def _row(sim, dt, info, cum, V0, V, W) -> dict:
         "water_outflow_volume": cum["w_out"],
         "outflow_volume": cum["out"],
         "line_stored_volume": cum["line"],
+        "stored_volume": V,
+        "source_volume": cum["src"],
         "mass_error": err,
         "water_stored_volume": W,
         "water_source_volume": cum["w_src"],

@@ -1,8 +1,9 @@
 """The ``dchfrac`` command line.
 
     dchfrac [--version] [-v | -q] COMMAND ...
-    dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
+    dchfrac run [--preset NAME] [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
     dchfrac params                                   (every parameter: unit, default, allowed range)
+    dchfrac balance RUN [RUN ...] --out FIG.png      (volume balance by phase: water and oil in, stored, out)
     dchfrac animate RUN [--fields S,phi,d,p] [--out FILE] [--fps 6]
     dchfrac bench [--out results/bench/bench.json] [--quick] [--reference] [--profile [--h H] [--t-end T]]
     dchfrac campaign run|status|plot|report SPEC ...
@@ -183,6 +184,25 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_balance(args) -> int:
+    """Plot the volume balance by phase of one or more runs (sweep.balance); bad input: one line, exit code 2."""
+    from .balance import plot_phase_balance
+
+    labels = args.labels.split(",") if args.labels else [Path(r).name for r in args.runs]
+    try:
+        if len(labels) != len(args.runs):
+            raise ValueError(f"--labels {args.labels!r}: allowed one label per run ({len(args.runs)})")
+        bad = _writable_or_exit("balance", Path(args.out).parent, "--out")
+        if bad:
+            return bad
+        path = plot_phase_balance(dict(zip(labels, args.runs)), args.out)
+    except ValueError as exc:
+        print(f"dchfrac balance: {exc}", file=sys.stderr)
+        return 2
+    print(f"written to {path}")
+    return 0
+
+
 def cmd_animate(args) -> int:
     """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
     from .animate import animate_run, animation_writer, parse_fields
@@ -326,6 +346,11 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("--out", default=None, help="output file, .mp4 (needs ffmpeg) or .gif (default RUN/animation.mp4|gif)")
     an.add_argument("--fps", type=int, default=6, help="frames per second (default 6)")
     an.set_defaults(func=cmd_animate)
+    ba = sub.add_parser("balance", help="plot water and oil in, stored and out over time (volume balance by phase)")
+    ba.add_argument("runs", nargs="+", help="run folder(s), one panel each")
+    ba.add_argument("--out", required=True, help="figure file (.png or .pdf)")
+    ba.add_argument("--labels", default=None, metavar="A,B", help="panel titles, one per run (default: folder names)")
+    ba.set_defaults(func=cmd_balance)
     pa = sub.add_parser("params", help="list every model parameter with unit, default and allowed range, and the run options")
     pa.set_defaults(func=cmd_params)
     b = sub.add_parser("bench", help="performance benchmarks (JSON)")
