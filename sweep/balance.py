@@ -69,7 +69,7 @@ def plot_phase_balance(runs: dict, out) -> Path:
     series = {k: (v if isinstance(v, pd.DataFrame) else _read_run(v)) for k, v in runs.items()}
     fig, axes = plt.subplots(1, len(series), figsize=(5.2 * len(series), 4.0), squeeze=False, sharey=True)
     styles = {"water_in": ("tab:blue", "-"), "water_stored": ("tab:blue", "--"), "water_out": ("tab:blue", ":"),
-              "oil_out": ("tab:brown", ":"), "oil_stored": ("tab:brown", "--"), "line": ("grey", "-.")}
+              "oil_in": ("tab:brown", "-"), "oil_out": ("tab:brown", ":"), "oil_stored": ("tab:brown", "--"), "line": ("grey", "-.")}
     for ax, (label, ts) in zip(axes[0], series.items()):
         b = phase_balance(ts)
         for col, (colour, ls) in styles.items():
