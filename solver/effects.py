@@ -9,14 +9,20 @@ asks which of the off effects the measured data call for.
 ``EFFECTS`` maps name -> :class:`Effect` (a tuple ``(parameter, off, description,
 signature, ...)``, so ``param, off, desc, sig = EFFECTS[name][:4]`` works).
 
-Units follow :mod:`solver.params`: β in kPa·s, compliance in mm/kPa, the
-other strengths are dimensionless factors.
+Units follow :mod:`solver.params`: β in kPa·s, the outer and cell compliances
+in mm/kPa, the line compliance in mm²/kPa, the other strengths are
+dimensionless factors.  Each effect's residual terms are written point-wise on
+the unknowns (the weak form, or a lumped boundary term on the nodes), so the
+Newton Jacobian follows from dual numbers and stays exact
+(``tests/test_jacobian.py``, ``tests/test_cell_effects.py``).
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
-__all__ = ["Effect", "EFFECTS", "effect_names", "get_effect", "is_off", "switch_off", "off_effects", "effect_strength"]
+__all__ = ["Effect", "EFFECTS", "effect_names", "get_effect", "is_off", "switch_off", "off_effects", "effect_strength",
+           "plate_bending_compliance", "tube_compliance"]
 
 
 class Effect(NamedTuple):
@@ -30,6 +36,7 @@ class Effect(NamedTuple):
     upper : largest strength the workflow explores (same unit as the parameter).
     probe : strength used for one cheap signature run (screening).
     unit : unit of the strength.
+    estimate : an independent estimate of the strength in the experiment and where it comes from ("" if none).
     """
 
     parameter: str
@@ -40,6 +47,7 @@ class Effect(NamedTuple):
     upper: float
     probe: float
     unit: str
+    estimate: str = ""
 
 
 EFFECTS: dict[str, Effect] = {
@@ -75,7 +83,45 @@ EFFECTS: dict[str, Effect] = {
         "the fluid channels into opened cracks: pressure plateau/drop after initiation, faster front along "
         "cracks; nothing before initiation",
         1.0, 1.0, 1.0, "-"),
+    "elastic_cell": Effect(
+        "cell_compliance", 0.0,
+        "elastic Hele-Shaw cell: the plates open a gap delta = c_cell p+ (mm) above the pack, which stores delta/h of "
+        "fluid and carries both fluids with transmissivity delta^3/12 in parallel with the pack "
+        "(solver.physics.cell_gap; Pihler-Puzovic et al., PRL 108, 074502, 2012)",
+        "an apparent compliance: p_inj rises more slowly and bends toward a plateau as the gap's transmissivity "
+        "(~ p^3) opens a bypass; water runs ahead of the pack front near the inlet, where p is highest",
+        0.0, 2e-3, 5e-4, "mm/kPa",
+        "plate bending, :func:`plate_bending_compliance`: two clamped acrylic plates (E = 3 GPa, nu = 0.35) of "
+        "radius 53 mm: 8.7e-4 mm/kPa at 10 mm thick, 1.1e-4 at 20 mm (delta 0.4 / 0.05 mm at 470 kPa)"),
+    "line_compliance": Effect(
+        "line_compliance", 0.0,
+        "lumped compliance C_line (mm^2/kPa per unit cell height) of the injection line and cavity: the pack "
+        "receives w_i - (C_line/L_i) dp/dt on r_i (solver.physics.line_storage_rate)",
+        "a delayed, exponential pressure rise with time constant C_line x the pack's resistance; the front lags "
+        "the pumped volume early and catches up once p_inj stops rising",
+        0.0, 20.0, 3.0, "mm^2/kPa",
+        "tubing swelling, :func:`tube_compliance`: 1 m of flexible tubing, inner radius 2 mm, wall 1 mm, "
+        "E = 10 MPa: 5.0 mm^3/kPa, 2.6 mm^2/kPa per unit cell height (the rig's tubing is not reported: an "
+        "order of magnitude; water's own compressibility adds 0.006 mm^3/kPa)"),
 }
+
+
+def plate_bending_compliance(E: float = 3.0e6, nu: float = 0.35, thickness: float = 10.0, radius: float = 53.0,
+                             plates: int = 2) -> float:
+    """Gap opening per pressure (mm/kPa) of ``plates`` clamped circular plates under a uniform pressure: the
+    centre deflection w = p a^4 / (64 D) of each, D = E t^3 / (12 (1 - nu^2)) (Timoshenko and
+    Woinowsky-Krieger, Theory of Plates and Shells, Sec. 62).  E kPa (acrylic about 3 GPa = 3e6 kPa), nu (-),
+    thickness t and radius a in mm.  An upper bound of the local c_cell: the pressure falls from the inlet to r_o."""
+    D = E * thickness**3 / (12.0 * (1.0 - nu * nu))
+    return plates * radius**4 / (64.0 * D)
+
+
+def tube_compliance(length: float = 1000.0, radius: float = 2.0, wall: float = 1.0, E: float = 1.0e4,
+                    cell_height: float = 1.96) -> float:
+    """Compliance of a thin-walled tube per unit cell height (mm^2/kPa): dV/dp = pi r^2 L (2 r / (E w)) (hoop
+    strain r/(E w) per kPa, doubled for the area), divided by the cell height (mm).  length L, radius r,
+    wall thickness w in mm, E in kPa (flexible PVC about 10 MPa = 1e4 kPa)."""
+    return math.pi * radius**2 * length * 2.0 * radius / (E * wall) / cell_height
 
 
 def effect_names() -> list[str]:

@@ -71,6 +71,8 @@ class Discretization:
     supg_length: np.ndarray | None = None  # (M,) mm, h_e = √(2 A_e) with transport = "supg"; None: no SUPG term
     stab_tau: np.ndarray | None = None  # (M,) mm²/kPa, pressure stabilization τ_e; None: plain Galerkin
     chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
+    outlet: "Outlet | None" = None  # the outflow condition's rows (outer_saturation_bc = "outflow"); None: off
+    inner_weights: np.ndarray | None = None  # ∫_Γi N_a ds (mm) of the inner nodes, with line_compliance; None: off
     # arrays reused by every assembly (by name; see _element_matrices)
     workspace: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -112,6 +114,52 @@ def _boundary_couplings(pts, tri, inner_e, outer_e, params, nf: int):
                     vals.append(Lo * loc[a, b] / params.outer_compliance)
     rows, cols, vals = (np.concatenate(x) for x in (rows, cols, vals))
     return rows, cols, vals, L
+
+
+@dataclass(frozen=True)
+class Outlet:
+    """CSR slots of the outlet condition (``outer_saturation_bc = "outflow"``): for each outer node a, the slots
+    of its p row (``src``) and of its S row (``dst``, the same columns in the same order: the block pattern),
+    ``owner`` the position of the slot's node in ``nodes``, and ``diag`` the slots (S_a, S_a)."""
+
+    nodes: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    owner: np.ndarray
+    diag: np.ndarray
+
+
+def _outlet(asm: fem.BlockAssembler, outer_n: np.ndarray, nf: int) -> Outlet:
+    """The :class:`Outlet` slots of the outer nodes."""
+    ptr = asm.indptr.astype(np.int64)
+    starts_p, starts_s = ptr[nf * outer_n + P], ptr[nf * outer_n + S]
+    counts = ptr[nf * outer_n + P + 1] - starts_p
+    owner = np.repeat(np.arange(len(outer_n)), counts)
+    offset = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    return Outlet(nodes=outer_n, src=np.repeat(starts_p, counts) + offset, dst=np.repeat(starts_s, counts) + offset,
+                  owner=owner, diag=asm.diag_slot[nf * outer_n + S])
+
+
+def outlet_water_outflow(disc: Discretization, params, U: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Water leaving each outer node (mm²/s), :func:`solver.physics.outlet_water_flux` of the node's S and total
+    outflow Q_a = −R_p,a, the reaction of its p = 0 row in the unconstrained residual ``R`` (ndof,)."""
+    nf, nodes = disc.n_fields, disc.outlet.nodes
+    return physics.outlet_water_flux(U[nodes, S], -R[nf * nodes + P], params.viscosity_ratio)
+
+
+def _add_outlet(disc: Discretization, params, U: np.ndarray, R: np.ndarray, J) -> None:
+    """Add the outlet's water outflow f(S_a) Q_a⁺ to the S rows of the outer nodes (the boundary term
+    ∫_Γo r w_1·n of the invading balance, lumped on the nodes); J (or None) gets its exact derivative
+    f(S_a) [Q_a > 0] ∂Q_a/∂U + f'(S_a) Q_a⁺ ∂S_a/∂U, with ∂Q_a/∂U = −(the p row of a)."""
+    nf, out = disc.n_fields, disc.outlet
+    Q = -R[nf * out.nodes + P]
+    S_a = ad.Dual.variables([U[out.nodes, S]])[0]
+    f = physics.fractional_flow(S_a, params.viscosity_ratio)
+    R[nf * out.nodes + S] += f.v * np.maximum(Q, 0.0)
+    if J is None:
+        return
+    J.data[out.dst] -= (f.v * (Q > 0.0))[out.owner] * J.data[out.src]
+    J.data[out.diag] += f.d[:, 0] * np.maximum(Q, 0.0)
 
 
 def _dirichlet_conditions(inner_n, outer_n, params, nf: int):
@@ -179,6 +227,8 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
         upwind_length=0.5 * np.sqrt(2.0 * geom.areas) if transport == "upwind" else None,
         supg_length=np.sqrt(2.0 * geom.areas) if transport == "supg" else None,
         stab_tau=pressure_stabilization_tau(pts, tri, params, phi0, pressure_stabilization),
+        outlet=_outlet(asm, outer_n, nf) if params.outer_saturation_bc == "outflow" else None,
+        inner_weights=fem.edge_load(pts, inner_e, n, 1.0)[inner_n] if params.line_compliance > 0 else None,
     )
 
 
@@ -215,13 +265,20 @@ class StepData:
     px_n: np.ndarray | None = None  # previous pressure gradient per element (M,), kPa/mm (with tau)
     py_n: np.ndarray | None = None
     supg_h: np.ndarray | None = None  # element size h_e per element (M,), mm, with transport = "supg"
+    gap_n: np.ndarray | None = None  # previous gap storage δ/h at quadrature points (M, nq), with cell_compliance
+    p_nodal_n: np.ndarray | None = None  # previous nodal pressure (N,), kPa, with line_compliance (not element data)
 
     def take(self, sl: slice) -> "StepData":
         """The same data restricted to the elements of ``sl`` (views, no copies)."""
         cut = lambda a: None if a is None else a[sl]
         return StepData(dt=self.dt, d_q=self.d_q[sl], phi_n=self.phi_n[sl], S_n=self.S_n[sl], ev_n=self.ev_n[sl],
+                        gap_n=cut(self.gap_n), p_nodal_n=self.p_nodal_n,
                         up_x=cut(self.up_x), up_y=cut(self.up_y), tau=cut(self.tau), px_n=cut(self.px_n),
                         py_n=cut(self.py_n), supg_h=cut(self.supg_h))
+
+
+# the fields of StepData that are not per-element arrays (the compiled forms and the element chunks skip them)
+_NOT_ELEMENT_DATA = ("dt", "p_nodal_n")
 
 
 def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: float) -> StepData:
@@ -232,6 +289,11 @@ def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: 
     S_n = fem.at_quadrature(U_n[:, S], tri, q)
     up_x, up_y = upwind_shift(disc, grads[:, P]) if disc.upwind_length is not None else (None, None)
     stab = {} if disc.stab_tau is None else {"tau": disc.stab_tau, "px_n": grads[:, P, 0], "py_n": grads[:, P, 1]}
+    if params.cell_compliance > 0:
+        stab["gap_n"] = physics.gap_storage(fem.at_quadrature(U_n[:, P], tri, q), params.cell_compliance,
+                                            params.cell_height)
+    if params.line_compliance > 0:
+        stab["p_nodal_n"] = U_n[:, P].copy()
     return StepData(dt=dt, d_q=fem.at_quadrature(d, tri, q), phi_n=phi_n, S_n=S_n, ev_n=ev_n, up_x=up_x, up_y=up_y,
                     supg_h=disc.supg_length, **stab)
 
@@ -246,6 +308,15 @@ def porosity_state(disc: Discretization, params, U: np.ndarray) -> tuple[np.ndar
     phi = physics.porosity(disc.phi0[:, None], ev[:, None], p_q, params.K_s, params.porosity_floor,
                            params.porosity_ceiling)
     return grads, ev, phi
+
+
+def storage_fraction(disc: Discretization, params, U: np.ndarray, phi_q: np.ndarray) -> np.ndarray:
+    """The fluid volume fraction the mass balances store, at the Strang points (M, 3): the porosity ``phi_q`` of
+    :func:`porosity_state`, plus the elastic cell's gap δ/h (:func:`solver.physics.gap_storage`) when on."""
+    if params.cell_compliance == 0:
+        return phi_q
+    p_q = fem.at_quadrature(U[:, P], disc.triangles, fem.STRANG3)
+    return phi_q + physics.gap_storage(p_q, params.cell_compliance, params.cell_height)
 
 
 def upwind_shift(disc: Discretization, grad_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -345,6 +416,8 @@ def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -
         sxy = sxy - kap * Sx * Sy
     k = physics.permeability(phi, phi0, params.kbar, params.k_max, params.crack_permeability,
                              params.permeability_floor)
+    if params.cell_compliance > 0:  # the opened gap above the pack carries both fluids in parallel
+        k = k + physics.gap_permeability(p, params.cell_compliance, params.cell_height)
     kr1, kr2 = physics.relative_permeabilities(Sat if S_flow is None else S_flow, params.viscosity_ratio)
     lam1 = k * kr1 / params.eta_w
     lam2 = k * kr2 / params.eta_o
@@ -407,14 +480,18 @@ def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields:
         frac = c.lam1 / (c.lam1 + c.lam2 + 1e-300)
         fx, fy = fx + sx, fy + sy
         f1x, f1y = f1x + frac * sx, f1y + frac * sy
-    invading = (phi * Sat - data.phi_n * data.S_n) / dt + cv * phi * Sat * dev
+    store, store_n = phi, data.phi_n  # the storage: the pores, and the gap of an elastic cell
+    if data.gap_n is not None:
+        store = phi + physics.gap_storage(p, params.cell_compliance, params.cell_height)
+        store_n = data.phi_n + data.gap_n
+    invading = (store * Sat - store_n * data.S_n) / dt + cv * phi * Sat * dev
     if data.supg_h is not None:
         sx, sy = supg_flux(c, params, Sat, Sx, Sy, invading, data.supg_h[:, None], dt)
         f1x, f1y = f1x + sx, f1y + sy
     return [
         [None, c.sxx, c.sxy],
         [None, c.sxy, c.syy],
-        [(phi - data.phi_n) / dt + cv * phi * dev, fx, fy],
+        [(store - store_n) / dt + cv * phi * dev, fx, fy],
         [invading, f1x, f1y],
         [mu - c_mu * physics.double_well_prime(Sat), -c_grad * Sx, -c_grad * Sy],
     ]
@@ -447,7 +524,7 @@ def compiled_forms(params, n_fields: int, data: StepData) -> tuple:
     constants; traced once per (params, n_fields, dt), compiled once per structure.
     """
     layout = tuple((f.name, np.ndim(getattr(data, f.name))) for f in fields(StepData)
-                   if f.name != "dt" and getattr(data, f.name) is not None)
+                   if f.name not in _NOT_ELEMENT_DATA and getattr(data, f.name) is not None)
 
     def build(tr):
         step = StepData(dt=data.dt, **{name: tr.data(name, per_point=nd == 2) for name, nd in layout})
@@ -477,7 +554,7 @@ def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepDat
         # contraction in one pass over the elements, without the GIL
         kern, consts = compiled_forms(params, nf, data)
         step = {f.name: getattr(data, f.name)[sl] for f in fields(StepData)
-                if f.name != "dt" and getattr(data, f.name) is not None}
+                if f.name not in _NOT_ELEMENT_DATA and getattr(data, f.name) is not None}
         kern(consts, U, disc.triangles[sl], disc.geom.grads[sl], disc.geom.areas[sl], {"phi0": disc.phi0[sl], **step},
              Fe, Ke if need_jacobian else None)
         return Fe, Ke
@@ -531,11 +608,34 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
     n = fem.assembly_threads()
     fem.map_chunks(work, (disc.chunks or (slice(0, M),)) if n <= 1 else fem.thread_chunks(M, n))
     R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
-    if not need_jacobian:
-        return R, None
-    J = disc.asm.matrix_field_major(Ke)
-    J.data[disc.boundary_slots] += disc.boundary_vals
+    J = None
+    if need_jacobian:
+        J = disc.asm.matrix_field_major(Ke)
+        J.data[disc.boundary_slots] += disc.boundary_vals
+    if disc.outlet is not None:
+        _add_outlet(disc, params, U, R, J)
+    if disc.inner_weights is not None:
+        _add_line_storage(disc, params, U, data, R, J)
     return R, J
+
+
+def line_stored_rate(disc: Discretization, params, U: np.ndarray, data: StepData):
+    """The line's storage rate on each inner node (mm²/s, a Dual in the node's p): ∫_Γi N_a ds times
+    :func:`solver.physics.line_storage_rate` at the node (lumped on the inlet's nodes; the cavity's pressure is
+    uniform, so p = p_inj there)."""
+    nodes = disc.inner_nodes
+    p_a = ad.Dual.variables([U[nodes, P]])[0]
+    rate = physics.line_storage_rate(p_a, data.p_nodal_n[nodes], data.dt, params.line_compliance, disc.inner_length)
+    return rate * disc.inner_weights
+
+
+def _add_line_storage(disc: Discretization, params, U: np.ndarray, data: StepData, R: np.ndarray, J) -> None:
+    """Add the line's storage to the inlet's p rows (the pack receives w_i minus it), with its exact derivative."""
+    rows = disc.n_fields * disc.inner_nodes + P
+    rate = line_stored_rate(disc, params, U, data)
+    R[rows] += rate.v
+    if J is not None:
+        J.data[disc.asm.diag_slot[rows]] += rate.d[:, 0]
 
 
 # ---------------------------------------------------------------- element fields

@@ -40,7 +40,17 @@ TIMESERIES_COLUMNS = {
     "water_inflow_volume": ("mm²", "cumulative invading-fluid inflow through the inner circle"),
     "water_outflow_volume": ("mm²", "cumulative invading-fluid outflow through the outer circle"),
     "outflow_volume": ("mm²", "cumulative total outflow through the outer circle"),
-    "mass_error": ("-", "relative error of the total mass balance since t = 0"),
+    "stored_volume": ("mm²", "fluid in the pores (and the elastic cell's gap) as the balance counts it: integral of "
+                             "the storage fraction at the quadrature points"),
+    "source_volume": ("mm²", "cumulative second-order volume source c_v integral of phi d(eps_v)/dt"),
+    "line_stored_volume": ("mm²", "volume stored in the injection line and cavity (line_compliance; 0 when off)"),
+    "mass_error": ("-", "relative error of the total mass balance since t = 0 (injected = stored change + "
+                        "source + outflow + line storage)"),
+    "water_stored_volume": ("mm²", "invading fluid in the pores as the balance counts it: integral of phi S at the "
+                                   "quadrature points of the scheme"),
+    "water_source_volume": ("mm²", "cumulative second-order invading source c_v integral of phi S d(eps_v)/dt"),
+    "water_mass_error": ("-", "relative error of the invading-fluid balance since t = 0 (inflow - outflow = "
+                              "stored change + source), relative to the injected volume"),
     "mean_damage": ("-", "area-weighted mean damage d"),
     "max_damage": ("-", "largest nodal damage d"),
     "max_hoop_stress": ("kPa", "largest element hoop (circumferential) effective stress"),

@@ -23,7 +23,7 @@ properties :attr:`Parameters.fracture_toughness`,
 :attr:`Parameters.nucleation_energy` and :attr:`Parameters.damage_viscosity`.
 
 Effect strengths (``volumetric_coupling``, ``korteweg_factor``,
-``outer_compliance``, ``crack_permeability``) switch individual model
+``outer_compliance``, ``crack_permeability``, ``cell_compliance``, ``line_compliance``) switch individual model
 ingredients on or off; at their "off" value each reproduces exactly the model
 without that ingredient, at the default the paper's model.
 """
@@ -42,7 +42,7 @@ import numpy as np
 POROSITY_FIELDS = ("random", "pockets", "constant")
 MU_OUTER_BCS = ("dirichlet", "zero_flux")
 CH_MOBILITIES = ("harmonic", "oil", "degenerate")
-OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow")
+OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow", "outflow")
 
 
 def _param(default, unit: str, allowed: str, doc: str, choices: tuple = ()):
@@ -117,8 +117,12 @@ class Parameters:
         f"Cahn–Hilliard mobility law, one of {CH_MOBILITIES}: k/η̄ (paper, Eq. M = k/η̄), k/η_o, or 4S(1 − S) "
         "k/η̄ (degenerate)", choices=CH_MOBILITIES)
     outer_saturation_bc: str = _param("dirichlet", "", f"one of {OUTER_SATURATION_BCS}",
-        f"outer condition on the invading phase, one of {OUTER_SATURATION_BCS}: S = 0 (paper, Sec. 3.4) or no "
-        "invading flux (only the defending fluid leaves)", choices=OUTER_SATURATION_BCS)
+        f"outer condition on the invading phase, one of {OUTER_SATURATION_BCS}: \"dirichlet\" S = 0 (the paper, "
+        "Sec. 3.4); \"defending_outflow\" no invading flux (only the defending fluid leaves); \"outflow\" an outlet "
+        "reservoir at p = 0 (Sec. 3.4): each phase leaves with its own Darcy flux, water in the share f(S) of the "
+        "node's outflow once the front has reached r_o (solver.physics.outlet_water_flux), nothing but oil flows "
+        "in; no Cahn–Hilliard flux crosses r_o (pair with mu_outer_bc = \"zero_flux\" for no μ source)",
+        choices=OUTER_SATURATION_BCS)
     volumetric_coupling: float = _param(1.0, "-", ">= 0",
         "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)")
     korteweg_factor: float = _param(1.0, "-", ">= 0",
@@ -140,6 +144,13 @@ class Parameters:
         "onset φ_c of a smooth upper bound 1 of the porosity law, - (None: the paper's unbounded linear law, "
         "φ > 1 in dilated cracks; above φ_c, φ = 1 − (1−φ_c)²/(2(1−φ_c) − (1−φ_lin)), "
         "solver.physics.porosity_ceiling)")
+    cell_compliance: float = _param(0.0, "mm/kPa", ">= 0",
+        "compliance c_cell of the elastic cell: the plates open a gap δ = c_cell p⁺ above the pack, which stores "
+        "δ/h and carries both fluids with transmissivity δ³/12 (0 = rigid plates, the paper; "
+        "solver.physics.cell_gap; Pihler-Puzović et al. 2012)")
+    line_compliance: float = _param(0.0, "mm²/kPa", ">= 0",
+        "lumped compliance C_line of the injection line and cavity per unit cell height: the pack receives "
+        "w_i − (C_line/L_i) ∂p/∂t on r_i (0 = stiff line, the paper; solver.physics.line_storage_rate)")
 
     def __post_init__(self):
         _coerce_and_check(self)
@@ -159,6 +170,13 @@ class Parameters:
     def damage_viscosity(self) -> float:
         """β, kPa·s: explicit ``beta`` or 65.7 √C (Sec. 3.6 calibration)."""
         return float(self.beta) if self.beta is not None else 65.7 * math.sqrt(self.cement)
+
+    @classmethod
+    def preset(cls, name: str, **changes) -> "Parameters":
+        """The named model ``name`` ("paper", "experiment": :mod:`solver.presets`) with ``changes`` on top."""
+        from .presets import preset_parameters
+
+        return preset_parameters(name, **changes)
 
     # ------------------------------------------------------------- derived
     @property
@@ -237,9 +255,9 @@ class Parameters:
     # ------------------------------------------------------- serialization
     def to_dict(self) -> dict:
         """All fields as a plain dict (None kept as None: parameter following its law of C), except the
-        fields added after runs were stored (``_OMIT_WHEN_NONE``), left out at their default None."""
+        fields added after runs were stored (``_OMIT_AT_DEFAULT``), left out at their default."""
         return {f.name: getattr(self, f.name) for f in fields(self)
-                if not (f.name in _OMIT_WHEN_NONE and getattr(self, f.name) is None)}
+                if not (f.name in _OMIT_AT_DEFAULT and getattr(self, f.name) == _OMIT_AT_DEFAULT[f.name])}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Parameters":
@@ -303,9 +321,10 @@ _OPTIONAL_FLOAT_FIELDS = tuple(f.name for f in fields(Parameters) if f.type == "
 #: the simple bounds declared as "> 0" / ">= 0" (after "None or " for optional fields): name -> (bound, strict)
 _SIMPLE_BOUNDS = {f.name: (0.0, f.metadata["allowed"].endswith("> 0")) for f in fields(Parameters)
                   if f.metadata["allowed"].removeprefix("None or ") in ("> 0", ">= 0")}
-# fields added after runs were stored: left out of to_dict() at None, so the parameter dicts (and the run keys
-# made from them) of older runs do not change
-_OMIT_WHEN_NONE = ("porosity_floor", "permeability_floor", "porosity_ceiling")
+# fields added after runs were stored: left out of to_dict() at their default (None, or the off value 0 of an
+# effect), so the parameter dicts (and the run keys made from them) of older runs do not change
+_OMIT_AT_DEFAULT = {"porosity_floor": None, "permeability_floor": None, "porosity_ceiling": None,
+                    "cell_compliance": 0.0, "line_compliance": 0.0}
 _CHOICES = tuple((f.name, f.metadata["choices"]) for f in fields(Parameters) if f.metadata["choices"])
 CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
 

@@ -129,6 +129,37 @@ def permeability_floor(k, floor: float):
     return smooth_floor(k, floor)
 
 
+def cell_gap(p, compliance: float):
+    """Opening δ = c_cell p⁺ (mm) of the gap between the cell's plates and the bead pack, under the local pore
+    pressure p (kPa), compliance c_cell (mm/kPa): the elastic Hele–Shaw cell (Pihler-Puzović et al., Phys. Rev.
+    Lett. 108, 074502, 2012), the plates bowing locally with the pressure (a Winkler foundation); p <= 0 opens
+    nothing (derivative 0 there)."""
+    pp = ad.positive_part(p) if isinstance(p, Dual) else np.maximum(p, 0.0)
+    return compliance * pp
+
+
+def gap_storage(p, compliance: float, cell_height: float):
+    """Fluid volume in the opened gap per unit pack volume, δ/h (-) with δ = :func:`cell_gap`, h the cell height
+    (mm): the gap's storage, added to φ in the time derivatives of both mass balances."""
+    return cell_gap(p, compliance) / cell_height
+
+
+def gap_permeability(p, compliance: float, cell_height: float):
+    """Transmissivity of the opened gap per unit cell height, δ³/(12 h) (mm²): plane Poiseuille flow in a slit
+    of width δ (flux −δ³/(12η) ∇p per unit length) spread over the cell height h; it acts in parallel with the
+    pack's k, and both fluids flow through it with the pack's relative permeabilities."""
+    d = cell_gap(p, compliance)
+    return d * d * d / (12.0 * cell_height)
+
+
+def line_storage_rate(p, p_n, dt: float, line_compliance: float, inner_length: float):
+    """Flux density (mm/s) the injection line and cavity keep from the pack on r_i: (C_line/L_i) (p − p_n)/Δt,
+    backward Euler of C_line ∂p_inj/∂t spread over the inlet's length L_i (mm); C_line (mm²/kPa per unit cell
+    height) is the line's lumped compliance, p, p_n (kPa) the inlet pressure now and at the last step.  The pack
+    receives w_i minus this: the pump's volume goes partly into the line's storage while the pressure rises."""
+    return line_compliance / inner_length * (p - p_n) / dt
+
+
 def _saturation_in_bounds(S):
     """S clipped to [0, 1] (derivative zero outside): the saturation the relative-permeability and degenerate
     mobility laws see (Duals, arrays or traced symbols)."""
@@ -159,6 +190,24 @@ def invading_permeability_slope(S, M: float):
 
 
 # ---------------------------------------------------------------- Cahn–Hilliard
+def fractional_flow(S, M: float):
+    """Water's share f = λ_1/(λ_1 + λ_2) = M k_r1 / (M k_r1 + k_r2) of the total Darcy flux (-), M = η_o/η_w
+    (Eq. relative_permeabilities; the absolute permeability cancels).  f(S <= 0) = 0, f(S >= 1) = 1."""
+    kr1, kr2 = relative_permeabilities(S, M)
+    return M * kr1 / (M * kr1 + kr2)
+
+
+def outlet_water_flux(S, Q, M: float):
+    """Water leaving an outlet node (mm²/s per unit cell height): f(S) Q⁺, upwinded from inside the domain.
+
+    ``Q`` (mm²/s) is the node's total outflow, the reaction of its p = 0 condition (Sec. 3.4); where it runs
+    out, each phase leaves with its own Darcy flux, so water leaves in the share :func:`fractional_flow` of the
+    node's saturation S; where it runs in, the outlet reservoir's oil (S = 0) enters and no water.  Before the
+    front reaches the node S = 0 and f = 0: no water leaves.
+    """
+    return fractional_flow(S, M) * np.maximum(Q, 0.0)
+
+
 def harmonic_viscosity(eta_o: float, eta_w: float) -> float:
     """η̄ = 2 η_o η_w / (η_o + η_w), kPa·s: the harmonic mean of Cogswell and Szulczewski (Sec. 2.8)."""
     return 2.0 * eta_o * eta_w / (eta_o + eta_w)

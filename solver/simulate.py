@@ -24,8 +24,8 @@ import pandas as pd
 
 from . import damage, fem, linsolve, metrics, physics, profiling
 from .anderson import Anderson
-from .model import (MU, P, S, UX, UY, build_discretization, element_fields, porosity_state, residual_and_jacobian,
-                    step_data)
+from .model import (MU, P, S, UX, UY, build_discretization, element_fields, line_stored_rate, outlet_water_outflow,
+                    porosity_state, residual_and_jacobian, step_data, storage_fraction)
 from .options import RunOptions, check_run_inputs
 from .output import RunWriter
 from .profiling import phase
@@ -403,8 +403,10 @@ def _setup(params, options, mesh, phi0) -> Simulation:
 def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, progress, t_wall):
     pending = o.frame_times()
     dt = o.dt0
-    cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0}
-    V0 = _stored_volume(sim, porosity_state(sim.disc, sim.params, sim.U)[2])
+    cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0, "w_src": 0.0, "line": 0.0}
+    store0 = storage_fraction(sim.disc, sim.params, sim.U, porosity_state(sim.disc, sim.params, sim.U)[2])
+    V0 = _stored_volume(sim, store0)
+    cum["W0"] = _stored_volume(sim, _water_fraction(sim, sim.U, store0))
     warned_layer = False
     prof = profiling.active()
     with phase("output"):
@@ -432,7 +434,9 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
             _, ev, phi_q = porosity_state(sim.disc, sim.params, U)  # the new state's porosity, read twice below
             _accumulate_balances(sim, U, info["data"], dt_try, cum, ev, phi_q)
             sim.commit(U, d, dt_try)
-            row = _row(sim, dt_try, info, cum, V0, _stored_volume(sim, phi_q))
+            store = storage_fraction(sim.disc, sim.params, U, phi_q)
+            row = _row(sim, dt_try, info, cum, V0, _stored_volume(sim, store),
+                       _stored_volume(sim, _water_fraction(sim, U, store)))
         rows.append(row)
         _count_step(prof, info)
         if row["outer_layer_area"] > 0 and not warned_layer:
@@ -529,30 +533,44 @@ def _accumulate_balances(sim, U, data, dt: float, cum: dict, ev: np.ndarray, phi
     Rp, Rs = R[P::nf], R[S::nf]
     cum["inj"] += dt * p.w_i * disc.inner_length
     cum["out"] += -dt * Rp[disc.outer_nodes].sum()
+    if disc.inner_weights is not None:  # the injection line's storage (solver.model.line_stored_rate)
+        cum["line"] += dt * float(line_stored_rate(disc, p, U, data).v.sum())
     cum["src"] += dt * _source(sim, data, ev, phi_q)
+    cum["w_src"] += dt * _source(sim, data, ev, phi_q * fem.at_quadrature(U[:, S], disc.triangles, fem.STRANG3))
     cum["w_in"] += dt * Rs[disc.inner_nodes].sum()
-    cum["w_out"] += -dt * Rs[disc.outer_nodes].sum()
+    if disc.outlet is None:  # S = 0 imposed on r_o: the water outflow is its reaction (0 with no S condition)
+        cum["w_out"] += -dt * Rs[disc.outer_nodes].sum()
+    else:  # the outlet's boundary term (solver.model.outlet_water_outflow), part of the S rows
+        cum["w_out"] += dt * outlet_water_outflow(disc, p, U, R).sum()
 
 
 def _stored_volume(sim, phi_q: np.ndarray) -> float:
-    """∫ φ dx (mm² per unit cell height) from φ at the Strang points (equal weights)."""
+    """∫ φ dx (mm² per unit cell height) from φ at the Strang points (equal weights); φ is the storage fraction
+    (pores and the elastic cell's gap, :func:`solver.model.storage_fraction`)."""
     return float(np.sum(sim.disc.geom.areas * phi_q.mean(axis=1)))
+
+
+def _water_fraction(sim, U: np.ndarray, phi_q: np.ndarray) -> np.ndarray:
+    """φ S at the Strang points (M, 3), the invading fluid's volume fraction as the S rows' storage term sees it."""
+    return phi_q * fem.at_quadrature(U[:, S], sim.disc.triangles, fem.STRANG3)
 
 
 def _source(sim, data, ev: np.ndarray, phi_q: np.ndarray) -> float:
     """c_v ∫ φ ε̇_v dx: the second-order volume source of the total mass balance (mm²/s), from the step's
-    frozen data and the new state's ε_v and φ."""
+    frozen data and the new state's ε_v and φ; with φ S in place of φ (:func:`_water_fraction`), that of the
+    invading balance."""
     dev = (ev - data.ev_n) / data.dt
     return float(sim.params.volumetric_coupling * np.sum(sim.disc.geom.areas * phi_q.mean(axis=1) * dev))
 
 
-def _row(sim, dt, info, cum, V0, V) -> dict:
-    """The time series' row of the committed state: V is its stored volume (mm², :func:`_stored_volume`)."""
+def _row(sim, dt, info, cum, V0, V, W) -> dict:
+    """The time series' row of the committed state: V its stored volume, W its stored invading volume (mm²,
+    :func:`_stored_volume`)."""
     disc, p, U, d = sim.disc, sim.params, sim.U, sim.d
     ef = element_fields(disc, p, U, d, fluxes=False)
     Sn = U[:, S]
     fm, fx, fb = metrics.front_measures(disc.points, Sn, sim.edges, disc.inner_nodes)
-    err = abs(cum["inj"] - (V - V0 + cum["src"] + cum["out"])) / max(cum["inj"], 1e-300)
+    err = abs(cum["inj"] - (V - V0 + cum["src"] + cum["out"] + cum["line"])) / max(cum["inj"], 1e-300)
     area = disc.geom.areas
     d_el = d[disc.triangles].mean(axis=1)
     inv = float(np.sum(area * ef["phi"] * Sn[disc.triangles].mean(axis=1)))
@@ -564,7 +582,13 @@ def _row(sim, dt, info, cum, V0, V) -> dict:
         "water_inflow_volume": cum["w_in"],
         "water_outflow_volume": cum["w_out"],
         "outflow_volume": cum["out"],
+        "line_stored_volume": cum["line"],
+        "stored_volume": V,
+        "source_volume": cum["src"],
         "mass_error": err,
+        "water_stored_volume": W,
+        "water_source_volume": cum["w_src"],
+        "water_mass_error": abs(cum["w_in"] - cum["w_out"] - (W - cum["W0"] + cum["w_src"])) / max(cum["inj"], 1e-300),
         "mean_damage": float(np.sum(area * d_el) / area.sum()),
         "max_damage": float(d.max()),
         "max_hoop_stress": float(ef["hoop_stress"].max()),

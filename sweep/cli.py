@@ -1,9 +1,10 @@
 """The ``dchfrac`` command line.
 
     dchfrac [--version] [-v | -q] COMMAND ...
-    dchfrac run [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
+    dchfrac run [--preset NAME] [--config FILE] [--set name=value ...] --out DIR [--h 1.0] [--t-end 2.0]
     dchfrac params                                   (every parameter: unit, default, allowed range)
     dchfrac warmup                                   (compile the numba kernels ahead of the first run)
+    dchfrac balance RUN [RUN ...] --out FIG.png      (volume balance by phase: water and oil in, stored, out)
     dchfrac animate RUN [--fields S,phi,d,p] [--out FILE] [--fps 6]
     dchfrac bench [--out results/bench/bench.json] [--quick] [--reference] [--profile [--h H] [--t-end T]]
     dchfrac campaign run|status|plot|report SPEC ...
@@ -75,6 +76,10 @@ def _run_inputs(args):
     from solver.output import check_writable_dir
 
     pdict, odict = _load_config(args.config) if args.config else ({}, {})
+    if getattr(args, "preset", None):
+        from solver.presets import preset_changes
+
+        pdict = {**preset_changes(args.preset), **pdict}
     opt_names = set(RunOptions.__dataclass_fields__)
     for k, v in _split_sets(args.set).items():
         (odict if k in opt_names else pdict)[k] = v
@@ -201,6 +206,25 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_balance(args) -> int:
+    """Plot the volume balance by phase of one or more runs (sweep.studies.balance); bad input: one line, exit code 2."""
+    from .studies.balance import plot_phase_balance
+
+    labels = args.labels.split(",") if args.labels else [Path(r).name for r in args.runs]
+    try:
+        if len(labels) != len(args.runs):
+            raise ValueError(f"--labels {args.labels!r}: allowed one label per run ({len(args.runs)})")
+        bad = _writable_or_exit("balance", Path(args.out).parent, "--out")
+        if bad:
+            return bad
+        path = plot_phase_balance(dict(zip(labels, args.runs)), args.out)
+    except ValueError as exc:
+        print(f"dchfrac balance: {exc}", file=sys.stderr)
+        return 2
+    print(f"written to {path}")
+    return 0
+
+
 def cmd_animate(args) -> int:
     """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
     from .animate import animate_run, animation_writer, parse_fields
@@ -230,6 +254,12 @@ def cmd_params(args) -> int:
     rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"], r["meaning"]) for r in parameter_table()]
     _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C)",
                 ("name", "unit", "default", "allowed", "meaning"), rows)
+    from solver.presets import preset_changes, preset_description, preset_names
+
+    print()
+    _print_rows("presets (dchfrac run --preset NAME; changes from the defaults above)", ("name", "changes", "what"),
+                [(n, ", ".join(f"{k}={_show(v)}" for k, v in preset_changes(n).items()) or "(none)",
+                  preset_description(n)) for n in preset_names()])
     docs = option_docs()
     rows = [(f.name, OPTION_UNITS.get(f.name, "?"), _show(getattr(RunOptions(), f.name)), docs.get(f.name, ""))
             for f in fields(RunOptions)]
@@ -237,6 +267,12 @@ def cmd_params(args) -> int:
     _print_rows("run options (discretization and outputs; set them like parameters with --set)",
                 ("name", "unit", "default", "meaning"), rows)
     return 0
+
+
+def _preset_names() -> list[str]:
+    from solver.presets import preset_names
+
+    return preset_names()
 
 
 def _show(v) -> str:
@@ -321,6 +357,8 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="run one simulation", epilog=_run_epilog(),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("--config", help="TOML with [parameters] and [options] tables")
+    r.add_argument("--preset", help="named model the parameters start from (--config and --set override it): "
+                                    "one of " + ", ".join(_preset_names()) + " (`dchfrac params` lists them)")
     r.add_argument("--set", action="append", metavar="NAME=VALUE", help="override a parameter or run option (names below)")
     r.add_argument("--out", required=True, help="run folder")
     r.add_argument("--h", type=float, help="mesh size, mm")
@@ -337,6 +375,11 @@ def build_parser() -> argparse.ArgumentParser:
     an.add_argument("--out", default=None, help="output file, .mp4 (needs ffmpeg) or .gif (default RUN/animation.mp4|gif)")
     an.add_argument("--fps", type=int, default=6, help="frames per second (default 6)")
     an.set_defaults(func=cmd_animate)
+    ba = sub.add_parser("balance", help="plot water and oil in, stored and out over time (volume balance by phase)")
+    ba.add_argument("runs", nargs="+", help="run folder(s), one panel each")
+    ba.add_argument("--out", required=True, help="figure file (.png or .pdf)")
+    ba.add_argument("--labels", default=None, metavar="A,B", help="panel titles, one per run (default: folder names)")
+    ba.set_defaults(func=cmd_balance)
     pa = sub.add_parser("params", help="list every model parameter with unit, default and allowed range, and the run options")
     pa.set_defaults(func=cmd_params)
     b = sub.add_parser("bench", help="performance benchmarks (JSON)")

@@ -17,6 +17,7 @@ Format (all tables optional except ``name``)::
     paper = "Sec. 3.6"
 
     [base]                              # Parameters fields (kPa, kPa*s, mm, mm^2, ...)
+    preset = "experiment"               # optional: a named model (solver.presets), the keys below on top
     eta_w = 1e-6
 
     [derived]                           # parameters computed from the others, per run
@@ -260,6 +261,14 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int
     if not isinstance(base, dict):
         _fail(f"{w}base", f"expected a table, got {base!r}")
     params, options = {}, {}
+    if "preset" in base:  # a named model (solver.presets), the other base keys on top
+        from solver.presets import preset_changes
+
+        try:
+            params.update(preset_changes(base["preset"]))
+        except ValueError as exc:
+            _fail(f"{w}base.preset", str(exc))
+        base = {k: v for k, v in base.items() if k != "preset"}
     for k, v in base.items():
         if k not in pfields:
             _fail(f"{w}base.{k}", f"unknown parameter {k!r}; allowed: {sorted(pfields)}")
