@@ -33,7 +33,7 @@ def test_unknown_preset_names_the_allowed_ones():
 
 def test_preset_reaches_the_run_command_and_campaign_specs(tmp_path):
     from sweep.cli import _run_inputs
-    from sweep.spec import SpecError, spec_from_dict
+    from sweep.campaign.spec import SpecError, spec_from_dict
 
     args = argparse.Namespace(config=None, set=["kbar=0.01"], h=None, t_end=None, out=str(tmp_path / "run"),
                               preset="experiment")
