@@ -68,6 +68,9 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                    help="wall-time limit per run, s (default: spec [run] timeout, else none); the run is killed")
     p.add_argument("--retries", type=int, default=None, help="extra attempts after a failure (default: spec or 0)")
     p.add_argument("--quiet", action="store_true", help="no progress lines (as -q)")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse a grid with implausible inputs (a likely unit slip, an unresolved length) instead "
+                        "of warning (the dry run lists them)")
     p.set_defaults(func=cmd_run)
 
     for name, fn, helptext in (
@@ -168,6 +171,11 @@ def cmd_run(args) -> int:
     from sweep.campaign import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost, run_campaign
 
     spec = _spec(args)
+    if args.strict:
+        warnings = _input_warnings(spec)
+        if warnings:
+            raise UsageError(f"--strict refuses: {warnings[0]}"
+                             + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
     if args.dry_run:
         jobs = args.jobs or int(spec.run.get("jobs", 1))
         est = estimate_cost(spec, args.results, jobs=jobs, retry_failed=args.retry_failed,

@@ -77,15 +77,37 @@ def _run_inputs(args):
     opt_names = set(RunOptions.__dataclass_fields__)
     for k, v in _split_sets(args.set).items():
         (odict if k in opt_names else pdict)[k] = v
-    if args.h is not None:
-        odict["h"] = args.h
-    if args.t_end is not None:
-        odict["t_end"] = args.t_end
+    for flag, name, v in (("--h", "h", args.h), ("--t-end", "t_end", args.t_end)):
+        if v is not None and name in odict and odict[name] != v:
+            raise ValueError(f"{flag} {v:g} conflicts with {name}={odict[name]!r} of --set/--config "
+                             "(allowed: one value, given once)")
+        if v is not None:
+            odict[name] = v
+    unknown = sorted(set(pdict) - set(Parameters.__dataclass_fields__))
+    if unknown:
+        from solver.plausible import did_you_mean
+
+        raise ValueError(f"unknown parameter or run option {unknown[0]!r}"
+                         f"{did_you_mean(unknown, [*Parameters.__dataclass_fields__, *opt_names])} "
+                         "(allowed: the names `dchfrac params` lists)")
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
     warnings = check_run_inputs(params, options)
+    if getattr(args, "strict", False) and warnings:
+        raise ValueError(f"--strict refuses: {warnings[0]}"
+                         + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
+    _check_run_out(args.out, getattr(args, "force", False))
     check_writable_dir(args.out, "--out")
     return params, options, warnings
+
+
+def _check_run_out(out: str, force: bool) -> None:
+    """``--out``: a folder name (not empty), and not an existing run folder unless ``force``."""
+    if not str(out).strip():
+        raise ValueError("--out '' is not allowed: a run folder name")
+    if (Path(out) / "summary.json").exists() and not force:
+        raise ValueError(f"--out {str(out)!r} is an existing run folder (allowed: a new folder, or --force to "
+                         "overwrite it)")
 
 
 def cmd_run(args) -> int:
@@ -299,6 +321,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--h", type=float, help="mesh size, mm")
     r.add_argument("--t-end", type=float, help="final time, s")
     r.add_argument("--quiet", action="store_true", help="no progress bar / progress lines")
+    r.add_argument("--strict", action="store_true",
+                   help="refuse implausible inputs (a likely unit slip, an unresolved length) instead of warning")
+    r.add_argument("--force", action="store_true", help="overwrite an existing run folder --out")
     r.set_defaults(func=cmd_run)
     an = sub.add_parser("animate", help="animate a run's snapshots (MP4 with ffmpeg, else GIF)",
                         description="Animate a run folder's snapshots: one panel per field, fixed colour scales, "
