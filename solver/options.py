@@ -277,10 +277,14 @@ def _number(name, v, kind, lo, hi, lo_open, optional):
         v = v.item()
     if isinstance(v, bool) or not isinstance(v, Integral if kind is int else Real):
         _fail(name, v, "an integer" if kind is int else "a number")
-    if type(v) not in (int, float):  # another Real (e.g. a Fraction): a plain number
-        v = int(v) if kind is int else float(v)
-    if not math.isfinite(v):
-        _fail(name, v, "a finite number")
+    try:
+        if type(v) not in (int, float):  # another Real (e.g. a Fraction): a plain number
+            v = int(v) if kind is int else float(v)
+        finite = math.isfinite(v)
+    except OverflowError:
+        finite = False
+    if not finite:
+        _fail(name, f"{str(v)[:12]}... ({len(str(v))} digits)" if isinstance(v, int) else v, "a finite number")
     if lo is not None and (v <= lo if lo_open else v < lo):
         _fail(name, v, f"{'>' if lo_open else '>='} {lo}")
     if hi is not None and v > hi:
@@ -382,3 +386,22 @@ def resolution_warnings(params, options: RunOptions) -> list[str]:
         out.append(f"parameter r_inner = {params.r_inner:g} mm is below the mesh size on the inner circle "
                    f"{h_in:g} mm: the cavity is not resolved (fewer than 2π edges on its circumference)")
     return out
+
+
+def check_environment() -> list[str]:
+    """Check the environment variables a run reads, before anything is written: ``DCHFRAC_KERNELS`` (a known
+    backend, numba installed when asked for) and ``DCHFRAC_ASSEMBLY_THREADS`` (a positive integer) raise
+    ValueError naming the variable, its value and what is allowed.  Returns warnings: a kernel cache
+    (``DCHFRAC_CACHE``) that cannot be written, so that every run compiles its kernels again (about 20 s)."""
+    from . import codegen, fem, kernels
+    from .output import check_writable_dir
+
+    fem.assembly_threads()
+    if kernels.backend() != "numba":
+        return []
+    try:
+        check_writable_dir(codegen.cache_dir(), "kernel cache DCHFRAC_CACHE")
+    except ValueError as exc:
+        return [f"{exc}: every run compiles its kernels again (about 20 s each); set DCHFRAC_CACHE to a writable "
+                "folder"]
+    return []

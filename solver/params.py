@@ -360,7 +360,10 @@ def _fail(name, value, allowed):
 def _as_float(name, v) -> float:
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, Real):
         _fail(name, v, "a real number")
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:
+        _fail(name, f"{str(v)[:12]}... ({len(str(v))} digits)", "a finite number")
     if not math.isfinite(v):
         _fail(name, v, "a finite number")
     return v

@@ -26,7 +26,7 @@ from . import damage, fem, linsolve, metrics, physics, profiling
 from .anderson import Anderson
 from .model import (MU, P, S, UX, UY, build_discretization, element_fields, porosity_state, residual_and_jacobian,
                     step_data)
-from .options import RunOptions, check_run_inputs
+from .options import RunOptions, check_environment, check_run_inputs
 from .output import RunWriter
 from .profiling import phase
 
@@ -293,7 +293,7 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         raise ValueError(f"params must be a solver.Parameters, got {type(params).__name__}")
     if not isinstance(options, RunOptions):
         raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
-    warnings = check_run_inputs(params, options) if mesh is None else []  # before the run folder is written
+    warnings = (check_run_inputs(params, options) if mesh is None else []) + check_environment()  # before the run folder is written
     t_wall = time.perf_counter()
     if progress is True:
         from .progress import StepProgress

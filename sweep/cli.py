@@ -51,8 +51,8 @@ def _load_config(path):
                          "and [options] tables)")
     try:
         data = read_toml(path)
-    except (TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"--config {str(path)!r}: not valid TOML ({exc})") from None
+    except TOMLDecodeError as exc:            # its message names the file
+        raise ValueError(f"--config: not valid TOML: {exc}") from None
     if "parameters" not in data and "options" not in data:
         return data, {}
     tables = data.get("parameters", {}), data.get("options", {})
@@ -70,7 +70,7 @@ def _run_inputs(args):
 
     Raises ValueError naming the input, its value and what is allowed."""
     from solver import Parameters, RunOptions
-    from solver.options import check_run_inputs
+    from solver.options import check_environment, check_run_inputs
     from solver.output import check_writable_dir
 
     pdict, odict = _load_config(args.config) if args.config else ({}, {})
@@ -92,7 +92,7 @@ def _run_inputs(args):
                          "(allowed: the names `dchfrac params` lists)")
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
-    warnings = check_run_inputs(params, options)
+    warnings = check_run_inputs(params, options) + check_environment()
     if getattr(args, "strict", False) and warnings:
         raise ValueError(f"--strict refuses: {warnings[0]}"
                          + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
@@ -184,15 +184,34 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _check_report_runs(kind: str, runs: list) -> None:
+    """The run folders of ``report``: one for "reference", several for "convergence", each with the files the
+    report reads (timeseries.csv, options.toml; snapshots/mesh.npz for "reference").  ValueError naming the first
+    that is not."""
+    if kind == "reference" and len(runs) != 1:
+        raise ValueError(f"report reference takes exactly one run folder, got {len(runs)}")
+    if kind == "convergence" and len(runs) < 2:
+        raise ValueError(f"report convergence takes two or more run folders (mesh sizes), got {len(runs)}")
+    need = ("timeseries.csv", "options.toml") + (("snapshots/mesh.npz",) if kind == "reference" else ())
+    for r in runs:
+        missing = [f for f in need if not (Path(r) / f).is_file()]
+        if missing:
+            raise ValueError(f"run {str(r)!r} is not a run folder: no {missing[0]} (allowed: folders written by "
+                             "`dchfrac run`)")
+
+
 def cmd_report(args) -> int:
     from .reference import convergence_report, reference_report
 
     bad = _writable_or_exit("report", args.out, "--out")
     if bad:
         return bad
+    try:            # before anything is written
+        _check_report_runs(args.kind, args.runs)
+    except ValueError as exc:
+        print(f"dchfrac report: {exc}", file=sys.stderr)
+        return 2
     if args.kind == "reference":
-        if len(args.runs) != 1:
-            raise SystemExit("dchfrac report reference takes exactly one run folder")
         res = reference_report(args.runs[0], args.out, args.paper)
         print(res["table"].to_string(index=False))
     else:
@@ -203,12 +222,16 @@ def cmd_report(args) -> int:
 
 def cmd_animate(args) -> int:
     """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
+    from solver.output import check_writable_dir
+
     from .animate import animate_run, animation_writer, parse_fields
 
     run = Path(args.run)
     try:
         fields = parse_fields(args.fields)
         animation_writer(args.out)
+        if args.out is not None:
+            check_writable_dir(Path(args.out).resolve().parent, "--out folder")
         if not (run / "snapshots" / "mesh.npz").is_file():
             raise ValueError(f"run {str(run)!r}: not a run folder (no snapshots/mesh.npz)")
         if args.fps < 1:

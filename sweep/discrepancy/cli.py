@@ -77,6 +77,7 @@ def cmd_run(args) -> int:
     """Run the workflow: exit 0 with a verdict, 2 on bad input (one line, before any forward run),
     EXIT_INCONCLUSIVE (3) when the forward runs did not reach the observation times (no verdict)."""
     from solver import RunOptions
+    from solver.options import check_environment
     from solver.output import check_writable_dir
 
     from .checks import check_data_against_model
@@ -100,6 +101,7 @@ def cmd_run(args) -> int:
         fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
         fine = fine_forwards(spec, cache, jobs)      # one per mesh realization ([discretization] mesh_seeds)
         warnings = check_data_against_model(data, spec, [fwd, *fine], strict=getattr(args, "strict", False))
+        warnings += check_environment()
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
