@@ -282,6 +282,8 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int
         if k not in ofields:
             _fail(f"{w}options.{k}", f"unknown run option {k!r}; allowed: {sorted(ofields)}")
         options[k] = v
+    if not isinstance(tbl.get("axes", {}), dict):
+        _fail(f"{w}axes", f"expected a table, got {tbl.get('axes')!r}")
     axes_tbl = dict(tbl.get("axes", {}))
     mode = tbl.get("mode", axes_tbl.pop("mode", "cross"))
     zips = tbl.get("zip", axes_tbl.pop("zip", []))
