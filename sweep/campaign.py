@@ -473,6 +473,7 @@ def run_campaign(
     code_hash = current_code_hash() if code_hash is None else code_hash
     sampler = samplers()[spec.sampler["kind"]]()
     store = ResultsStore(root, spec.name)
+    store.load_writers()          # before any run: the way out of a Ctrl-C writes the table without an import
     store.acquire_lock()
     try:
         store.clean_tmp()
