@@ -164,6 +164,8 @@ def _value_key(v):
     """Hashable identity of an axis value: numbers by value (1 == 1.0), others by their JSON text."""
     import json
 
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 2**1023:
+        return v                  # beyond any float: its own identity (refused later as a parameter value)
     return float(v) if is_number(v) else json.dumps(v, sort_keys=True, default=str)
 
 
