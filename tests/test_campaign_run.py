@@ -220,7 +220,7 @@ def test_resume_after_ctrl_c_runs_only_the_rest_and_gives_the_same_table(tmp_pat
     proc.send_signal(signal.SIGINT)
     # the way out (workers killed, the table rebuilt and written, interpreter shut down) takes seconds; it
     # never waits for the blocked runs.  The bound only tells a hang from a slow machine, so it is far above
-    # any load (results/README of #48: 4-12 s measured, two CPU-bound processes added)
+    # any load (results/input_validation/README.md: 4-12 s measured, with two CPU-bound processes added)
     _, err = proc.communicate(timeout=_HANG_S)
     assert proc.returncode != 0 and b"KeyboardInterrupt" in err
     # the interrupted campaign stops its workers: the blocked runs never finish (nothing releases them)
