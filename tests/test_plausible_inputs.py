@@ -198,3 +198,5 @@ def test_discrepancy_init_refuses_an_unwritable_out_and_a_folder_in_one_line(tmp
     assert main(["discrepancy", "init", "--measured", str(d), "--out", str(tmp_path / "dir"), "--force"]) == 2
     assert "is a folder (allowed: a SPEC file name" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.tmp")) and list((tmp_path / "dir").iterdir()) == []
+    assert main(["discrepancy", "init", "--measured", str(d), "--out", str(tmp_path / "new" / "sub" / "s.toml")]) == 0
+    assert (tmp_path / "new" / "sub" / "s.toml").is_file()

@@ -151,5 +151,6 @@ def write_starting_spec(measured, out, force: bool = False, strict: bool = False
 
     spec = spec_from_dict(tomllib.loads(text))          # what is written loads as written
     warnings = check_data_against_model(data, spec, spec_models(spec), strict=strict)
+    out.parent.mkdir(parents=True, exist_ok=True)     # its writability was checked before any work
     write_text_atomic(out, text)
     return out, warnings
