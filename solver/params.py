@@ -477,6 +477,8 @@ def field_unit(name: str) -> str:
 
 
 def parameter_table() -> list[dict]:
-    """One dict per parameter: name, unit, default, allowed (text), meaning (units mm, s, kPa)."""
+    """One dict per parameter: name, unit, default, allowed (text), plausible ((lo, hi) or None), meaning (units
+    mm, s, kPa)."""
     return [{"name": f.name, "unit": _UNITS.get(f.name, "?"), "default": f.default,
-             "allowed": _ALLOWED.get(f.name, "?"), "meaning": _FIELD_DOCS.get(f.name, "")} for f in fields(Parameters)]
+             "allowed": _ALLOWED.get(f.name, "?"), "plausible": PLAUSIBLE.get(f.name),
+             "meaning": _FIELD_DOCS.get(f.name, "")} for f in fields(Parameters)]

@@ -250,9 +250,12 @@ def cmd_params(args) -> int:
     from solver.options import OPTION_UNITS, RunOptions, option_docs
     from solver.params import parameter_table
 
-    rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"], r["meaning"]) for r in parameter_table()]
-    _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C)",
-                ("name", "unit", "default", "allowed", "meaning"), rows)
+    rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"],
+             "" if r["plausible"] is None else "[{:g}, {:g}]".format(*r["plausible"]), r["meaning"])
+            for r in parameter_table()]
+    _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C; outside the "
+                "plausible range a run warns, --strict refuses)",
+                ("name", "unit", "default", "allowed", "plausible", "meaning"), rows)
     docs = option_docs()
     rows = [(f.name, OPTION_UNITS.get(f.name, "?"), _show(getattr(RunOptions(), f.name)), docs.get(f.name, ""))
             for f in fields(RunOptions)]
