@@ -9,6 +9,7 @@ from numbers import Integral, Real
 import numpy as np
 
 from .linsolve import PRECISIONS
+from .plausible import did_you_mean, implausible, slip_message
 from .tomlio import read_toml, write_flat_toml
 
 _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
@@ -177,7 +178,7 @@ class RunOptions:
         names = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - names)
         if unknown:
-            raise ValueError(f"unknown run option(s) {unknown}; allowed: {sorted(names)}")
+            raise ValueError(f"unknown run option(s) {unknown}{did_you_mean(unknown, names)}; allowed: {sorted(names)}")
         return cls(**d)
 
     def frame_times(self) -> list[float]:
@@ -210,35 +211,37 @@ def _fail(name, value, allowed):
     raise ValueError(f"run option {name}={value!r} is out of range: allowed {allowed}")
 
 
-# (name, kind, lower, upper, lower bound open, None allowed): every numeric option's range, checked in one loop.
-# kind float accepts any real number (numpy scalars included, stored as a Python float), int any integer.
+# (name, kind, lower, upper, lower bound open, None allowed, plausible range): every numeric option's range,
+# checked in one loop, and where a unit slip is likely the plausible (lo, hi) beside it (solver.plausible;
+# outside it a run warns, ``--strict`` refuses).  kind float accepts any real number (numpy scalars included,
+# stored as a Python float), int any integer.
 _NUMBERS = (
-    ("h", float, 0.0, 24.0, True, False),
-    ("h_inner", float, None, None, True, True),   # in (0, h]: checked after the loop
-    ("inner_grading_length", float, 0.0, None, True, True),
-    ("h_outer", float, None, None, True, True),   # in (0, h]: checked after the loop
-    ("frames", int, 1, None, False, True),
-    ("mesh_seed", int, 0, None, False, True),
-    ("t_end", float, 0.0, None, True, False),
-    ("dt0", float, 0.0, None, True, False),
-    ("dt_min", float, 0.0, None, True, False),
-    ("dt_max", float, 0.0, None, True, False),
-    ("dt_grow", float, 1.0, None, False, False),
-    ("dt_cut", float, 0.0, 1.0, True, False),
-    ("easy_newton_its", int, 1, None, False, False),
-    ("dt_change_target", float, 0.0, 1.0, True, False),
-    ("stop_front_radius", float, 0.0, None, True, True),
-    ("newton_rtol", float, 0.0, 1e-2, True, False),
-    ("newton_mass_tol", float, 0.0, 1e-2, True, False),
-    ("newton_max_its", int, 1, None, False, False),
-    ("stagger_tol", float, 0.0, 1.0, True, False),
-    ("stagger_max_its", int, 1, None, False, False),
-    ("damage_max_its", int, 1, None, False, False),
-    ("jacobian_reuse", float, 0.0, 1.0, False, False),
-    ("max_wall_time", float, 0.0, None, True, True),
-    ("pressure_stabilization", float, 0.0, 100.0, False, True),
-    ("anderson_depth", int, 0, 20, False, True),     # None: 0 (the plain iteration), set after the loop
-    ("first_stagger_rtol", float, 0.0, 0.1, True, True),
+    ("h", float, 0.0, 24.0, True, False, (0.05, 24.0)),
+    ("h_inner", float, None, None, True, True, (0.01, 10.0)),   # in (0, h]: checked after the loop
+    ("inner_grading_length", float, 0.0, None, True, True, (0.01, 1e3)),
+    ("h_outer", float, None, None, True, True, (0.01, 10.0)),   # in (0, h]: checked after the loop
+    ("frames", int, 1, None, False, True, None),
+    ("mesh_seed", int, 0, 2**63 - 1, False, True, None),
+    ("t_end", float, 0.0, None, True, False, (1e-3, 20.0)),
+    ("dt0", float, 0.0, None, True, False, (1e-9, 1.0)),
+    ("dt_min", float, 0.0, None, True, False, (1e-12, 0.1)),
+    ("dt_max", float, 0.0, None, True, False, (1e-6, 5.0)),
+    ("dt_grow", float, 1.0, None, False, False, None),
+    ("dt_cut", float, 0.0, 1.0, True, False, None),
+    ("easy_newton_its", int, 1, None, False, False, None),
+    ("dt_change_target", float, 0.0, 1.0, True, False, None),
+    ("stop_front_radius", float, 0.0, None, True, True, (0.1, 1e4)),
+    ("newton_rtol", float, 0.0, 1e-2, True, False, None),
+    ("newton_mass_tol", float, 0.0, 1e-2, True, False, None),
+    ("newton_max_its", int, 1, None, False, False, None),
+    ("stagger_tol", float, 0.0, 1.0, True, False, None),
+    ("stagger_max_its", int, 1, None, False, False, None),
+    ("damage_max_its", int, 1, None, False, False, None),
+    ("jacobian_reuse", float, 0.0, 1.0, False, False, None),
+    ("max_wall_time", float, 0.0, None, True, True, (1.0, 1e7)),
+    ("pressure_stabilization", float, 0.0, 100.0, False, True, None),
+    ("anderson_depth", int, 0, 20, False, True, None),     # None: 0 (the plain iteration), set after the loop
+    ("first_stagger_rtol", float, 0.0, 0.1, True, True, None),
 )
 
 
@@ -274,10 +277,14 @@ def _number(name, v, kind, lo, hi, lo_open, optional):
         v = v.item()
     if isinstance(v, bool) or not isinstance(v, Integral if kind is int else Real):
         _fail(name, v, "an integer" if kind is int else "a number")
-    if type(v) not in (int, float):  # another Real (e.g. a Fraction): a plain number
-        v = int(v) if kind is int else float(v)
-    if not math.isfinite(v):
-        _fail(name, v, "a finite number")
+    try:
+        if type(v) not in (int, float):  # another Real (e.g. a Fraction): a plain number
+            v = int(v) if kind is int else float(v)
+        finite = math.isfinite(v)
+    except OverflowError:
+        finite = False
+    if not finite:
+        _fail(name, f"{str(v)[:12]}... ({len(str(v))} digits)" if isinstance(v, int) else v, "a finite number")
     if lo is not None and (v <= lo if lo_open else v < lo):
         _fail(name, v, f"{'>' if lo_open else '>='} {lo}")
     if hi is not None and v > hi:
@@ -305,7 +312,7 @@ def _snapshot_times(v, t_end):
 
 
 def _check(o: RunOptions) -> None:
-    for name, kind, lo, hi, lo_open, optional in _NUMBERS:
+    for name, kind, lo, hi, lo_open, optional, _ in _NUMBERS:
         object.__setattr__(o, name, _number(name, getattr(o, name), kind, lo, hi, lo_open, optional))
     for name in ("h_inner", "h_outer"):
         if getattr(o, name) is not None and not 0.0 < getattr(o, name) <= o.h:
@@ -335,7 +342,8 @@ def check_run_inputs(params, options: RunOptions) -> list[str]:
     Raises ValueError naming the option, its value and the allowed range when the mesh size h (mm) does
     not fit the annulus (h < (r_outer - r_inner)/2, as ``solver.mesh.annulus_mesh`` requires) or when
     ``stop_front_radius`` (mm) is not inside (r_inner, r_outer].  Returns warnings (text) for inputs that
-    run but cannot give a resolved answer: a saturation interface width l_S below 2 h (mm).
+    run but are implausible (outside a declared plausible range: a likely unit slip, :func:`plausibility_warnings`)
+    or cannot give a resolved answer (:func:`resolution_warnings`).
     """
     ri, ro = params.r_inner, params.r_outer
     if not options.h < (ro - ri) / 2:
@@ -344,8 +352,58 @@ def check_run_inputs(params, options: RunOptions) -> list[str]:
     r = options.stop_front_radius
     if r is not None and not ri < r <= ro:
         _fail("stop_front_radius", r, f"None or a radius in (r_inner = {ri:g}, r_outer = {ro:g}] mm")
-    warnings = []
-    if params.l_S < 2 * options.h:
-        warnings.append(f"parameter l_S = {params.l_S:g} mm is below 2 h = {2 * options.h:g} mm: the mesh does "
-                        "not resolve the diffuse saturation interface (results depend on h)")
-    return warnings
+    from .params import plausibility_warnings as parameter_warnings
+
+    return parameter_warnings(params) + plausibility_warnings(options) + resolution_warnings(params, options)
+
+
+def plausibility_warnings(options: RunOptions) -> list[str]:
+    """One warning per run option set outside its declared plausible range (``_NUMBERS``), naming the likely
+    unit slip (``t_end = 2000 s: did you mean ms?``)."""
+    return [slip_message("run option", name, getattr(options, name), OPTION_UNITS[name], rng,
+                         RunOptions.__dataclass_fields__[name].default)
+            for name, *_, rng in _NUMBERS if implausible(getattr(options, name), rng)]
+
+
+def resolution_warnings(params, options: RunOptions) -> list[str]:
+    """Warnings for lengths (mm) the mesh of size h cannot resolve or the annulus cannot hold: the diffuse
+    saturation interface l_S and damage band l_d below 2 h (each spans about 2 l: fewer than 2 elements across
+    it), either above the annulus width r_outer - r_inner, and an inner radius below the mesh size on the
+    inner circle (the cavity then has fewer than 2π edges)."""
+    h, width = options.h, params.r_outer - params.r_inner
+    h_in = options.h_inner if options.h_inner is not None else h
+    what = {"l_S": "the diffuse saturation interface", "l_d": "the diffuse damage band"}
+    out = []
+    for name in ("l_S", "l_d"):
+        v = getattr(params, name)
+        if v < 2 * h:
+            out.append(f"parameter {name} = {v:g} mm is below 2 h = {2 * h:g} mm: the mesh does not resolve "
+                       f"{what[name]} (results depend on h)")
+        if v > width:
+            out.append(f"parameter {name} = {v:g} mm exceeds the annulus width r_outer - r_inner = {width:g} mm: "
+                       f"{what[name]} fills the domain (a unit slip?)")
+    if params.r_inner < h_in:
+        out.append(f"parameter r_inner = {params.r_inner:g} mm is below the mesh size on the inner circle "
+                   f"{h_in:g} mm: the cavity is not resolved (fewer than 2π edges on its circumference)")
+    return out
+
+
+def check_environment() -> list[str]:
+    """Check the environment variables a run reads, before anything is written: ``DCHFRAC_KERNELS`` (a known
+    backend, numba installed when asked for) and ``DCHFRAC_ASSEMBLY_THREADS`` (a positive integer) raise
+    ValueError naming the variable, its value and what is allowed.  Returns warnings: a kernel cache
+    (``DCHFRAC_CACHE``) that cannot be written, so that every run compiles its kernels again (about 20 s)."""
+    from . import codegen, fem, kernels
+    from .output import check_writable_dir
+    from .paths import check_environment as check_path_variables
+
+    check_path_variables()  # DCHFRAC_KERNELS, DCHFRAC_LINEAR_SOLVER
+    fem.assembly_threads()
+    if kernels.backend() != "numba":
+        return []
+    try:
+        check_writable_dir(codegen.cache_dir(), "kernel cache DCHFRAC_CACHE")
+    except ValueError as exc:
+        return [f"{exc}: every run compiles its kernels again (about 20 s each); set DCHFRAC_CACHE to a writable "
+                "folder"]
+    return []

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, fields, replace as _dc_replace
 from numbers import Integral, Real
 from pathlib import Path
 
+from .plausible import did_you_mean, implausible, slip_hint, slip_message
 from .tomlio import read_toml, write_flat_toml
 
 import numpy as np
@@ -43,14 +44,19 @@ POROSITY_FIELDS = ("random", "pockets", "constant")
 MU_OUTER_BCS = ("dirichlet", "zero_flux")
 CH_MOBILITIES = ("harmonic", "oil", "degenerate")
 OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow", "outflow")
+#: the largest seed: it is stored in the campaign tables as a 64-bit integer
+SEED_MAX = 2**63 - 1
 
 
-def _param(default, unit: str, allowed: str, doc: str, choices: tuple = ()):
+def _param(default, unit: str, allowed: str, doc: str, choices: tuple = (), plausible: tuple | None = None):
     """A parameter's one declaration: its default, unit (mm, s, kPa system; "-" dimensionless, "" for labels and
     seeds), allowed values as text (a bare "> 0" / ">= 0", optionally after "None or ", is enforced from here;
     the relations between parameters are checked by :func:`_check_relations`), meaning with its paper
-    reference, and the choices of a text parameter."""
-    return field(default=default, metadata={"unit": unit, "allowed": allowed, "doc": doc, "choices": tuple(choices)})
+    reference, the choices of a text parameter, and for a number its plausible range (lo, hi) in its unit: the
+    values a Hele-Shaw experiment of the model's kind can have.  Outside it a run warns, naming the likely unit
+    slip (:func:`plausibility_warnings`), and ``--strict`` refuses."""
+    return field(default=default, metadata={"unit": unit, "allowed": allowed, "doc": doc, "choices": tuple(choices),
+                                            "plausible": plausible})
 
 
 @dataclass(frozen=True)
@@ -63,51 +69,74 @@ class Parameters:
     """
 
     eta_o: float = _param(0.29, "kPa·s", "> 0",
-        "defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 300 kcSt = 0.29 kPa·s)")
+        "defending (oil) viscosity η_o = η_2, kPa·s (Sec. 3.5: 300 kcSt = 0.29 kPa·s)",
+        plausible=(1e-7, 10.0))
     eta_w: float = _param(1e-6, "kPa·s", "> 0",
-        "invading (water) viscosity η_w = η_1, kPa·s (Table A: 1e-6)")
+        "invading (water) viscosity η_w = η_1, kPa·s (Table A: 1e-6)",
+        plausible=(1e-7, 10.0))
     kbar: float = _param(0.0015, "mm²", "> 0",
-        "Kozeny–Carman coefficient k̄, mm² (Eq. permeability; Sec. 3.5: 0.0015)")
+        "Kozeny–Carman coefficient k̄, mm² (Eq. permeability; Sec. 3.5: 0.0015)",
+        plausible=(1e-7, 1.0))
     cement: float = _param(1.2, "%", ">= 0 (> 0 when psi_c follows its law 0.0015 C²)",
-        "cement volume ratio C, percent (Table A: [0, 3]; reference 1.2)")
+        "cement volume ratio C, percent (Table A: [0, 3]; reference 1.2)",
+        plausible=(0.0, 10.0))
     w_i: float = _param(50.0, "mm/s", ">= 0",
-        "inner-boundary Darcy velocity of the invading fluid w_i, mm/s (Table A: 50)")
+        "inner-boundary Darcy velocity of the invading fluid w_i, mm/s (Table A: 50)",
+        plausible=(1e-3, 1e4))
     E: float = _param(331.0, "kPa", "> 0",
-        "Young's modulus of the granular pack, kPa (Table A: 331)")
+        "Young's modulus of the granular pack, kPa (Table A: 331)",
+        plausible=(1.0, 1e5))
     nu: float = _param(0.2, "-", "(-1, 0.5)",
-        "Poisson ratio of the granular pack, - (Table A: 0.2)")
+        "Poisson ratio of the granular pack, - (Table A: 0.2)",
+        plausible=(0.0, 0.499))
     K_s: float = _param(1600.0, "kPa", "> K = E/(3(1 - 2 nu))",
-        "bulk modulus of the solid grains, kPa (Table A: 1600; Biot b = 1 - K/K_s)")
+        "bulk modulus of the solid grains, kPa (Table A: 1600; Biot b = 1 - K/K_s)",
+        plausible=(1.0, 1e8))
     gamma: float = _param(0.03, "kPa·mm", ">= 0",
-        "surface tension γ between the fluids, kPa·mm (Table A: 0.03; Eq. fluid_free_energy)")
+        "surface tension γ between the fluids, kPa·mm (Table A: 0.03; Eq. fluid_free_energy)",
+        plausible=(0.0, 1.0))
     l_S: float = _param(4.0, "mm", "> 0",
-        "regularization length of the saturation phase field l_S, mm (Table A: 4)")
+        "regularization length of the saturation phase field l_S, mm (Table A: 4)",
+        plausible=(0.01, 100.0))
     l_d: float = _param(4.0, "mm", "> 0 and <= 3 G_c/(8 psi_c) (m >= 1)",
-        "regularization length of the damage phase field l_d, mm (Table A: 4; Eq. crack_density_function)")
+        "regularization length of the damage phase field l_d, mm (Table A: 4; Eq. crack_density_function)",
+        plausible=(0.01, 100.0))
     mu_i: float = _param(0.006, "kPa", ">= 0",
-        "Dirichlet chemical potential μ_i on the inner boundary, kPa (Table A: 0.006)")
+        "Dirichlet chemical potential μ_i on the inner boundary, kPa (Table A: 0.006)",
+        plausible=(0.0, 10.0))
     mu_o: float = _param(0.02, "kPa", ">= 0",
-        "Dirichlet chemical potential μ_o on the outer boundary, kPa (Table A: 0.02)")
+        "Dirichlet chemical potential μ_o on the outer boundary, kPa (Table A: 0.02)",
+        plausible=(0.0, 10.0))
     Gc: float | None = _param(None, "kPa·mm", "None or > 0",
-        "fracture toughness G_c, kPa·mm; None -> (0.26 C + 1)² (Eq. Gc)")
+        "fracture toughness G_c, kPa·mm; None -> (0.26 C + 1)² (Eq. Gc)",
+        plausible=(1e-3, 1e3))
     psi_c: float | None = _param(None, "kPa", "None or > 0",
-        "nucleation energy ψ_c, kPa; None -> 0.0015 C² (Eq. psic)")
+        "nucleation energy ψ_c, kPa; None -> 0.0015 C² (Eq. psic)",
+        plausible=(1e-6, 1e3))
     beta: float | None = _param(None, "kPa·s", "None or >= 0",
-        "damage viscosity β, kPa·s; None -> 65.7 √C (Sec. 3.6; Eq. fracture_equation)")
+        "damage viscosity β, kPa·s; None -> 65.7 √C (Sec. 3.6; Eq. fracture_equation)",
+        plausible=(0.0, 1e4))
     cell_height: float = _param(1.96, "mm", "> 0",
-        "Hele–Shaw gap h, mm (Table A: 1.96; k_max = h²/12)")
+        "Hele–Shaw gap h, mm (Table A: 1.96; k_max = h²/12)",
+        plausible=(0.01, 100.0))
     r_inner: float = _param(5.0, "mm", "> 0",
-        "inner radius of the annulus r_i, mm (Sec. 3.5: 5)")
+        "inner radius of the annulus r_i, mm (Sec. 3.5: 5)",
+        plausible=(0.1, 1e3))
     r_outer: float = _param(53.0, "mm", "> r_inner",
-        "outer radius of the annulus r_o, mm (Table A: 53)")
+        "outer radius of the annulus r_o, mm (Table A: 53)",
+        plausible=(1.0, 1e4))
     bead_diameter: float = _param(2.0, "mm", "> 0",
-        "bead diameter δ, mm (Table A: 2; enters Ca*)")
+        "bead diameter δ, mm (Table A: 2; enters Ca*)",
+        plausible=(0.01, 100.0))
     phi_mean: float = _param(0.4, "-", "(0, 1)",
-        "mean initial porosity φ̄ = 1 - packing fraction, - (Table A: 0.40)")
+        "mean initial porosity φ̄ = 1 - packing fraction, - (Table A: 0.40)",
+        plausible=(0.05, 0.95))
     phi_range: float = _param(0.2, "-", ">= 0 and phi_mean ± phi_range inside (0, 1)",
-        "half-width of the uniform random initial porosity, - (Sec. 3.3: values in [0.2, 0.6])")
-    seed: int = _param(0, "", "integer >= 0",
-        "seed of the random initial porosity (numpy default_rng), int >= 0")
+        "half-width of the uniform random initial porosity, - (Sec. 3.3: values in [0.2, 0.6])",
+        plausible=(0.0, 0.5))
+    seed: int = _param(0, "", "integer in [0, 2**63 - 1]",
+        "seed of the random initial porosity (numpy default_rng), int in [0, 2**63 - 1]",
+        plausible=(0, SEED_MAX))
     porosity_field: str = _param("random", "", f"one of {POROSITY_FIELDS}",
         f"initial porosity field, one of {POROSITY_FIELDS} (Sec. 3.3)", choices=POROSITY_FIELDS)
     mu_outer_bc: str = _param("dirichlet", "", f"one of {MU_OUTER_BCS}",
@@ -124,33 +153,42 @@ class Parameters:
         "in; no Cahn–Hilliard flux crosses r_o (pair with mu_outer_bc = \"zero_flux\" for no μ source)",
         choices=OUTER_SATURATION_BCS)
     volumetric_coupling: float = _param(1.0, "-", ">= 0",
-        "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)")
+        "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)",
+        plausible=(0.0, 10.0))
     korteweg_factor: float = _param(1.0, "-", ">= 0",
-        "factor on κ in the Korteweg terms of Eq. summary_equations_secondary (1 paper, 0 off)")
+        "factor on κ in the Korteweg terms of Eq. summary_equations_secondary (1 paper, 0 off)",
+        plausible=(0.0, 10.0))
     outer_compliance: float = _param(0.0, "mm/kPa", ">= 0",
-        "compliance of a spring on the outer boundary, mm/kPa (0 = rigid u = 0, the paper)")
+        "compliance of a spring on the outer boundary, mm/kPa (0 = rigid u = 0, the paper)",
+        plausible=(0.0, 10.0))
     crack_permeability: float = _param(1.0, "-", ">= 0",
-        "blend s: k = k(φ0) + s (min(k(φ), k_max) - k(φ0)) (1 paper, 0 frozen at k(φ0))")
+        "blend s: k = k(φ0) + s (min(k(φ), k_max) - k(φ0)) (1 paper, 0 frozen at k(φ0))",
+        plausible=(0.0, 10.0))
     porosity_floor: float | None = _param(None, "-",
         "None or in (0, phi_mean - phi_range) (below every initial porosity)",
         "smooth lower bound φ_f of the porosity law, - (None: the paper's unbounded linear law; below φ_f, φ "
-        "= φ_f²/(2φ_f − φ_lin), solver.physics.porosity_floor)")
+        "= φ_f²/(2φ_f − φ_lin), solver.physics.porosity_floor)",
+        plausible=(1e-4, 1.0))
     permeability_floor: float | None = _param(None, "mm²",
         "None or in (0, k(phi_mean - phi_range)) mm² (below every initial permeability)",
         "smooth lower bound k_f of the permeability, mm² (None: the paper's Kozeny–Carman law, k = 0 at "
-        "closed pores; below k_f, k = k_f²/(2k_f − k_KC), solver.physics.permeability_floor)")
+        "closed pores; below k_f, k = k_f²/(2k_f − k_KC), solver.physics.permeability_floor)",
+        plausible=(1e-12, 1.0))
     porosity_ceiling: float | None = _param(None, "-",
         "None or in (phi_mean + phi_range, 1) (above every initial porosity)",
         "onset φ_c of a smooth upper bound 1 of the porosity law, - (None: the paper's unbounded linear law, "
         "φ > 1 in dilated cracks; above φ_c, φ = 1 − (1−φ_c)²/(2(1−φ_c) − (1−φ_lin)), "
-        "solver.physics.porosity_ceiling)")
+        "solver.physics.porosity_ceiling)",
+        plausible=(0.0, 1.0))
     cell_compliance: float = _param(0.0, "mm/kPa", ">= 0",
         "compliance c_cell of the elastic cell: the plates open a gap δ = c_cell p⁺ above the pack, which stores "
         "δ/h and carries both fluids with transmissivity δ³/12 (0 = rigid plates, the paper; "
-        "solver.physics.cell_gap; Pihler-Puzović et al. 2012)")
+        "solver.physics.cell_gap; Pihler-Puzović et al. 2012)",
+        plausible=(0.0, 0.01))
     line_compliance: float = _param(0.0, "mm²/kPa", ">= 0",
         "lumped compliance C_line of the injection line and cavity per unit cell height: the pack receives "
-        "w_i − (C_line/L_i) ∂p/∂t on r_i (0 = stiff line, the paper; solver.physics.line_storage_rate)")
+        "w_i − (C_line/L_i) ∂p/∂t on r_i (0 = stiff line, the paper; solver.physics.line_storage_rate)",
+        plausible=(0.0, 100.0))
 
     def __post_init__(self):
         _coerce_and_check(self)
@@ -267,7 +305,7 @@ class Parameters:
         names = [f.name for f in fields(cls)]
         unknown = sorted(set(d) - set(names))
         if unknown:
-            raise ValueError(f"unknown parameter(s) {unknown}; allowed names: {names}")
+            raise ValueError(f"unknown parameter(s) {unknown}{did_you_mean(unknown, names)}; allowed names: {names}")
         return cls(**d)
 
     def replace(self, **changes) -> "Parameters":
@@ -275,7 +313,8 @@ class Parameters:
         names = {f.name for f in fields(self)}
         unknown = sorted(set(changes) - names)
         if unknown:
-            raise ValueError(f"unknown parameter(s) {unknown}; allowed names: {sorted(names)}")
+            raise ValueError(f"unknown parameter(s) {unknown}{did_you_mean(unknown, names)}; allowed names: "
+                             f"{sorted(names)}")
         return _dc_replace(self, **changes)
 
     def to_toml(self, path) -> None:
@@ -309,6 +348,8 @@ class Parameters:
 _FIELD_DOCS = {f.name: f.metadata["doc"] for f in fields(Parameters)}
 _UNITS = {f.name: f.metadata["unit"] for f in fields(Parameters)}
 _ALLOWED = {f.name: f.metadata["allowed"] for f in fields(Parameters)}
+_DEFAULTS = {f.name: f.default for f in fields(Parameters)}
+PLAUSIBLE = {f.name: f.metadata["plausible"] for f in fields(Parameters) if f.metadata["plausible"] is not None}
 Parameters.__doc__ += "\n    Attributes\n    ----------\n" + "".join(
     f"    {f.name} : {f.metadata['doc']} Default {f.default!r}; allowed {f.metadata['allowed']}.\n"
     for f in fields(Parameters))
@@ -340,7 +381,10 @@ def _fail(name, value, allowed):
 def _as_float(name, v) -> float:
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, Real):
         _fail(name, v, "a real number")
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:
+        _fail(name, f"{str(v)[:12]}... ({len(str(v))} digits)", "a finite number")
     if not math.isfinite(v):
         _fail(name, v, "a finite number")
     return v
@@ -366,8 +410,8 @@ def _coerce_types(p: Parameters) -> None:
         if v is not None:
             object.__setattr__(p, name, _as_float(name, v))
     s = p.seed
-    if isinstance(s, (bool, np.bool_)) or not isinstance(s, Integral) or s < 0:
-        _fail("seed", s, "an integer >= 0")
+    if isinstance(s, (bool, np.bool_)) or not isinstance(s, Integral) or not 0 <= s <= SEED_MAX:
+        _fail("seed", s, "an integer in [0, 2**63 - 1]")
     object.__setattr__(p, "seed", int(s))
     for name, allowed in _CHOICES:
         if getattr(p, name) not in allowed:
@@ -386,6 +430,9 @@ def _check_relations(p: Parameters) -> None:
         _fail("nu", p.nu, "the open interval (-1, 0.5)")
     K = _bulk(p.E, p.nu)
     if not p.K_s > K:
+        if implausible(p.E, PLAUSIBLE["E"]) and not implausible(p.K_s, PLAUSIBLE["K_s"]):  # E the likely culprit
+            raise ValueError(f"parameter E={p.E!r} makes the drained bulk modulus K = {K:.6g} kPa exceed K_s = "
+                             f"{p.K_s:g} kPa (allowed: K < K_s); {slip_hint('E', p.E, 'kPa', PLAUSIBLE['E'], _DEFAULTS['E'])}")
         _fail("K_s", p.K_s, f"> drained bulk modulus K = E/(3(1-2nu)) = {K:.6g} kPa (Biot b in (0, 1))")
     if not p.r_outer > p.r_inner:
         _fail("r_outer", p.r_outer, f"> r_inner = {p.r_inner}")
@@ -418,6 +465,13 @@ def _check_porosity_bounds(p: Parameters) -> None:
                                                       "(above every initial porosity)")
 
 
+def plausibility_warnings(p: Parameters) -> list[str]:
+    """One warning per parameter of ``p`` set outside its declared plausible range, naming the likely unit
+    slip (``solver.plausible``; G_c, ψ_c, β when given explicitly)."""
+    return [slip_message("parameter", name, getattr(p, name), _UNITS[name], rng, _DEFAULTS[name])
+            for name, rng in PLAUSIBLE.items() if implausible(getattr(p, name), rng)]
+
+
 def integer_fields() -> tuple[str, ...]:
     """Names of the integer parameters (declared ``int``, e.g. ``seed``): a table of conditions that stores
     them as floats (1.0) must give them back as integers."""
@@ -444,6 +498,8 @@ def field_unit(name: str) -> str:
 
 
 def parameter_table() -> list[dict]:
-    """One dict per parameter: name, unit, default, allowed (text), meaning (units mm, s, kPa)."""
+    """One dict per parameter: name, unit, default, allowed (text), plausible ((lo, hi) or None), meaning (units
+    mm, s, kPa)."""
     return [{"name": f.name, "unit": _UNITS.get(f.name, "?"), "default": f.default,
-             "allowed": _ALLOWED.get(f.name, "?"), "meaning": _FIELD_DOCS.get(f.name, "")} for f in fields(Parameters)]
+             "allowed": _ALLOWED.get(f.name, "?"), "plausible": PLAUSIBLE.get(f.name),
+             "meaning": _FIELD_DOCS.get(f.name, "")} for f in fields(Parameters)]

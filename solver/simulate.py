@@ -26,7 +26,7 @@ from . import damage, fem, linsolve, metrics, physics, profiling
 from .anderson import Anderson
 from .model import (MU, P, S, UX, UY, build_discretization, element_fields, line_stored_rate, outlet_water_outflow,
                     porosity_state, residual_and_jacobian, step_data, storage_fraction)
-from .options import RunOptions, check_run_inputs
+from .options import RunOptions, check_environment, check_run_inputs
 from .output import RunWriter
 from .profiling import phase
 
@@ -296,7 +296,8 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
         raise ValueError(f"params must be a solver.Parameters, got {type(params).__name__}")
     if not isinstance(options, RunOptions):
         raise ValueError(f"options must be a solver.RunOptions, got {type(options).__name__}")
-    warnings = check_run_inputs(params, options) if mesh is None else []  # before the run folder is written
+    # before the run folder is written
+    warnings = (check_run_inputs(params, options) if mesh is None else []) + check_environment()
     if mesh is None and check_memory:
         from .budget import check_fits
 

@@ -9,8 +9,11 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib
 
-#: raised by :func:`read_toml` on malformed TOML
-TOMLDecodeError = tomllib.TOMLDecodeError
+
+
+class TOMLDecodeError(ValueError):
+    """Raised by :func:`read_toml` on malformed TOML or a file that is not UTF-8 text; the message names the
+    file (and, for malformed TOML, the line and column)."""
 
 
 def toml_value(v) -> str:
@@ -34,5 +37,14 @@ def write_flat_toml(path, d: dict, header: str | None = None) -> None:
 
 
 def read_toml(path) -> dict:
-    """Parse the TOML file ``path`` (the one TOML reader of the project; tomli on Python 3.10)."""
-    return tomllib.loads(Path(path).read_text())
+    """Parse the TOML file ``path`` (the one TOML reader of the project; tomli on Python 3.10): UTF-8 text,
+    with or without a byte-order mark.  Raises :class:`TOMLDecodeError` naming the file."""
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8-sig")      # a BOM (written by some editors) is not TOML: dropped
+    except UnicodeDecodeError as exc:
+        raise TOMLDecodeError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise TOMLDecodeError(f"{p}: invalid TOML: {exc}") from None

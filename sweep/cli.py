@@ -53,8 +53,8 @@ def _load_config(path):
                          "and [options] tables)")
     try:
         data = read_toml(path)
-    except (TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"--config {str(path)!r}: not valid TOML ({exc})") from None
+    except TOMLDecodeError as exc:            # its message names the file
+        raise ValueError(f"--config: not valid TOML: {exc}") from None
     if "parameters" not in data and "options" not in data:
         return data, {}
     tables = data.get("parameters", {}), data.get("options", {})
@@ -72,7 +72,7 @@ def _run_inputs(args):
 
     Raises ValueError naming the input, its value and what is allowed."""
     from solver import Parameters, RunOptions
-    from solver.options import check_run_inputs
+    from solver.options import check_environment, check_run_inputs
     from solver.output import check_writable_dir
 
     pdict, odict = _load_config(args.config) if args.config else ({}, {})
@@ -83,19 +83,41 @@ def _run_inputs(args):
     opt_names = set(RunOptions.__dataclass_fields__)
     for k, v in _split_sets(args.set).items():
         (odict if k in opt_names else pdict)[k] = v
-    if args.h is not None:
-        odict["h"] = args.h
-    if args.t_end is not None:
-        odict["t_end"] = args.t_end
+    for flag, name, v in (("--h", "h", args.h), ("--t-end", "t_end", args.t_end)):
+        if v is not None and name in odict and odict[name] != v:
+            raise ValueError(f"{flag} {v:g} conflicts with {name}={odict[name]!r} of --set/--config "
+                             "(allowed: one value, given once)")
+        if v is not None:
+            odict[name] = v
+    unknown = sorted(set(pdict) - set(Parameters.__dataclass_fields__))
+    if unknown:
+        from solver.plausible import did_you_mean
+
+        raise ValueError(f"unknown parameter or run option {unknown[0]!r}"
+                         f"{did_you_mean(unknown, [*Parameters.__dataclass_fields__, *opt_names])} "
+                         "(allowed: the names `dchfrac params` lists)")
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
-    warnings = check_run_inputs(params, options)
+    warnings = check_run_inputs(params, options) + check_environment()
+    if getattr(args, "strict", False) and warnings:
+        raise ValueError(f"--strict refuses: {warnings[0]}"
+                         + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
+    _check_run_out(args.out, getattr(args, "force", False))
     if not getattr(args, "force", False):  # a run that cannot fit in memory: refused before anything is written
         from solver.budget import check_fits
 
         check_fits(params, options)
     check_writable_dir(args.out, "--out")
     return params, options, warnings
+
+
+def _check_run_out(out: str, force: bool) -> None:
+    """``--out``: a folder name (not empty), and not an existing run folder unless ``force``."""
+    if not str(out).strip():
+        raise ValueError("--out '' is not allowed: a run folder name")
+    if (Path(out) / "summary.json").exists() and not force:
+        raise ValueError(f"--out {str(out)!r} is an existing run folder (allowed: a new folder, or --force to "
+                         "overwrite it)")
 
 
 def cmd_run(args) -> int:
@@ -189,15 +211,34 @@ def cmd_warmup(args) -> int:
     return 0
 
 
+def _check_report_runs(kind: str, runs: list) -> None:
+    """The run folders of ``report``: one for "reference", several for "convergence", each with the files the
+    report reads (timeseries.csv, options.toml; snapshots/mesh.npz for "reference").  ValueError naming the first
+    that is not."""
+    if kind == "reference" and len(runs) != 1:
+        raise ValueError(f"report reference takes exactly one run folder, got {len(runs)}")
+    if kind == "convergence" and len(runs) < 2:
+        raise ValueError(f"report convergence takes two or more run folders (mesh sizes), got {len(runs)}")
+    need = ("timeseries.csv", "options.toml") + (("snapshots/mesh.npz",) if kind == "reference" else ())
+    for r in runs:
+        missing = [f for f in need if not (Path(r) / f).is_file()]
+        if missing:
+            raise ValueError(f"run {str(r)!r} is not a run folder: no {missing[0]} (allowed: folders written by "
+                             "`dchfrac run`)")
+
+
 def cmd_report(args) -> int:
     from .studies.reference import convergence_report, reference_report
 
     bad = _writable_or_exit("report", args.out, "--out")
     if bad:
         return bad
+    try:            # before anything is written
+        _check_report_runs(args.kind, args.runs)
+    except ValueError as exc:
+        print(f"dchfrac report: {exc}", file=sys.stderr)
+        return 2
     if args.kind == "reference":
-        if len(args.runs) != 1:
-            raise SystemExit("dchfrac report reference takes exactly one run folder")
         res = reference_report(args.runs[0], args.out, args.paper)
         print(res["table"].to_string(index=False))
     else:
@@ -227,12 +268,16 @@ def cmd_balance(args) -> int:
 
 def cmd_animate(args) -> int:
     """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
+    from solver.output import check_writable_dir
+
     from .animate import animate_run, animation_writer, parse_fields
 
     run = Path(args.run)
     try:
         fields = parse_fields(args.fields)
         animation_writer(args.out)
+        if args.out is not None:
+            check_writable_dir(Path(args.out).resolve().parent, "--out folder")
         if not (run / "snapshots" / "mesh.npz").is_file():
             raise ValueError(f"run {str(run)!r}: not a run folder (no snapshots/mesh.npz)")
         if args.fps < 1:
@@ -251,9 +296,12 @@ def cmd_params(args) -> int:
     from solver.options import OPTION_UNITS, RunOptions, option_docs
     from solver.params import parameter_table
 
-    rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"], r["meaning"]) for r in parameter_table()]
-    _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C)",
-                ("name", "unit", "default", "allowed", "meaning"), rows)
+    rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"],
+             "" if r["plausible"] is None else "[{:g}, {:g}]".format(*r["plausible"]), r["meaning"])
+            for r in parameter_table()]
+    _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C; outside the "
+                "plausible range a run warns, --strict refuses)",
+                ("name", "unit", "default", "allowed", "plausible", "meaning"), rows)
     from solver.presets import preset_changes, preset_description, preset_names
 
     print()
@@ -364,8 +412,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--h", type=float, help="mesh size, mm")
     r.add_argument("--t-end", type=float, help="final time, s")
     r.add_argument("--quiet", action="store_true", help="no progress bar / progress lines")
+    r.add_argument("--strict", action="store_true",
+                   help="refuse implausible inputs (a likely unit slip, an unresolved length) instead of warning")
     r.add_argument("--force", action="store_true",
-                   help="run even when the estimated memory exceeds what is available (solver.budget)")
+                   help="overwrite an existing run folder --out, and run even when the estimated memory exceeds what "
+                        "is available (solver.budget)")
     r.set_defaults(func=cmd_run)
     an = sub.add_parser("animate", help="animate a run's snapshots (MP4 with ffmpeg, else GIF)",
                         description="Animate a run folder's snapshots: one panel per field, fixed colour scales, "

@@ -66,8 +66,8 @@ def test_options_that_do_not_fit_the_annulus_are_refused(params, opts, fragment)
 
 def test_interface_narrower_than_two_mesh_sizes_is_warned():
     assert check_run_inputs(Parameters(), RunOptions(h=1.0)) == []   # l_S = 4 mm, h = 1 mm: resolved
-    (w,) = check_run_inputs(Parameters(l_S=1.0), RunOptions(h=4.0))
-    assert "l_S = 1 mm is below 2 h = 8 mm" in w
+    (w,) = check_run_inputs(Parameters(l_S=1.0), RunOptions(h=2.0))
+    assert "l_S = 1 mm is below 2 h = 4 mm" in w
 
 
 def test_simulate_refuses_before_writing_the_run_folder(tmp_path):
@@ -127,7 +127,7 @@ def _config(tmp_path, text):
     (["--set", "stop_front_radius=100"], "r_outer = 53] mm"),
     (["--set", "seed=1.5"], "parameter seed=1.5"),
     (["--set", "cement"], "--set 'cement' is not allowed: name=value"),
-    (["--set", "cemnt=1.0"], "unknown parameter(s) ['cemnt']"),
+    (["--set", "cemnt=1.0"], "unknown parameter or run option 'cemnt' (did you mean 'cement'?)"),
     (["--h", "-1"], "run option h=-1.0"),
     (["--config", "{tmp}/missing.toml"], "missing.toml': file not found"),
     (["--config", "CONFIG:[parameters]\ncement = \n"], "not valid TOML"),

@@ -142,3 +142,26 @@ def test_a_record_without_a_file_list_still_needs_the_snapshots_it_was_classifie
     for p in (dirs[2] / "snapshots").iterdir():
         p.unlink()
     assert verify_run(dirs[2], rec) == ["snapshots/mesh.npz is missing"]
+
+
+def test_columns_compare_and_load_timeseries_name_the_damaged_runs(campaign, capsys):
+    """Issue #48: these skipped damaged runs silently (load_timeseries returned 5 of 6 series)."""
+    import warnings
+
+    from sweep.campaign.load import load_timeseries
+
+    spec, root, dirs = campaign
+    _damage(dirs)
+    capsys.readouterr()
+    assert cli_main(["columns", str(spec), "--results", str(root)]) == 0
+    err = capsys.readouterr().err
+    assert "3 damaged run(s)" in err and f"damaged {dirs[1].name} (eta_o=0.5): timeseries.csv is missing" in err
+    assert cli_main(["compare", str(spec), str(spec), "--results", str(root)]) == 0
+    assert f"damaged {dirs[1].name} (eta_o=0.5): timeseries.csv is missing" in capsys.readouterr().err
+    with pytest.raises(DamagedRunsError, match=f"{dirs[1].name} .*timeseries.csv: missing"):
+        load_timeseries(spec, root)
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        ts = load_timeseries(spec, root, allow_damaged=True)
+    assert any(dirs[1].name in str(x.message) for x in w)
+    assert dirs[1].name not in set(ts["key"])

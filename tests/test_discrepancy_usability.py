@@ -18,7 +18,7 @@ from sweep.discrepancy.spec import load_spec, spec_from_dict
 COND = "id,w_i,cement\nw35,35,1.2\nw50,50,\nw65,65,2.0\n"
 OBS = ("condition,observable,time,value,uncertainty\n"
        "w35,p_inj,0.1,120,2\nw35,p_inj,0.25,180,2\nw50,p_inj,0.1,150,2\nw50,front_radius_branches,0.2,14.5,0.3\n"
-       "w65,p_inj,0.1,160,2\nw65,regime,0.31,fracturing,0\n")
+       "w65,p_inj,0.1,160,2\nw65,regime,0.31,invasive_fracturing,0\n")
 
 
 def _folder(tmp_path, cond=COND, obs=OBS):
@@ -99,7 +99,7 @@ def test_init_writes_a_commented_spec_that_loads(tmp_path):
     assert (parse_options({}).noise.disc_error_fraction, parse_options({}).profile.likelihood) == (0.5, "weighted")
     for word in ("w35", "front_radius_branches (mm)", "p_inj (kPa)", "regime (label)", "[profile]", "rough_tol"):
         assert word in text
-    assert "'w65': 'fracturing at 0.31 s'" in text                               # each condition's observed label
+    assert "'w65': 'invasive_fracturing at 0.31 s'" in text                               # each condition's observed label
     parsed = tomllib.loads(text)
     for table, cls in OPTION_TABLES.items():                                      # every setting listed
         assert set(parsed[table]) == {f.name for f in dataclasses.fields(cls)}

@@ -26,7 +26,7 @@ import sys
 from pathlib import Path
 
 from sweep.campaign.logs import LogStream, end_logging, setup_logging
-from sweep.campaign.scheduler import BACKENDS
+from sweep.campaign.scheduler import BACKENDS, check_backend
 
 __all__ = ["add_campaign_commands", "main"]
 
@@ -68,6 +68,9 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                    help="wall-time limit per run, s (default: spec [run] timeout, else none); the run is killed")
     p.add_argument("--retries", type=int, default=None, help="extra attempts after a failure (default: spec or 0)")
     p.add_argument("--quiet", action="store_true", help="no progress lines (as -q)")
+    p.add_argument("--strict", action="store_true",
+                   help="refuse a grid with implausible inputs (a likely unit slip, an unresolved length) instead "
+                        "of warning (the dry run lists them)")
     p.set_defaults(func=cmd_run)
 
     for name, fn, helptext in (
@@ -157,6 +160,36 @@ def _input_warnings(spec) -> list[str]:
     return [f"{n} run(s): {w}" for w, n in counts.items()]
 
 
+def _check_environment() -> None:
+    """The environment variables the runs read (``solver.options.check_environment``): refused before any run
+    (UsageError), its warnings logged."""
+    from solver.options import check_environment
+
+    try:
+        for w in check_environment():
+            logging.getLogger("dchfrac.campaign").warning("warning: %s", w)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+
+
+def _name_damaged(source, results) -> None:
+    """A warning on stderr naming the damaged runs of the campaign ``source`` (spec TOML, or campaign folder
+    holding its spec.toml), as ``status`` names them; nothing when the spec is not at hand."""
+    from sweep.campaign.engine import plan_campaign
+    from sweep.campaign.spec import load_spec
+
+    p = Path(source)
+    folder = p.is_dir()
+    spec_file = p / "spec.toml" if folder else p
+    if not spec_file.is_file():
+        return
+    plan = plan_campaign(load_spec(spec_file), p.parent if folder else results)
+    if plan.damaged:
+        print(f"warning: campaign {plan.spec.name}: {len(plan.damaged)} damaged run(s) (files missing, changed or "
+              f"unreadable since their record was written), left out; `dchfrac campaign run` reruns them:\n"
+              + plan.damage_text(), file=sys.stderr)
+
+
 def _fmt_s(s: float) -> str:
     from sweep.campaign.engine import _hms
 
@@ -168,6 +201,12 @@ def cmd_run(args) -> int:
     from sweep.campaign.engine import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost, run_campaign
 
     spec = _spec(args)
+    _check_environment()
+    if args.strict:
+        warnings = _input_warnings(spec)
+        if warnings:
+            raise UsageError(f"--strict refuses: {warnings[0]}"
+                             + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
     if args.dry_run:
         jobs = args.jobs or int(spec.run.get("jobs", 1))
         est = estimate_cost(spec, args.results, jobs=jobs, retry_failed=args.retry_failed,
@@ -191,6 +230,10 @@ def cmd_run(args) -> int:
                   f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")
         return 0
     timeout = "spec" if args.timeout is None else args.timeout
+    try:                                        # before anything is run or written
+        check_backend(args.backend, args.scheduler)
+    except ValueError as e:
+        raise UsageError(str(e)) from None
     try:
         res = run_campaign(spec, args.results, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                            timeout=timeout, retries=args.retries, fail_fast=args.fail_fast,
@@ -335,6 +378,7 @@ def cmd_columns(args) -> int:
         if table is None or table.empty:
             print(f"campaign {spec.name}: no finished runs yet, so no table", file=sys.stderr)
             return 1
+        _name_damaged(args.spec, args.results)
         cols = column_dictionary(table)
     width = max(len(n) for n in cols["name"])
     uw = max(len(u) for u in cols["unit"])
@@ -355,6 +399,8 @@ def cmd_compare(args) -> int:
         except ValueError as e:
             raise UsageError(str(e)) from None
     columns = tuple(c.strip() for c in args.columns.split(",") if c.strip())
+    for source in (args.spec, args.other):
+        _name_damaged(source, args.results)
     try:
         c = compare_campaigns(args.spec, args.other, args.results, label=args.label, columns=columns)
     except (ValueError, FileNotFoundError) as e:

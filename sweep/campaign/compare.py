@@ -127,6 +127,9 @@ def _frame(source, root, label, columns):
 
     d = campaign_dir(source, root)
     table = load_campaign(source, root)
+    if table.empty:
+        raise ValueError(f"campaign {d.name!r}: no finished runs in {d} (no table.parquet or table.csv there, no "
+                         "run records): nothing to compare")
     missing = [c for c in (label, *columns) if c not in table.columns]
     if missing:
         raise ValueError(f"campaign {d.name!r} has no column {missing[0]!r}: `dchfrac campaign columns` lists them")

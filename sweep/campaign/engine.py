@@ -476,9 +476,11 @@ def run_campaign(
     code_hash = current_code_hash() if code_hash is None else code_hash
     sampler = samplers()[spec.sampler["kind"]]()
     store = ResultsStore(root, spec.name)
+    store.load_writers()          # before any run: the way out of a Ctrl-C writes the table without an import
     store.acquire_lock()
     try:
         store.clean_tmp()
+        check_same_campaign(spec, store, _keys(sampler.initial(spec)))
         _save_spec(spec, store)
         cfg = ExecConfig(root=str(Path(root).resolve()), campaign=spec.name, runner=runner_fn, timeout=timeout,
                          retries=retries, isolate=isolate, blas_threads=1 if jobs > 1 or backend != "loky" else None,
@@ -615,6 +617,22 @@ def sampler_status(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, tab
         return None
     table = build_table(spec, root, code_hash=code_hash) if table is None else table
     return sampler.state(spec, table)
+
+
+def check_same_campaign(spec: CampaignSpec, store: ResultsStore, keys) -> None:
+    """Refuse a grid spec that would take over another campaign of the same name: the folder holds a spec.toml
+    of other text and runs that this spec's grid (run keys ``keys``) does not hold, which its table and spec
+    copy would drop.  A spec that keeps every stored run (an extended grid, an edited comment) goes on.  ValueError
+    naming the folder, the count and what to do."""
+    old = store.dir / "spec.toml"
+    src = Path(spec.source)
+    if spec.sampler["kind"] != "grid" or not old.is_file() or not src.is_file() or old.read_text() == src.read_text():
+        return
+    lost = set(store.records()) - set(keys)
+    if lost:
+        raise ValueError(f"campaign name {spec.name!r} must be new or name the same campaign: {store.dir} holds "
+                         f"{len(lost)} run(s) of another spec ({old}) outside this spec's grid, which its table would "
+                         f"drop (allowed: another name in {spec.source}, or another --results folder)")
 
 
 def _save_spec(spec: CampaignSpec, store: ResultsStore) -> None:

@@ -107,27 +107,54 @@ def _swept_names(d: Path, table) -> list[str]:
     return []
 
 
-def load_timeseries(source, root="results", *, status: str | None = None):
+def _damaged_series(d: Path, damaged: list, allow_damaged: bool) -> None:
+    """Name the runs of campaign ``d`` whose time series is damaged: DamagedRunsError, or with
+    ``allow_damaged`` a warning (they are left out)."""
+    if not damaged:
+        return
+    msg = (f"campaign {d.name}: {len(damaged)} run(s) with a damaged time series; `dchfrac campaign run SPEC` "
+           "reruns them: " + "; ".join(damaged))
+    if not allow_damaged:
+        from sweep.campaign.engine import DamagedRunsError
+
+        raise DamagedRunsError(msg)
+    import warnings
+
+    warnings.warn(msg + " (left out)", stacklevel=3)
+
+
+def load_timeseries(source, root="results", *, status: str | None = None, allow_damaged: bool = False):
     """The time series of every run of a campaign in one long frame (pandas DataFrame).
 
     source : as for :func:`load_campaign`. status : keep only runs with this status ("ok", "failed"),
     None keeps every run that wrote a time series (a failed run's series ends where it failed).
     Columns: ``key``, the swept values (named as the spec's axes), ``status``, then the columns of
     ``timeseries.csv`` (t in s, p_inj in kPa, radii in mm, ...; ``sweep.campaign.columns.timeseries_dictionary``).
+    A run whose series is unreadable, or an "ok" run without one, is damaged: ``sweep.campaign.engine.DamagedRunsError``
+    names them all, unless ``allow_damaged`` (then they are left out with a warning naming them).
     """
     import pandas as pd
 
     table = load_campaign(source, root)
     d = Path(table.attrs["campaign_dir"])
     swept = _swept_names(d, table)
-    frames = []
+    frames, damaged = [], []
     for _, row in table.iterrows():
         f = d / str(row["run_dir"]) / "timeseries.csv"
-        if (status is not None and row["status"] != status) or not f.is_file():
+        if status is not None and row["status"] != status:
             continue
-        ts = pd.read_csv(f)
+        if not f.is_file():
+            if row["status"] == "ok":
+                damaged.append(f"{row['key']} ({f}: missing)")
+            continue
+        try:
+            ts = pd.read_csv(f)
+        except (ValueError, OSError, pd.errors.ParserError) as exc:    # EmptyDataError is a ValueError
+            damaged.append(f"{row['key']} ({f}: {type(exc).__name__}: {exc})")
+            continue
         keys = {"key": row["key"], **{n: row[n] for n in swept}, "status": row["status"]}
         frames.append(ts.assign(**keys)[[*keys, *ts.columns]])
+    _damaged_series(d, damaged, allow_damaged)
     if not frames:
         return pd.DataFrame(columns=["key", *swept, "status", "t"])
     out = pd.concat(frames, ignore_index=True)

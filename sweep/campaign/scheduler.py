@@ -357,6 +357,30 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
 # ---------------------------------------------------------------------------
 # backends
 # ---------------------------------------------------------------------------
+def check_backend(backend: str, scheduler: str | None, timeout: float = 10.0) -> None:
+    """Check, before anything is run or written, that ``backend`` can run: its package imports and a dask
+    scheduler address answers within ``timeout`` s.  ValueError naming the backend (and address) otherwise."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend={backend!r} not allowed: one of {BACKENDS}")
+    if backend == "loky":
+        if scheduler:
+            raise ValueError(f"--scheduler {scheduler!r} is only meaningful with backend dask or ray")
+        return
+    package = {"dask": "dask.distributed", "ray": "ray"}[backend]
+    try:
+        __import__(package)
+    except ImportError as e:
+        raise ValueError(f"--backend {backend} needs {package} (pip install 'dchfrac[{backend}]'): {e}") from None
+    if backend == "dask" and scheduler:
+        from dask.distributed import Client
+
+        try:
+            Client(scheduler, timeout=timeout).close()
+        except Exception as e:  # noqa: BLE001 - OSError, TimeoutError, CommClosedError...: one line naming it
+            raise ValueError(f"--scheduler {scheduler!r}: no dask scheduler answers within {timeout:g} s "
+                             f"({type(e).__name__}: {e})") from None
+
+
 @contextlib.contextmanager
 def _backend(backend: str, jobs: int, scheduler: str | None):
     """Yield n_jobs for joblib inside the backend's parallel_config."""

@@ -109,6 +109,16 @@ def resolve_runner(ref: str):
         raise ValueError(f"runner={ref!r} cannot be imported: {e}") from None
     if not callable(obj):
         raise ValueError(f"runner={ref!r} is not callable")
+    import inspect
+
+    try:       # a runner is called as runner(params, options, run_dir) (sweep.campaign.scheduler)
+        inspect.signature(obj).bind({}, {}, "run_dir")
+    except (TypeError, ValueError):
+        raise ValueError(f"runner={ref!r} is not a runner: a Python function runner(params, options, run_dir) "
+                         "(sweep.campaign.scheduler)") from None
+    if not inspect.isfunction(obj):
+        raise ValueError(f"runner={ref!r} is a {type(obj).__name__}, not a runner: a Python function "
+                         "runner(params, options, run_dir) (sweep.campaign.scheduler)")
     return obj
 
 
@@ -127,6 +137,8 @@ _BLOCK_KEYS = {"label", "base", "options", "axes", "mode", "zip"}
 _RUN_KEYS = {"timeout", "retries", "runner", "jobs", "isolate", "max_runs"}
 # grids above this many runs are refused (quickly, before expansion) unless [run] max_runs or --max-runs allows them
 DEFAULT_MAX_RUNS = 10_000
+# and no grid above this many, whatever max_runs says: its plan (each point validated) would take hours
+MAX_RUNS_CEILING = 100_000
 _MODES = ("cross", "zip")
 
 
@@ -157,10 +169,15 @@ def _value_key(v):
     """Hashable identity of an axis value: numbers by value (1 == 1.0), others by their JSON text."""
     import json
 
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > 2**1023:
+        return v                  # beyond any float: its own identity (refused later as a parameter value)
     return float(v) if is_number(v) else json.dumps(v, sort_keys=True, default=str)
 
 
 def _too_many(where: str, n: int, limit: int):
+    if n > MAX_RUNS_CEILING:
+        _fail(where, f"{n} runs exceed the limit max_runs = {limit} and the ceiling {MAX_RUNS_CEILING} of any grid "
+                     "(each point is planned on its own: split it into campaigns, or sample it: [sampler])")
     _fail(where, f"{n} runs exceed the limit max_runs = {limit} (allowed: at most max_runs; raise it with "
                  f"[run] max_runs = {n} in the spec or --max-runs {n})")
 
@@ -280,6 +297,8 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int
         if k not in ofields:
             _fail(f"{w}options.{k}", f"unknown run option {k!r}; allowed: {sorted(ofields)}")
         options[k] = v
+    if not isinstance(tbl.get("axes", {}), dict):
+        _fail(f"{w}axes", f"expected a table, got {tbl.get('axes')!r}")
     axes_tbl = dict(tbl.get("axes", {}))
     mode = tbl.get("mode", axes_tbl.pop("mode", "cross"))
     zips = tbl.get("zip", axes_tbl.pop("zip", []))
@@ -420,6 +439,8 @@ def _check_derived(derived: dict, top, blocks: tuple, pfields) -> None:
             names = expression_names(expr)
         except SyntaxError as e:
             _fail(f"derived.{k}", f"invalid expression {expr!r}: {e.msg}")
+        except (ValueError, RecursionError, MemoryError) as e:
+            _fail(f"derived.{k}", f"invalid expression: {str(e) or type(e).__name__}")
         bad = sorted(names - set(pfields))
         if bad:
             _fail(f"derived.{k}", f"unknown name {bad[0]!r} in {expr!r}; names must be parameters")
@@ -522,6 +543,10 @@ def _check_run(run: dict) -> None:
 def _check_max_runs(where: str, n) -> int:
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         _fail(where, f"max_runs={n!r} must be an integer >= 1 (the largest grid allowed)")
+    if n > MAX_RUNS_CEILING:
+        _fail(where, f"max_runs={n} must be at most {MAX_RUNS_CEILING} (each point is planned and validated on its "
+                     f"own, about 2 ms: a larger grid would take hours before its first run; split it into "
+                     "campaigns, or sample it: [sampler])")
     return n
 
 
@@ -535,8 +560,8 @@ def load_spec(path, max_runs: int | None = None) -> CampaignSpec:
         raise SpecError(f"campaign spec {str(p)!r} not found")
     try:
         d = read_toml(p)
-    except TOMLDecodeError as e:
-        raise SpecError(f"{p}: invalid TOML: {e}") from None
+    except TOMLDecodeError as e:              # its message names the file
+        raise SpecError(str(e)) from None
     return spec_from_dict(d, source=str(p), max_runs=max_runs)
 
 

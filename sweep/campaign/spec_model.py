@@ -126,24 +126,53 @@ _BINOPS = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: l
            ast.Div: lambda a, b: a / b, ast.Pow: lambda a, b: a ** b}
 
 
-def expression_names(expr: str) -> set[str]:
-    """The names a ``[derived]`` expression reads (its functions excluded)."""
+#: bounds of a ``[derived]`` expression: its length (characters) and its syntax-tree size.  Its numbers are
+#: floats (a 64-bit float overflows at once where Python's integers would grow without bound: 9**9**9)
+MAX_EXPRESSION_CHARS = 500
+MAX_EXPRESSION_NODES = 200
+
+
+def _parse_bounded(expr: str):
+    """The syntax tree of ``expr``; ValueError when it exceeds the bounds above."""
+    if len(expr) > MAX_EXPRESSION_CHARS:
+        raise ValueError(f"expression of {len(expr)} characters is too long (allowed: at most "
+                         f"{MAX_EXPRESSION_CHARS})")
     tree = ast.parse(expr, mode="eval")
+    n = sum(1 for _ in ast.walk(tree))
+    if n > MAX_EXPRESSION_NODES:
+        raise ValueError(f"expression of {n} syntax nodes is too large (allowed: at most {MAX_EXPRESSION_NODES})")
+    return tree
+
+
+def expression_names(expr: str) -> set[str]:
+    """The names a ``[derived]`` expression reads (its functions excluded); SyntaxError or ValueError (too
+    large) when it is not one."""
+    tree = _parse_bounded(expr)
     return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id not in _FUNCS}
 
 
+def _float(v, expr: str) -> float:
+    try:
+        return float(v)
+    except OverflowError:
+        raise ValueError(f"number {str(v)[:20]}... in expression {expr!r} is too large for a float") from None
+
+
 def evaluate_expression(expr: str, env: Mapping[str, float]) -> float:
-    """Evaluate an arithmetic expression over ``env`` (numbers only; no attribute access, no calls
-    except sqrt, exp, log, log10, abs, min, max). Raises ValueError naming the unknown name."""
+    """Evaluate an arithmetic expression over ``env`` (numbers only, as floats; no attribute access, no calls
+    except sqrt, exp, log, log10, abs, min, max; bounded size).  Raises ValueError naming the unknown name, an
+    overflow, a division by zero or a non-finite result."""
     def ev(node):
         if isinstance(node, ast.Expression):
             return ev(node.body)
         if isinstance(node, ast.Constant) and is_number(node.value):
-            return node.value
+            return _float(node.value, expr)
         if isinstance(node, ast.Name):
             if node.id not in env:
                 raise ValueError(f"unknown name {node.id!r} in expression {expr!r}")
-            return env[node.id]
+            if not is_number(env[node.id]):
+                raise ValueError(f"name {node.id!r} = {env[node.id]!r} in expression {expr!r} is not a number")
+            return _float(env[node.id], expr)
         if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
             return _BINOPS[type(node.op)](ev(node.left), ev(node.right))
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
@@ -153,7 +182,15 @@ def evaluate_expression(expr: str, env: Mapping[str, float]) -> float:
             return _FUNCS[node.func.id](*[ev(a) for a in node.args])
         raise ValueError(f"unsupported syntax {ast.dump(node)[:60]} in expression {expr!r}")
 
-    return float(ev(ast.parse(expr, mode="eval")))
+    try:
+        v = float(ev(_parse_bounded(expr)))
+    except OverflowError:
+        raise ValueError(f"expression {expr!r} overflows a float (allowed: a finite number)") from None
+    except ZeroDivisionError:
+        raise ValueError(f"expression {expr!r} divides by zero") from None
+    if not math.isfinite(v):
+        raise ValueError(f"expression {expr!r} gives {v} (allowed: a finite number)")
+    return v
 
 
 # ---------------------------------------------------------------------------

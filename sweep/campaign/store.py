@@ -278,6 +278,15 @@ class ResultsStore:
                          for v in df["run_dir"]]
         return df
 
+    @staticmethod
+    def load_writers() -> None:
+        """Import what :meth:`write_table` needs (pandas, pyarrow.parquet: seconds on a loaded machine) now, so
+        that the table written on the way out of an interrupted campaign (Ctrl-C) imports nothing: an import cut
+        by the interrupt, then made again on the way out, was what made an interrupted campaign slow to exit."""
+        import pyarrow.parquet  # noqa: F401
+
+        import sweep.campaign.columns  # noqa: F401
+
     def _write_parquet(self, typed, dictionary) -> None:
         import pyarrow as pa
         import pyarrow.parquet as pq

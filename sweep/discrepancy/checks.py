@@ -18,24 +18,55 @@ from __future__ import annotations
 
 from .data import LENGTH_SIGMAS
 
-__all__ = ["check_data_against_model", "PRESSURE_SCALE_FACTOR"]
+__all__ = ["check_data_against_model", "spec_models", "PRESSURE_SCALE_FACTOR"]
 
 # measured p_inj above this many E (kPa) is refused as a unit error (the model's p_inj: below ~4 E)
 PRESSURE_SCALE_FACTOR = 100.0
 
 
-def check_data_against_model(data, spec, forwards=()) -> None:
+def check_data_against_model(data, spec, forwards=(), strict: bool = False) -> list[str]:
     """Raise ValueError if ``data`` (MeasuredData) cannot be compared with ``spec`` (DiscrepancySpec) run
-    by ``forwards`` (forward models: the workflow's and the fine check models); see the module docstring."""
+    by ``forwards`` (forward models: the workflow's and the fine check models); see the module docstring.
+
+    Returns the warnings of implausible inputs (a likely unit slip, a length the mesh does not resolve:
+    ``solver.options.check_run_inputs``), each once naming the conditions it concerns; with ``strict`` the
+    first of them is raised instead.  ``discrepancy init`` and ``discrepancy run`` both call this (init with
+    :func:`spec_models`)."""
     _check_holdout(data, spec)
     params = _condition_parameters(data, spec)
     solver_options = [f.options for f in forwards if _is_run_options(getattr(f, "options", None))]
-    _check_runnable(params, solver_options)
+    warnings = _check_runnable(params, solver_options)
     _check_times(data, solver_options)
     _check_pressure_scale(data, params)
     _check_front_radii(data, params)
     for f in forwards:
         _check_regime_labels(data, getattr(f, "regime_labels", None))
+    if strict and warnings:
+        raise ValueError(f"--strict refuses: {warnings[0]}"
+                         + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
+    return warnings
+
+
+class _SpecModel:
+    """What the checks read of a solver forward model: its run options and regime labels (no run, no cache)."""
+
+    def __init__(self, options: dict):
+        from solver import RunOptions
+        from sweep.regimes.classify import REGIMES
+
+        self.options = RunOptions.from_dict(options)
+        self.regime_labels = REGIMES
+
+
+def spec_models(spec) -> list:
+    """Stand-ins of the solver forward models ``discrepancy run`` makes of ``spec`` (its ``[options]`` and each
+    fine check model's), for :func:`check_data_against_model` before any forward model exists."""
+    from .spec import fine_options
+
+    try:
+        return [_SpecModel(o) for o in [spec.options, *fine_options(spec)]]
+    except ValueError as exc:
+        raise ValueError(f"discrepancy spec [options]: {exc}") from None
 
 
 def _is_run_options(o) -> bool:
@@ -68,16 +99,24 @@ def _condition_parameters(data, spec) -> dict:
     return out
 
 
-def _check_runnable(params: dict, solver_options: list) -> None:
+def _check_runnable(params: dict, solver_options: list) -> list[str]:
+    """Every condition runs with every solver model's options; returns the warnings, each once with the
+    conditions it concerns."""
     from solver.options import check_run_inputs
 
+    seen: dict[str, list] = {}
     for o in solver_options:
         for cid, p in params.items():
             try:
-                check_run_inputs(p, o)
+                ws = check_run_inputs(p, o)
             except ValueError as exc:
                 raise ValueError(f"condition {cid!r} (r_inner = {p.r_inner:g}, r_outer = {p.r_outer:g} mm) cannot "
                                  f"run with the spec's options: {exc}") from None
+            for w in ws:
+                seen.setdefault(w, [])
+                if cid not in seen[w]:
+                    seen[w].append(cid)
+    return [f"condition(s) {cids}: {w}" for w, cids in seen.items()]
 
 
 def _check_times(data, solver_options: list) -> None:

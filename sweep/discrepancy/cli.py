@@ -5,8 +5,12 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+from pathlib import Path
 
-__all__ = ["add_discrepancy_commands", "main", "show_progress"]
+__all__ = ["add_discrepancy_commands", "main", "show_progress", "EXIT_INCONCLUSIVE"]
+
+#: exit code of ``discrepancy run`` when it draws no verdict (forward runs that did not reach the data)
+EXIT_INCONCLUSIVE = 3
 
 
 def show_progress(quiet: bool = False) -> None:
@@ -37,32 +41,43 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     r.add_argument("--cache", default=None, help="forward-run cache folder (default: OUT/cache)")
     r.add_argument("--no-figures", action="store_true")
     r.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    r.add_argument("--strict", action="store_true",
+                   help="refuse implausible inputs (a likely unit slip, an unresolved length) instead of warning")
     r.set_defaults(func=cmd_run)
     i = sub.add_parser("init", help="write a commented starting SPEC from a measured-data folder")
     i.add_argument("--measured", required=True, help="measured-data folder (conditions.csv, observations.csv)")
     i.add_argument("--out", default="discrepancy_spec.toml", help="SPEC file to write (default: %(default)s)")
     i.add_argument("--force", action="store_true", help="overwrite an existing SPEC file")
+    i.add_argument("--strict", action="store_true",
+                   help="refuse implausible inputs (e.g. observation times in ms: an implausible t_end)")
     i.set_defaults(func=cmd_init)
     return d
 
 
 def cmd_init(args) -> int:
     """Validate the measured data and write a starting SPEC (exit 2 with one line on bad input)."""
+    from solver.output import check_writable_dir
+
     from .init_spec import write_starting_spec
 
     try:
-        path = write_starting_spec(args.measured, args.out, force=args.force)
+        check_writable_dir(Path(args.out).parent, "--out folder")
+        path, warnings = write_starting_spec(args.measured, args.out, force=args.force,
+                                             strict=getattr(args, "strict", False))
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
+    for w in warnings:
+        print(f"dchfrac discrepancy: warning: {w}", file=sys.stderr)
     print(f"wrote {path}: edit it, then dchfrac discrepancy run --measured {args.measured} --model {path} --out OUT")
     return 0
 
 
 def cmd_run(args) -> int:
-    from pathlib import Path
-
+    """Run the workflow: exit 0 with a verdict, 2 on bad input (one line, before any forward run),
+    EXIT_INCONCLUSIVE (3) when the forward runs did not reach the observation times (no verdict)."""
     from solver import RunOptions
+    from solver.options import check_environment
     from solver.output import check_writable_dir
 
     from .checks import check_data_against_model
@@ -81,12 +96,17 @@ def cmd_run(args) -> int:
         check_writable_dir(out, "--out")
         check_writable_dir(cache, "--cache")
         jobs = args.jobs if args.jobs is not None else spec.fit.n_jobs
+        if args.jobs is not None and not 1 <= args.jobs <= 256:
+            raise ValueError(f"--jobs {args.jobs} is not allowed: an integer in [1, 256] (as [fit] n_jobs)")
         fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
         fine = fine_forwards(spec, cache, jobs)      # one per mesh realization ([discretization] mesh_seeds)
-        check_data_against_model(data, spec, [fwd, *fine])
+        warnings = check_data_against_model(data, spec, [fwd, *fine], strict=getattr(args, "strict", False))
+        warnings += check_environment()
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
+    for w in warnings:
+        print(f"dchfrac discrepancy: warning: {w}", file=sys.stderr)
     if not getattr(args, "logging_configured", False):  # `dchfrac -v/-q discrepancy ...` set it already
         show_progress(args.quiet)
     try:
@@ -94,6 +114,13 @@ def cmd_run(args) -> int:
     except ObservableUnavailable as exc:       # the solver's time series lacks an observable's column
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
         return 2
+    if rep["verdict"] == "inconclusive":       # a verdict never rests on runs that did not reach the data
+        from .workflow import failed_text
+
+        for stage, failed in rep["failed_points"].items():
+            print(f"dchfrac discrepancy: no verdict: at the {stage} the forward runs did not reach "
+                  f"{failed_text(failed)}; report in {out / 'report.md'}", file=sys.stderr)
+        return EXIT_INCONCLUSIVE
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
                                           f"{rep['strength_interval']}"
                                           + (f" ({ROUGH_NOTE})" if rep.get("strength_interval_rough") else "")

@@ -12,7 +12,7 @@ Format (a folder, units mm, s, kPa)::
                                  crack_length mm; regime a label)
                       time       s (finite, >= 0)
                       value      in the observable's unit; for ``regime`` a label
-                                 (e.g. "fracturing"), its time the moment of classification
+                                 (e.g. "invasive_fracturing", one of sweep.regimes.classify.REGIMES), its time the moment of classification
                       uncertainty one standard deviation, same unit as value (> 0; ignored
                                  and may be 0 for regime)
 

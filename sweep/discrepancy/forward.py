@@ -148,8 +148,7 @@ class SolverForward(ForwardModel):
         self.base = dict(base)
         Parameters.from_dict(self.base)  # validate now
         self.options = options.replace(snapshot_times=(options.t_end,), write_xdmf=False)
-        self.cache_dir = Path(cache_dir)
-        self.cache_dir.mkdir(parents=True, exist_ok=True)
+        self.cache_dir = Path(cache_dir)      # made at the first run: a refused input leaves no folder
         self.n_jobs = int(n_jobs)
         self.n_runs = 0
 
@@ -201,6 +200,7 @@ class SolverForward(ForwardModel):
                 todo[str(rd)] = {k: v for k, v in self._pdict(o).items() if v is not None}
         if todo:
             self.n_runs += len(todo)
+            self.cache_dir.mkdir(parents=True, exist_ok=True)
             od = self.options.to_dict()
             if self.n_jobs != 1 and len(todo) > 1:
                 from joblib import Parallel, delayed, parallel_config

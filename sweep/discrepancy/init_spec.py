@@ -129,20 +129,28 @@ def starting_spec(data: MeasuredData, folder) -> str:
     return "\n".join(_header(data, Path(folder)) + _model_tables(data) + _option_tables())
 
 
-def write_starting_spec(measured, out, force: bool = False) -> Path:
+def write_starting_spec(measured, out, force: bool = False, strict: bool = False) -> tuple[Path, list[str]]:
     """Validate the measured-data folder ``measured``, write its starting SPEC to ``out`` (atomically; an
-    existing file only with ``force``) and check that it loads.  Returns the path."""
+    existing file only with ``force``) and check that it loads and that the data pass the checks
+    ``discrepancy run`` makes with it (:func:`.checks.check_data_against_model`: the same validator).  Returns
+    the path and the warnings (implausible inputs, e.g. observation times in ms making t_end implausible);
+    with ``strict`` a warning is refused."""
     from solver.output import atomic_write_text
 
+    from .checks import check_data_against_model, spec_models
     from .spec import spec_from_dict
 
     out = Path(out)
     if out.exists() and not force:
         raise ValueError(f"{out} exists (use --force to overwrite it)")
+    if out.is_dir():
+        raise ValueError(f"--out {str(out)!r} is a folder (allowed: a SPEC file name, e.g. spec.toml)")
     data = load_measured(measured)
     text = starting_spec(data, measured)
     import tomllib
 
-    spec_from_dict(tomllib.loads(text))          # what is written loads as written
+    spec = spec_from_dict(tomllib.loads(text))          # what is written loads as written
+    warnings = check_data_against_model(data, spec, spec_models(spec), strict=strict)
+    out.parent.mkdir(parents=True, exist_ok=True)     # its writability was checked before any work
     atomic_write_text(out, text)
-    return out
+    return out, warnings

@@ -62,7 +62,7 @@ REGISTRY: dict[str, Observable] = {o.name: o for o in (
     Observable("crack_length", "mm", "curve", ("open_tip_radius",), _crack_length, 0.3,
                "length of the open crack beyond the inner radius (0 before initiation)"),
     Observable("regime", "label", "label", (), None, None,
-               "regime label of the last snapshot (sweep.regimes.classify), e.g. fracturing"),
+               "regime label of the last snapshot (sweep.regimes.classify.REGIMES), e.g. invasive_fracturing"),
 )}
 
 CURVES = tuple(n for n, o in REGISTRY.items() if o.kind == "curve")

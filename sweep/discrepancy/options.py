@@ -228,7 +228,10 @@ def _reject_workflow_table(wf: dict) -> None:
 def parse_options(d: dict) -> WorkflowOptions:
     """The four option tables of a parsed SPEC ``d`` (other tables ignored here), validated."""
     if "workflow" in d:
-        _reject_workflow_table(dict(d["workflow"] or {}))
+        if not isinstance(d["workflow"], dict):
+            raise ValueError(f"discrepancy spec: [workflow] = {d['workflow']!r} is not allowed: its settings moved to "
+                             f"the tables {sorted(OPTION_TABLES)}")
+        _reject_workflow_table(dict(d["workflow"]))
     parts = {}
     for name, cls in OPTION_TABLES.items():
         t = d.get(name, {})

@@ -166,6 +166,15 @@ class Problem:
         nanr = self.spec.fit.nan_residual
         return [self.standardize(self.y[mask] - self.model_vector(pred, mask), mask, nanr) for pred in preds]
 
+    def failed_points(self, params, x, ids) -> dict:
+        """{condition: {"failed": n, "points": N}} of the conditions ``ids`` at x: the observation points the
+        forward runs did not reach (no prediction, a run that failed or stopped early), for those with any."""
+        mask = self.mask(ids)
+        miss = ~np.isfinite(self.model_vector(self.prediction(params, x, ids), mask))
+        cond = self.cond[mask]
+        return {cid: {"failed": int(miss[cond == cid].sum()), "points": int((cond == cid).sum())}
+                for cid in ids if miss[cond == cid].any()}
+
     def mask(self, ids) -> np.ndarray:
         """Curve rows of the conditions ``ids``."""
         return np.isin(self.cond, list(ids))

@@ -77,7 +77,8 @@ def build_report(run, forward) -> dict:
               "residuals_systematic_after": bool(run.loc["systematic"] if named_ok else run.loc0["systematic"]),
               "rounds": run.rounds, "forward_runs": int(getattr(forward, "n_runs", 0)),
               "forward_runs_by_stage": run.ledger.stages, **_noise_fields(run),
-              "profiles": run.profiles, "partial_explanation": run.partial, "rivals": run.rivals}
+              "profiles": run.profiles, "partial_explanation": run.partial, "rivals": run.rivals,
+              "failed_points": run.failed_points}
     if run.emulated is not None:
         report["emulated_refits"] = run.emulated.summary()
     report["code"] = code_provenance()
@@ -222,6 +223,12 @@ def _verdict_lines(report: dict) -> list[str]:
 def _caveat_lines(report: dict) -> list[str]:
     """Partial explanation, tie, not identifiable, refresh convergence: what qualifies the verdict."""
     L = []
+    for stage, failed in (report.get("failed_points") or {}).items():
+        L += [f"No verdict: at the {stage} the forward runs did not reach every observation time ("
+              + "; ".join(f"condition `{cid}`: {v['failed']} of {v['points']} points"
+                          + (", no successful run" if v["failed"] == v["points"] else "") for cid, v in failed.items())
+              + "). A verdict needs runs that reach the observation times: check these conditions' parameters "
+              "(units, ranges) and the run options (t_end, max_wall_time).", ""]
     pe = report.get("partial_explanation")
     if pe:
         eff = ", ".join(f"`{a['effect']}` {a['strength']:.4g} (95 % interval {_f(a['strength_interval'])})" for a in pe["effects"])

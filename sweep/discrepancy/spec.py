@@ -251,6 +251,46 @@ def _check_alternatives(cal: tuple, alt: tuple) -> None:
             _bad("alternative.name", n, "a parameter that is not calibrated ([[calibrate]] already fits it)")
 
 
+# the kind of each table and of the keys read before their own checks: (table, key or None, kind, allowed)
+_SHAPES = (("baseline", None, dict, "a table"), ("candidates", None, dict, "a table"),
+           ("holdout", None, dict, "a table"), ("options", None, dict, "a table of solver.RunOptions"),
+           ("discretization", None, dict, "a table of solver.RunOptions and mesh_seeds"),
+           ("calibrate", None, list, "an array of tables [[calibrate]]"),
+           ("alternative", None, list, "an array of tables [[alternative]]"),
+           ("baseline", "effects_off", list, "a list of effect names"),
+           ("candidates", "effects", list, "a list of effect names"),
+           ("candidates", "scaling", dict, "a table {effect = scaling}"),
+           ("candidates", "upper", dict, "a table {effect = number}"),
+           ("candidates", "probe", dict, "a table {effect = number}"))
+
+
+def _check_shapes(d: dict) -> None:
+    """Each table of ``d`` and the keys read before their own checks are of their kind (ValueError naming
+    them); the entries of [[calibrate]] and [[alternative]] are tables with numeric bounds, effect lists hold
+    names, and the upper / probe strengths are numbers."""
+    for table, key, kind, allowed in _SHAPES:
+        t = d.get(table)
+        present = table in d if key is None else isinstance(t, dict) and key in t
+        v = t if key is None else (t.get(key) if isinstance(t, dict) else None)
+        if present and not isinstance(v, kind):
+            _bad(table if key is None else f"{table}.{key}", v, allowed)
+    for table in ("calibrate", "alternative"):
+        for c in d.get(table, []):
+            if not isinstance(c, dict):
+                _bad(table, c, f"a table [[{table}]] with name, lower, upper")
+            for k in ("lower", "upper", "initial"):
+                if k in c and (isinstance(c[k], bool) or not isinstance(c[k], (int, float))):
+                    _bad(f"{table}.{k}", c[k], "a number")
+    for table, key in (("baseline", "effects_off"), ("candidates", "effects")):
+        for e in d.get(table, {}).get(key, []):
+            if not isinstance(e, str):
+                _bad(f"{table}.{key}", e, "an effect name (text)")
+    for key in ("upper", "probe"):
+        for k, v in d.get("candidates", {}).get(key, {}).items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                _bad(f"candidates.{key}.{k}", v, "a number")
+
+
 def spec_from_dict(d: dict) -> DiscrepancySpec:
     """Validate a parsed TOML spec (see the module docstring)."""
     from solver import Parameters, RunOptions
@@ -260,6 +300,7 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     extra = sorted(set(d) - known - {"workflow"})      # [workflow]: refused by parse_options, naming its keys
     if extra:
         _bad("tables", extra, f"only {sorted(known)}")
+    _check_shapes(d)
     base = dict(d.get("baseline", {}))
     off = tuple(base.pop("effects_off", ()))
     for e in off:
@@ -287,8 +328,12 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     for k in list(upper) + list(probe):
         get_effect(k)
     ho = d.get("holdout", {})
+    if not isinstance(ho, dict):
+        _bad("holdout", ho, "a table: ids = [...] or every = n")
     ids = ho.get("ids")
     every = ho.get("every")
+    if ids is not None and (not isinstance(ids, list) or not all(isinstance(i, str) for i in ids)):
+        _bad("holdout.ids", ids, "a list of condition ids (text), e.g. [\"w65\"]")
     if ids is None and every is None:
         _bad("holdout", ho, "ids = [...] or every = n (whole conditions are held out)")
     if every is not None and (not isinstance(every, int) or every < 2):

@@ -35,7 +35,9 @@ log = logging.getLogger("dchfrac.discrepancy")
 
 __all__ = ["run_workflow", "VERDICTS", "Problem", "Fit"]
 
-VERDICTS = ("named", "tie", "no_missing_effect", "unexplained_discrepancy")
+#: "inconclusive": the forward runs of a fit the verdict rests on did not reach every observation time (a
+#: failed or short run): no verdict is drawn from placeholder residuals (:func:`check_reached`)
+VERDICTS = ("named", "tie", "no_missing_effect", "unexplained_discrepancy", "inconclusive")
 
 
 @dataclass
@@ -68,6 +70,7 @@ class WorkflowRun:
     rivals: list = field(default_factory=list)
     partial: dict | None = None
     emulated: EmulatedRefits | None = None
+    failed_points: dict = field(default_factory=dict)
 
     @property
     def spec(self) -> DiscrepancySpec:
@@ -222,6 +225,28 @@ def search(run: WorkflowRun) -> None:
         run.verdict = "named" if run.accepted else _unnamed(run)
 
 
+def check_reached(run: WorkflowRun, fit: Fit, stage: str) -> bool:
+    """Did the forward runs of ``fit`` reach every observation time of every condition (training and held
+    out)?  The fit treats a point without a prediction with the ``[fit] nan_residual`` penalty, which steers it
+    away from parameters that fail; a verdict drawn from such placeholders would be a number the model never
+    gave.  Otherwise the failed points are recorded by condition under ``stage``, the verdict is
+    "inconclusive" and False is returned."""
+    failed = {**run.problem.failed_points(fit.params, fit.x, run.train),
+              **run.problem.failed_points(fit.params, fit.x, run.holdout)}
+    if not failed:
+        return True
+    run.failed_points[stage] = failed
+    run.verdict = "inconclusive"
+    log.warning("verdict inconclusive: at the %s the forward runs did not reach %s", stage, failed_text(failed))
+    return False
+
+
+def failed_text(failed: dict) -> str:
+    """One line naming the failed points of each condition ({cid: {"failed", "points"}})."""
+    return "; ".join(f"condition {cid!r}: {v['failed']} of {v['points']} observation points"
+                     + (" (no successful run)" if v["failed"] == v["points"] else "") for cid, v in failed.items())
+
+
 def _unnamed(run: WorkflowRun) -> str:
     return "unexplained_discrepancy" if run.loc0["systematic"] else "no_missing_effect"
 
@@ -372,8 +397,11 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     check_data_against_model(data, spec, [forward, *realizations(fine_forward)])  # before any forward run
     run = prepare(data, spec, forward, fine_forward)
     calibrate(run)
-    search(run)
-    finalize(run)
+    if check_reached(run, run.fit0, "calibrated baseline"):
+        search(run)
+        finalize(run)
+        if run.verdict == "named":
+            check_reached(run, run.current, "named model")
     named = run.accepted[0] if run.accepted and run.verdict == "named" else None
     log.info("verdict %s%s", run.verdict, f": {named['effect']} = {named['strength']:.5g} "
              f"{named['strength_interval']}" if named else "")
