@@ -443,6 +443,9 @@ def _check_relations(p: Parameters) -> None:
               f"< min(phi_mean, 1 - phi_mean) = {min(p.phi_mean, 1 - p.phi_mean):.6g} "
               "(phi_mean ± phi_range inside (0, 1))")
     _check_porosity_bounds(p)
+    if not p.nucleation_energy > 0.0:  # 0.0015 C² underflows for a vanishing cement ratio
+        _fail("cement" if p.psi_c is None else "psi_c", p.cement if p.psi_c is None else p.psi_c,
+              "a value whose nucleation energy psi_c = 0.0015 C² is > 0 kPa (Eq. psic)")
     bound = 3.0 * p.fracture_toughness / (8.0 * p.nucleation_energy)
     if not p.l_d <= bound * (1.0 + 1e-12):
         _fail("l_d", p.l_d, f"<= 3 G_c/(8 psi_c) = {bound:.6g} mm (Eq. fracture_upper_bound, m >= 1)")

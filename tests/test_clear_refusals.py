@@ -33,7 +33,7 @@ def test_toml_errors_name_the_file_and_a_bom_is_read(tmp_path, capsys):
 
 @pytest.mark.parametrize("env,value,fragment", [
     ("DCHFRAC_ASSEMBLY_THREADS", "abc", "DCHFRAC_ASSEMBLY_THREADS must be a positive integer, got 'abc'"),
-    ("DCHFRAC_KERNELS", "bogus", "DCHFRAC_KERNELS must be one of ('auto', 'numba', 'numpy'), got 'bogus'"),
+    ("DCHFRAC_KERNELS", "bogus", "DCHFRAC_KERNELS='bogus' is not allowed: one of ('auto', 'numba', 'numpy')"),
 ])
 def test_bad_environment_is_refused_before_a_run_folder_is_written(tmp_path, capsys, monkeypatch, env, value, fragment):
     import solver

@@ -126,6 +126,8 @@ def resolve_runner(ref: str):
 # small helpers
 # ---------------------------------------------------------------------------
 def _fail(where: str, msg: str):
+    """Raise SpecError naming the key; control characters of a key are escaped, so the message is one line."""
+    where = where.encode("unicode_escape").decode("ascii")
     raise SpecError(f"{where}: {msg}")
 
 
