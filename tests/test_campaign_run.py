@@ -337,7 +337,9 @@ def test_add_campaign_commands_parses_every_option():
     assert (a.spec, a.jobs, a.backend, a.scheduler, a.timeout, a.results) == ("c.toml", 3, "dask", "tcp://h:8786", 5.0, "out")
     assert a.dry_run and a.retry_failed and a.fail_fast and a.func is cmd_run
     b = parser.parse_args(["campaign", "status", "c.toml"])
-    assert b.func is cmd_status and b.results == "results"
+    assert b.func is cmd_status and b.results is None  # the spec's project results/ (sweep.campaign.paths)
+    c = parser.parse_args(["campaign", "run", "c.toml", "--rerun-stale", "--rerun-archived", "--accept-stale"])
+    assert c.rerun_stale and c.rerun_archived and c.accept_stale
     with pytest.raises(SystemExit):
         parser.parse_args(["campaign", "run", "c.toml", "--backend", "spark"])
 

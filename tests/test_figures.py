@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from fake_runs import field_runner
 
-from sweep import figures
+from sweep.campaign import figures
 from sweep.campaign.engine import plot_campaign, run_campaign
 from sweep.campaign.spec import spec_from_dict
 

@@ -13,8 +13,9 @@ Run records live in ``<root>/<name>/runs/<key>/record.json`` (see :mod:`sweep.ca
 a rerun skips every key with an intact record of the current code ("ok" or "failed";
 ``retry_failed=True`` reruns the failures), so an interrupted campaign loses at most its runs
 in flight. It reruns damaged runs (files missing, changed or unreadable: :func:`sweep.campaign.store.verify_run`)
-and runs made by other solver code (recorded ``code_hash`` != :func:`solver.code_hash`), and
-reclassifies runs labelled by other classifier code; ``accept_stale=True`` keeps those instead.
+and reclassifies runs labelled by other classifier code.  Runs made by other solver code (stale: recorded
+``code_hash`` != :func:`solver.code_hash`) are used like any other and rerun only with ``rerun_stale=True``;
+archived runs (rows of the committed table without a run folder here) only with ``rerun_archived=True``.
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, TextIO
 
+from sweep.campaign.paths import DEFAULT_ROOT, results_root
 from sweep.campaign.sampler import Point
 from sweep.campaign.scheduler import DefaultRunner, ExecConfig, RunTask, classification_dict, iter_records
 from sweep.campaign.spec import CampaignSpec, load_spec, resolve_runner, samplers
@@ -55,8 +57,6 @@ __all__ = [
     "per_run_overhead",
     "shared_run_factor",
 ]
-
-DEFAULT_ROOT = "results"
 
 # Dry-run cost model: wall seconds per simulated second of one coupled run at mesh size h (mm):
 #   c(h) = c2 * (2 / h) ** COST_MESH_EXPONENT,
@@ -94,10 +94,12 @@ class DamagedRunsError(RuntimeError):
 class Plan:
     """The grid of a campaign and what the store already holds for it.
 
-    Each point with a record is exactly one of: damaged (its files fail :func:`verify_run`),
-    stale (made by other solver code: recorded ``code_hash`` != ``code_hash``; a record
-    without one is stale), done ("ok") or failed. With ``accept_stale`` the stale runs count
-    as done or failed too (``stale`` still lists them).
+    Each point is exactly one of: damaged (its files fail :func:`verify_run`), done ("ok") or failed (a
+    record of a run folder here), archived (no run folder here, but a row of the committed table:
+    :mod:`sweep.campaign.archived`) or pending (neither).  Stale (made by other solver code: recorded
+    ``code_hash`` != ``code_hash``; a record without one is stale) is a note on done, failed and archived
+    runs, not a state: it decides nothing unless ``rerun_stale`` (then the stale runs with a record are
+    neither done nor failed: :func:`run_campaign` reruns them).
     """
 
     spec: CampaignSpec
@@ -107,8 +109,10 @@ class Plan:
     records: dict[str, dict]
     code_hash: str
     classifier_hash: str
-    accept_stale: bool = False
+    rerun_stale: bool = False
     verify: bool = True
+    archived_rows: dict[str, dict] = field(default_factory=dict)
+    unmatched_rows: list[dict] = field(default_factory=list)
     _problems: dict[str, list[str]] = field(default_factory=dict, repr=False)
 
     def problems(self, key: str) -> list[str]:
@@ -125,13 +129,15 @@ class Plan:
         self._problems[record["key"]] = []
 
     def is_stale(self, key: str) -> bool:
-        return self.records[key].get("code_hash") != self.code_hash
+        """Whether the run of ``key`` (its record, else its archived row) was made by other solver code."""
+        rec = self.records.get(key) or self.archived_rows.get(key) or {}
+        return rec.get("code_hash") != self.code_hash
 
     def _with(self, pred) -> list[tuple[Point, str]]:
         return [(p, k) for p, k in zip(self.points, self.keys) if pred(k, self.records.get(k))]
 
     def _usable(self, k, r) -> bool:
-        return r is not None and not self.problems(k) and (self.accept_stale or not self.is_stale(k))
+        return r is not None and not self.problems(k) and not (self.rerun_stale and self.is_stale(k))
 
     @property
     def done(self):
@@ -143,7 +149,17 @@ class Plan:
 
     @property
     def pending(self):
-        return self._with(lambda k, r: r is None)
+        return self._with(lambda k, r: r is None and k not in self.archived_rows)
+
+    @property
+    def archived(self):
+        """Points without a run folder here whose row is in the committed table."""
+        return self._with(lambda k, r: r is None and k in self.archived_rows)
+
+    def archived_status(self, status: str = "ok"):
+        """The archived points whose committed row has ``status`` ("ok") or another one (any other value)."""
+        ok = status == "ok"
+        return [(p, k) for p, k in self.archived if (self.archived_rows[k].get("status") == "ok") == ok]
 
     @property
     def damaged(self):
@@ -151,8 +167,9 @@ class Plan:
 
     @property
     def stale(self):
-        """Intact runs made by other solver code (rerun by run_campaign unless accept_stale)."""
-        return self._with(lambda k, r: r is not None and not self.problems(k) and self.is_stale(k))
+        """Intact runs and archived rows made by other solver code (rerun by run_campaign only with rerun_stale)."""
+        return self._with(lambda k, r: (r is not None and not self.problems(k) or k in self.archived_rows)
+                          and self.is_stale(k))
 
     @property
     def misclassified(self):
@@ -174,24 +191,35 @@ def _keys(points: Sequence[Point]) -> list[str]:
 
 
 def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, points: Sequence[Point] | None = None,
-                  accept_stale: bool = False, verify: bool = True) -> Plan:
-    """Expand the spec's initial points and look their keys up in the store.
+                  rerun_stale: bool = False, verify: bool = True) -> Plan:
+    """Expand the spec's initial points and look their keys up in the store and the committed table.
 
+    root : results root (a relative one is resolved against the spec's project root:
+        :func:`sweep.campaign.paths.results_root`).
     code_hash : the current solver code (default :func:`sweep.campaign.store.current_code_hash`); records of
-        other code are stale. accept_stale : count stale runs as done/failed. verify : check each
-        stored run's files against its record (:func:`sweep.campaign.store.verify_run`).
+        other code are stale. rerun_stale : count stale runs with a record as neither done nor failed (to be
+        rerun). verify : check each stored run's files against its record (:func:`sweep.campaign.store.verify_run`).
     """
+    from sweep.campaign.archived import match_committed, read_committed_table, row_values
+
     spec = as_spec(spec)
+    root = results_root(spec, root)
     code_hash = current_code_hash() if code_hash is None else code_hash
     pts = list(points) if points is not None else samplers()[spec.sampler["kind"]]().initial(spec)
     store = ResultsStore(root, spec.name)
     keys = _keys(pts)
     recs = {k: r for k in keys if (r := store.read_record(k)) is not None}
-    plan = Plan(spec, store, pts, keys, recs, code_hash, current_classifier_hash(), accept_stale, verify)
+    plan = Plan(spec, store, pts, keys, recs, code_hash, current_classifier_hash(), rerun_stale, verify)
     for k in keys:
         if k not in recs and store.run_dir(k).exists():  # a finished folder whose record was lost or broken
             recs[k] = {"key": k, "status": "damaged"}
             plan._problems[k] = ["record.json is missing or does not parse"]
+    committed = read_committed_table(store.dir)
+    if committed is not None:
+        rows = [row_values(r) for r in committed.to_dict("records")]
+        here = set(recs) | {r["key"] for r in rows if isinstance(r.get("key"), str) and store.run_dir(r["key"]).is_dir()}
+        plan.archived_rows, unmatched = match_committed(pts, keys, set(recs), [r for r in rows if r.get("key") not in here])
+        plan.unmatched_rows = unmatched
     return plan
 
 
@@ -291,26 +319,42 @@ def _row(point: Point, key: str, rec: Mapping[str, Any], with_numbers: bool, pla
 
 def build_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None,
                 numbers: bool = True):
-    """One row per stored run of the campaign's grid, in grid order (pandas DataFrame).
+    """One row per stored or archived run of the campaign's grid, in grid order (pandas DataFrame).
 
     Columns: index, key, status ("ok", "failed" or "damaged"), reason, regime, blocks, stale (made
     by other solver code), dimensionless numbers, the swept values, classification fields,
     metrics, every parameter and run option (model units), wall_time_s, attempts, code_hash,
-    classifier_hash (the code that made the run and its label), host, finished_at. Pending runs
-    have no row.
+    classifier_hash (the code that made the run and its label), host, finished_at. A point without a
+    run folder here takes its row of the committed table (archived: :mod:`sweep.campaign.archived`), as
+    it was written; pending runs have no row.
     """
     import pandas as pd
 
     plan = plan or plan_campaign(spec, root, code_hash=code_hash)
     extra = _extra_points(plan)
     records = {**extra[2], **plan.records}
-    rows = [_row(p, k, records[k], numbers, plan) for p, k in zip(plan.points + extra[0], plan.keys + extra[1])
-            if k in records]
+    rows = []
+    for p, k in zip(plan.points + extra[0], plan.keys + extra[1]):
+        if k in records:
+            rows.append(_row(p, k, records[k], numbers, plan))
+        elif k in plan.archived_rows:
+            rows.append(_archived_row(p.index, plan.archived_rows[k], plan))
+    if plan.spec.sampler["kind"] != "grid":  # runs a sampler added, known from the committed table only
+        n = len(plan.points) + len(extra[0])
+        rows += [_archived_row(n + i, r, plan) for i, r in enumerate(plan.unmatched_rows)]
     df = pd.DataFrame(rows)
     if not df.empty:
-        df.insert(df.columns.get_loc("blocks") + 1, "run_dir",
+        df.insert(df.columns.get_loc("blocks") + 1 if "blocks" in df.columns else 3, "run_dir",
                   [str(plan.store.run_dir(k).resolve()) for k in df["key"]])
     return _add_fracturing_number(df, plan.spec)
+
+
+def _archived_row(index: int, row: Mapping[str, Any], plan: Plan) -> dict:
+    """The table row of an archived run: its committed row, with its position and staleness of today."""
+    out = {k: v for k, v in row.items() if k not in ("run_dir", "N_f", "dp_cri")}
+    out["index"] = index
+    out["stale"] = row.get("code_hash") != plan.code_hash
+    return out
 
 
 def _dp_cri_setting(spec: CampaignSpec):
@@ -365,6 +409,7 @@ def write_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: 
     """Rebuild the campaign table from the run records and write it: table.csv, table.parquet and its column
     dictionary columns.csv (``ResultsStore.write_table``)."""
     spec = as_spec(spec)
+    root = results_root(spec, root)
     df = build_table(spec, root, code_hash=code_hash, plan=plan)
     return ResultsStore(root, spec.name).write_table(df, swept=spec.axis_names)
 
@@ -444,7 +489,8 @@ def run_campaign(
     retries: int | None = None,
     fail_fast: bool = False,
     retry_failed: bool = False,
-    accept_stale: bool = False,
+    rerun_stale: bool = False,
+    rerun_archived: bool = False,
     runner: Callable | str | None = None,
     isolate: str | None = None,
     code_hash: str | None = None,
@@ -459,8 +505,9 @@ def run_campaign(
     retries : extra attempts after a failure (default spec ``[run] retries`` or 0).
     fail_fast : stop at the first failed run (runs not yet started are cancelled).
     retry_failed : rerun points whose record is "failed" (otherwise they are skipped).
-    accept_stale : keep runs made by other solver code (and labels of other classifier code) instead
-        of rerunning (reclassifying) them; they are listed in ``stale_reused``.
+    rerun_stale : rerun the runs made by other solver code (by default they are kept, listed in
+        ``stale_reused``, like archived rows made by other code).
+    rerun_archived : rerun the archived points (committed rows without a run folder here).
     runner : callable or "module:function" (default spec ``[run] runner`` or DefaultRunner).
     isolate : "auto" | "process" | "none" (default spec ``[run] isolate`` or "auto").
     code_hash : the solver code recorded in each record (default :func:`sweep.campaign.store.current_code_hash`).
@@ -468,6 +515,7 @@ def run_campaign(
     table_interval : s between table rewrites while running (always written at the end).
     """
     spec = as_spec(spec)
+    root = results_root(spec, root)
     jobs, timeout, retries, isolate = _check_run_settings(spec, jobs, timeout, retries, isolate)
     runner_fn = _make_runner(spec, runner)
     code_hash = current_code_hash() if code_hash is None else code_hash
@@ -476,7 +524,6 @@ def run_campaign(
     store.acquire_lock()
     try:
         store.clean_tmp()
-        _save_spec(spec, store)
         cfg = ExecConfig(root=str(Path(root).resolve()), campaign=spec.name, runner=runner_fn, timeout=timeout,
                          retries=retries, isolate=isolate, blas_threads=1 if jobs > 1 or backend != "loky" else None,
                          code_hash=code_hash)
@@ -484,24 +531,26 @@ def run_campaign(
         result = CampaignResult(spec.name, 0, 0, 0, 0, 0, False, [])
         plan = None
         while points:
-            plan = plan_campaign(spec, root, code_hash=code_hash, points=points, accept_stale=accept_stale)
-            todo = _todo(plan, retry_failed)
-            _book_round(result, plan, len(points), accept_stale)
+            plan = plan_campaign(spec, root, code_hash=code_hash, points=points, rerun_stale=rerun_stale)
+            todo = _todo(plan, retry_failed, rerun_archived)
+            _book_round(result, plan, len(points), rerun_stale)
             if progress is not None:
                 print(f"[{spec.name}] {len(points)} runs: {_counts_text(plan)}; executing {len(todo)} on {backend} "
                       f"with {jobs} job(s)", file=progress, flush=True)
+            if todo:
+                _save_spec(spec, store)
             try:
                 _execute(plan, todo, cfg, result, jobs=jobs, backend=backend, scheduler=scheduler,
                          fail_fast=fail_fast, progress=progress, table_interval=table_interval)
             finally:
                 # whatever happened (Ctrl-C included), the table reflects every finished run
-                plan = plan_campaign(spec, root, code_hash=code_hash, points=points, accept_stale=accept_stale)
-                result.table_paths = write_table(spec, root, plan=plan)
+                plan = plan_campaign(spec, root, code_hash=code_hash, points=points, rerun_stale=rerun_stale)
+                if todo or not store.table_csv.is_file():  # a committed table is rewritten only by new runs
+                    result.table_paths = write_table(spec, root, plan=plan)
             if result.aborted:
                 break
-            if not accept_stale:
-                result.reclassified += _reclassify_keys(plan, [k for _, k in plan.misclassified], spec.classify)
-            points = _refined_points(sampler, spec, root, plan, store, points)
+            result.reclassified += _reclassify_keys(plan, [k for _, k in plan.misclassified], spec.classify)
+            points = _refined_points(sampler, spec, root, plan, store, points, write=bool(todo))
         result.n_skipped = result.n_points - result.n_executed
         if result.reclassified:
             result.table_paths = write_table(spec, root, plan=plan)
@@ -512,20 +561,23 @@ def run_campaign(
         store.release_lock()
 
 
-def _book_round(result: CampaignResult, plan: Plan, n_points: int, accept_stale: bool) -> None:
-    """Count a round's damaged runs (rerun) and stale runs (rerun, or reused with ``accept_stale``)."""
+def _book_round(result: CampaignResult, plan: Plan, n_points: int, rerun_stale: bool) -> None:
+    """Count a round's damaged runs (rerun) and stale runs (rerun with ``rerun_stale``, else reused)."""
     stale = [k for _, k in plan.stale]
     result.damaged_rerun += [k for _, k in plan.damaged]
-    result.stale_reused += stale if accept_stale else []
-    result.stale_rerun += [] if accept_stale else stale
+    result.stale_reused += [] if rerun_stale else stale
+    result.stale_rerun += stale if rerun_stale else []
     result.n_points = n_points
 
 
-def _refined_points(sampler, spec: CampaignSpec, root, plan: Plan, store: ResultsStore, points: list) -> list:
-    """The points of the next round: ``points`` plus the sampler's new ones, or [] when it adds none."""
+def _refined_points(sampler, spec: CampaignSpec, root, plan: Plan, store: ResultsStore, points: list,
+                    write: bool = True) -> list:
+    """The points of the next round: ``points`` plus the sampler's new ones, or [] when it adds none;
+    ``sampler.json`` is rewritten when ``write`` (runs were made this round) or missing."""
     table = build_table(spec, root, plan=plan)
     new = [p for p in sampler.refine(spec, table) if run_key(p.params, p.options) not in set(plan.keys)]
-    _write_sampler_state(sampler, spec, table, store)
+    if write or not (store.dir / "sampler.json").is_file():
+        _write_sampler_state(sampler, spec, table, store)
     return points + new if new else []
 
 
@@ -550,10 +602,12 @@ def _check_run_settings(spec: CampaignSpec, jobs, timeout, retries, isolate):
     return jobs, timeout, retries, isolate
 
 
-def _todo(plan: Plan, retry_failed: bool) -> list[tuple[Point, str]]:
-    """Points to execute, in grid order: pending, damaged, stale (unless accepted), failed (if retried)."""
-    stale = [] if plan.accept_stale else plan.stale
-    todo = plan.pending + plan.damaged + stale + (plan.failed if retry_failed else [])
+def _todo(plan: Plan, retry_failed: bool, rerun_archived: bool = False) -> list[tuple[Point, str]]:
+    """Points to execute, in grid order: pending, damaged, stale (with ``plan.rerun_stale``), failed (if
+    retried; archived failed rows too), archived (with ``rerun_archived``)."""
+    stale = plan.stale if plan.rerun_stale else []
+    failed = plan.failed + plan.archived_status("failed") if retry_failed else []
+    todo = plan.pending + plan.damaged + stale + failed + (plan.archived if rerun_archived else [])
     unique = {k: (p, k) for p, k in todo}  # a point both stale and failed is run once
     return sorted(unique.values(), key=lambda pk: pk[0].index)
 
@@ -562,8 +616,8 @@ def _counts_text(plan: Plan) -> str:
     """"a done, b failed, c pending" plus the stale (made by other code) and damaged counts."""
     text = f"{len(plan.done)} done, {len(plan.failed)} failed, {len(plan.pending)} pending"
     if plan.stale:
-        text += (f", {len(plan.stale)} made by other code (accepted)" if plan.accept_stale
-                 else f", {len(plan.stale)} made by other code (stale)")
+        text += (f", {len(plan.stale)} made by other code (stale: to rerun)" if plan.rerun_stale
+                 else f", {len(plan.stale)} made by other code (stale: kept)")
     if plan.damaged:
         text += f", {len(plan.damaged)} damaged"
     return text
@@ -607,6 +661,7 @@ def _write_sampler_state(sampler, spec: CampaignSpec, table, store: ResultsStore
 def sampler_status(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None) -> dict | None:
     """The adaptive sampler's state dict (see ``sweep.campaign.boundary.BoundarySampler.state``), None for the grid."""
     spec = as_spec(spec)
+    root = results_root(spec, root)
     sampler = samplers()[spec.sampler["kind"]]()
     if not hasattr(sampler, "state"):
         return None
@@ -681,9 +736,9 @@ def estimated_sim_time(params: Mapping[str, Any], options: Mapping[str, Any]) ->
 
 
 def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | None = None,
-                  retry_failed: bool = False, accept_stale: bool = False) -> dict:
+                  retry_failed: bool = False, rerun_stale: bool = False, rerun_archived: bool = False) -> dict:
     """Grid size and estimated wall time (s) of the runs to do (pending, damaged, stale unless
-    ``accept_stale``, failed with ``retry_failed``) of a campaign on ``jobs`` workers.
+    ``rerun_stale``, failed with ``retry_failed``, archived with ``rerun_archived``) of a campaign on ``jobs`` workers.
 
     Per run: :func:`per_run_overhead` plus :func:`wall_per_sim_second` (bench figures or the documented
     default) times :func:`shared_run_factor` (a run beside others is slower than alone) times
@@ -691,13 +746,16 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
     when runs differ much in cost). Failed runs count only with ``retry_failed``.
     """
     spec = as_spec(spec)
-    plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=accept_stale)
+    root = results_root(spec, root)
+    plan = plan_campaign(spec, root, code_hash=code_hash, rerun_stale=rerun_stale)
     bench = _load_bench(root)
     overhead, overhead_src = per_run_overhead(bench)
     shared, shared_src = shared_run_factor(jobs, bench)
     per_h: dict[float, dict] = {}
     total = 0.0
-    for p, k in _todo(plan, retry_failed):
+    todo = _todo(plan, retry_failed, rerun_archived)
+    n_todo = len(todo)
+    for p, k in todo:
         h = float(p.options.get("h", 1.0))
         c, src = wall_per_sim_second(h, bench)
         c *= shared
@@ -715,7 +773,10 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
         "done": len(plan.done),
         "failed": len(plan.failed),
         "pending": len(plan.pending),
-        "stale": 0 if accept_stale else len(plan.stale),
+        "stale": len(plan.stale) if rerun_stale else 0,
+        "stale_kept": 0 if rerun_stale else len(plan.stale),
+        "archived": len(plan.archived),
+        "runs_to_do": n_todo,
         "damaged": len(plan.damaged),
         "by_mesh_size": per_h,
         "cpu_s": total,
@@ -739,7 +800,8 @@ def reclassify(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, allow_d
     A run the classifier cannot read loses its label (``metrics.classify_error`` says why).
     """
     spec = as_spec(spec)
-    plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=True)
+    root = results_root(spec, root)
+    plan = plan_campaign(spec, root, code_hash=code_hash)
     check_intact(plan, allow_damaged)
     n = len(_reclassify_keys(plan, [k for _, k in plan.done], spec.classify))
     write_table(spec, root, plan=plan)
@@ -841,10 +903,24 @@ def _timeseries_plot(spec, store, table, g, path) -> list[Path]:
     if ax.lines:
         ax.legend(fontsize=7)
     ax.set_title(g.get("title", spec.name))
+    if _keep_committed(path, drawn=len(ax.lines), missing=missing, why="no timeseries.csv"):
+        plt.close(fig)
+        return []
     paths = save_figure(fig, path)
     plt.close(fig)
     _warn_left_out(path, missing, "no timeseries.csv")
     return paths
+
+
+def _keep_committed(path: Path, *, drawn: int, missing: Sequence[str], why: str) -> bool:
+    """True (with a warning) when a figure would show nothing, or would replace an existing file while
+    leaving runs out (their run folders are archived): the existing figure is kept."""
+    if drawn and not (missing and path.is_file()):
+        return False
+    kept = "kept as it is" if path.is_file() else "not drawn"
+    print(f"warning: {path.name} {kept}: {len(missing)} of {drawn + len(missing)} run(s) have {why} here "
+          f"(pruned or archived run folders)", file=sys.stderr)
+    return True
 
 
 def _warn_left_out(path: Path, keys: Sequence[str], why: str) -> None:
@@ -912,6 +988,8 @@ def _fields_plot(spec, store, table, g, path) -> list[Path]:
                 panels.append((i, cvals.index(row[cols_col]) if cvals else j, row, snap))
             else:
                 missing.append(row["key"])
+    if _keep_committed(path, drawn=len(panels), missing=missing, why=f"no snapshot with {g['field']}"):
+        return []
     cmap, vmin, vmax = colour_scale(g["field"], [s[g["field"]] for *_, (_, _, s) in panels],
                                     fixed=(0.0, 1.0) if g["field"] in ("phi", "d", "S") else None)
     fig, axes = plt.subplots(len(rows), ncols, figsize=(3 * ncols + 0.8, 3 * len(rows)), squeeze=False)
@@ -944,7 +1022,7 @@ def _fields_plot(spec, store, table, g, path) -> list[Path]:
 
 def _phase_diagram(spec, table, g, path) -> list[Path]:
     """The paper's diagrams through sweep.regimes.diagrams (ok runs only); PNG (+ the diagram's formats)."""
-    from sweep import diagrams as dg
+    from sweep.regimes import diagrams as dg
 
     ok = table[table["status"] == "ok"]
     kind = g["kind"]
@@ -976,7 +1054,7 @@ def _boundary_figure(spec, store: ResultsStore, table):
     order) and the table with an ``order`` column (the order the sampler chose each run)."""
     import pandas as pd
 
-    from sweep import diagrams as dg
+    from sweep.regimes import diagrams as dg
     from sweep.campaign.boundary import BoundarySampler
     from sweep.regimes.regime_model import boundary_band
     from sweep.campaign.spec import round_sig
@@ -1012,9 +1090,10 @@ def plot_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, tabl
     from sweep.campaign.figures import save_figure
 
     spec = as_spec(spec)
+    root = results_root(spec, root)
     store = ResultsStore(root, spec.name)
     if table is None:
-        plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=True)
+        plan = plan_campaign(spec, root, code_hash=code_hash)
         check_intact(plan, allow_damaged)
         table = build_table(spec, root, plan=plan)
     store.figures_dir.mkdir(parents=True, exist_ok=True)
@@ -1053,10 +1132,12 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
     regimes, failures with their reasons, the run table's main columns, and the figures (drawn first
     when ``plot``). DamagedRunsError names damaged runs unless ``allow_damaged`` (then listed)."""
     spec = as_spec(spec)
+    root = results_root(spec, root)
     store = ResultsStore(root, spec.name)
-    plan = plan_campaign(spec, root, code_hash=code_hash, accept_stale=True)
+    plan = plan_campaign(spec, root, code_hash=code_hash)
     check_intact(plan, allow_damaged)
     table = build_table(spec, root, plan=plan)
+    check_not_emptier(store, table)
     figs = plot_campaign(spec, root, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
     if not table.empty:
         store.write_table(table, swept=spec.axis_names)
@@ -1068,6 +1149,8 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
     L += [f"Spec: `{spec.source}`.", "", *provenance_lines(plan), "",
           f"- runs in the grid: {len(plan.points)}",
           f"- done: {len(plan.done)}", f"- failed: {len(plan.failed)}", f"- pending: {len(plan.pending)}"]
+    if plan.archived or plan.unmatched_rows:
+        L.append(f"- archived (rows of the committed table, run folders not here): {_archived_text(plan)}")
     if plan.damaged:
         L += [f"- damaged (left out): {len(plan.damaged)}", "", "```", plan.damage_text(), "```"]
     L.append("")
@@ -1085,10 +1168,13 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
         for reg, n in table["regime"].fillna("(none)").value_counts().items():
             L.append(f"| {reg} | {n} |")
         L.append("")
-    if plan.failed:
+    failed = [(k, plan.records[k].get("reason")) for _, k in plan.failed]
+    failed += [(plan.archived_rows[k].get("key"), plan.archived_rows[k].get("reason")) for _, k in
+               plan.archived_status("failed")]
+    if failed:
         L += ["## Failures", "", "| key | reason |", "|---|---|"]
-        for p, k in plan.failed:
-            reason = str(plan.records[k].get("reason")).replace("|", "\\|").replace("\n", " ")
+        for k, reason in failed:
+            reason = str(reason).replace("|", "\\|").replace("\n", " ")
             L.append(f"| `{k}` | {reason} |")
         L.append("")
     if figs:
@@ -1118,12 +1204,43 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
     return store.report_md
 
 
+class EmptierResultError(RuntimeError):
+    """A report or plot would replace a committed table with one of fewer rows."""
+
+
+def check_not_emptier(store: ResultsStore, table) -> None:
+    """Raise EmptierResultError when ``table`` has fewer rows than the campaign's committed table."""
+    from sweep.campaign.archived import read_committed_table
+
+    old = read_committed_table(store.dir)
+    if old is not None and len(table) < len(old):
+        raise EmptierResultError(
+            f"campaign {store.name}: the table rebuilt from the spec has {len(table)} rows, the committed "
+            f"{store.table_csv} {len(old)}: nothing written (the spec no longer asks for the missing runs, "
+            f"or their run folders are damaged; `dchfrac campaign status` lists them)")
+
+
+def _archived_text(plan: Plan) -> str:
+    """"N (a ok, b failed)" of the archived points, plus the committed rows of runs a sampler added."""
+    ok, bad = len(plan.archived_status("ok")), len(plan.archived_status("failed"))
+    text = f"{ok + bad} ({ok} ok, {bad} failed)"
+    extra = plan.unmatched_rows if plan.spec.sampler["kind"] != "grid" else []
+    if extra:
+        text += f", and {len(extra)} rows of runs the sampler added"
+    elif plan.unmatched_rows:
+        text += f"; {len(plan.unmatched_rows)} committed rows match no point of the spec (left out)"
+    return text
+
+
 def code_counts(plan: Plan) -> dict[str, int]:
-    """{solver code hash: stored runs of the plan made by it}; "pre-hash" for records without a hash."""
+    """{solver code hash: runs of the plan made by it (records, archived rows)}; "pre-hash" for records
+    without a hash."""
     out: dict[str, int] = {}
-    for k in plan.keys:
-        if k in plan.records:
-            h = plan.records[k].get("code_hash") or "pre-hash"
+    extra = plan.unmatched_rows if plan.spec.sampler["kind"] != "grid" else []
+    recs = [plan.records.get(k) or plan.archived_rows.get(k) for k in plan.keys] + list(extra)
+    for r in recs:
+        if r is not None:
+            h = r.get("code_hash") or "pre-hash"
             out[h] = out.get(h, 0) + 1
     return out
 
@@ -1135,6 +1252,7 @@ def provenance_lines(plan: Plan) -> list[str]:
     for h, n in code_counts(plan).items():
         who = "pre-hash code (made before runs recorded their code)" if h == "pre-hash" else f"code hash `{h}`"
         lines.append(f"- {n} run(s) made by {who}{' (current)' if h == plan.code_hash else ' (other code: stale)'}")
+    lines.append("Stale runs are used like the others; `dchfrac campaign run SPEC --rerun-stale` reruns them.")
     return lines
 
 
