@@ -115,7 +115,7 @@ def test_table_rows_known_answers_and_store_layout(tmp_path):
         assert rec["status"] == "ok" and rec["code_hash"] == VERSION
         assert json.loads((d / "out.json").read_text())["x"] == pytest.approx(rec["params"]["eta_o"] * 10.0)
     assert not [p for p in (tmp_path / "toy" / "runs").iterdir() if p.name.startswith(".")]
-    assert res.table_paths == [tmp_path / "toy" / "table.csv", tmp_path / "toy" / "table.parquet"]
+    assert res.table_paths == [tmp_path / "toy" / f for f in ("table.csv", "table.parquet", "columns.csv")]
     pq = pd.read_parquet(tmp_path / "toy" / "table.parquet")
     pd.testing.assert_frame_equal(_stable(pq), _stable(typed_table(res.table)))
 

@@ -112,3 +112,29 @@ def test_load_timeseries_and_compare_name_what_is_missing(demo, capsys):
         load_timeseries(spec)
     rc, out = _cli(capsys, "compare", spec, folder.parent / "nowhere")
     assert rc == 2 and "nowhere" in out and "no column" not in out
+
+
+def test_load_run_reads_a_pruned_committed_run_and_names_what_it_lacks():
+    from sweep import load_run
+
+    runs = ROOT / "results" / "ca_star_boundary_h1_floor" / "runs"
+    run = load_run(next(p for p in sorted(runs.iterdir()) if (p / "params.toml").is_file()))
+    assert run.units["cement"] == "%" and run.units["p_inj"] == "kPa" and run.timeseries.attrs["units"]["t"] == "s"
+    assert len(run.timeseries) > 1 and run.options["h"] == 1.0
+    assert len(run.snapshots) == 1 and {"t", "S", "phi"} <= set(run.snapshots[0])  # the classified snapshot
+    assert run.mesh["points"].shape[1] == 2 and run.mesh["triangles"].shape[1] == 3
+    assert any("(pruned)" in m for m in run.missing)
+
+
+def test_load_run_refuses_a_folder_that_is_not_a_run(tmp_path):
+    from sweep import load_run
+
+    with pytest.raises(FileNotFoundError, match=str(tmp_path)):
+        load_run(tmp_path)
+
+
+def test_load_timeseries_of_committed_pruned_runs_has_units():
+    from sweep import load_timeseries
+
+    ts = load_timeseries(ROOT / "campaigns" / "studies" / "ca_star_boundary_h2_pockets_tip.toml")
+    assert ts["key"].nunique() == 34 and ts.attrs["units"]["p_inj"] == "kPa" and ts.attrs["units"]["cement"] == "%"

@@ -52,7 +52,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune}")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune,tables}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -93,6 +93,14 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         if name == "report":
             q.add_argument("--html", action="store_true",
                            help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
+    q = sub.add_parser("tables", help="rewrite table.parquet (units in its metadata) and columns.csv of campaigns "
+                                      "from their records or committed tables (no run)")
+    q.add_argument("specs", nargs="*", metavar="SPEC", help="campaign specs (TOML)")
+    q.add_argument("--all", action="store_true",
+                   help="every campaign spec under PROJECT/campaigns/ whose results folder holds a table")
+    q.add_argument("--project", default=".", metavar="PROJECT", help="project folder for --all (default: .)")
+    q.add_argument("--results", default=None, metavar="DIR", help="results root (default: results/ of each spec's project)")
+    q.set_defaults(func=cmd_tables)
     q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
     q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
     q.add_argument("other", help="second campaign: spec TOML or campaign folder")
@@ -368,6 +376,41 @@ def cmd_columns(args) -> int:
     uw = max(len(u) for u in cols["unit"])
     for name, unit, meaning in zip(cols["name"], cols["unit"], cols["meaning"]):
         print(f"{name:<{width}}  {unit:<{uw}}  {meaning}")
+    return 0
+
+
+def committed_specs(project) -> list[Path]:
+    """The campaign specs of ``project/campaigns`` (twin campaigns of ``discrepancy/`` excepted) whose
+    results folder holds a committed table."""
+    from sweep.campaign.paths import results_root
+    from sweep.campaign.spec import load_spec
+
+    out = []
+    for p in sorted(Path(project, "campaigns").rglob("*.toml")):
+        if "discrepancy" in p.relative_to(Path(project, "campaigns")).parts:
+            continue
+        d = results_root(p, None) / load_spec(p).name
+        if (d / "table.csv").is_file() or (d / "table.parquet").is_file():
+            out.append(p)
+    return out
+
+
+@_guarded
+def cmd_tables(args) -> int:
+    from sweep.campaign.engine import refresh_table
+    from sweep.campaign.spec import load_spec
+
+    specs = [Path(s) for s in args.specs] + (committed_specs(args.project) if args.all else [])
+    if not specs:
+        raise UsageError("give campaign specs or --all")
+    root = None if args.results is None else Path(args.results).resolve()
+    for s in specs:
+        try:
+            paths = refresh_table(load_spec(s), root)
+        except FileNotFoundError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 1
+        print(f"{s}: " + ", ".join(p.name for p in paths))
     return 0
 
 

@@ -247,10 +247,19 @@ def to_csv_frame(df, dictionary):
 
 
 def arrow_schema(df, dictionary):
-    """The pyarrow schema of a typed table: every column typed (never Arrow null), lists as Arrow lists."""
+    """The pyarrow schema of a typed table: every column typed (never Arrow null), lists as Arrow lists; each
+    field's metadata holds its ``unit`` and ``meaning`` (and ``swept``), the schema's ``dchfrac.columns`` the
+    whole dictionary as JSON (``pyarrow.parquet.read_schema(path).field("cement").metadata``)."""
     import pyarrow as pa
 
     kinds = {"Float64": pa.float64(), "Int64": pa.int64(), "boolean": pa.bool_(), "string": pa.string(),
              "list<float>": pa.list_(pa.float64()), "list<string>": pa.list_(pa.string())}
-    dt = dict(zip(dictionary["name"], dictionary["dtype"]))
-    return pa.schema([pa.field(str(c), kinds[dt.get(c, "string")]) for c in df.columns])
+    info = {r["name"]: r for r in dictionary.to_dict("records")}
+
+    def meta(c):
+        r = info.get(c, {})
+        return {k: str(r.get(k, "")) for k in ("unit", "meaning", "swept") if k in r}
+
+    fields_ = [pa.field(str(c), kinds[info.get(c, {}).get("dtype", "string")], metadata=meta(c)) for c in df.columns]
+    rows = [{k: (bool(v) if k == "swept" else str(v)) for k, v in r.items()} for r in dictionary.to_dict("records")]
+    return pa.schema(fields_, metadata={"dchfrac.columns": json.dumps(rows), "dchfrac.units": "mm, s, kPa"})

@@ -43,6 +43,7 @@ __all__ = [
     "run_campaign",
     "build_table",
     "write_table",
+    "refresh_table",
     "estimate_cost",
     "wall_per_sim_second",
     "estimated_sim_time",
@@ -209,6 +210,12 @@ def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, poin
     store = ResultsStore(root, spec.name)
     keys = _keys(pts)
     recs = {k: r for k in keys if (r := store.read_record(k)) is not None}
+    if points is None and spec.sampler["kind"] != "grid":  # the runs a sampler added in earlier rounds
+        for k, r in store.records().items():
+            if k not in recs and k not in keys:
+                pts.append(Point(r["params"], r["options"], {}, ("refined",), len(pts)))
+                keys.append(k)
+                recs[k] = r
     plan = Plan(spec, store, pts, keys, recs, code_hash, current_classifier_hash(), rerun_stale, verify)
     for k in keys:
         if k not in recs and store.run_dir(k).exists():  # a finished folder whose record was lost or broken
@@ -412,6 +419,24 @@ def write_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: 
     root = results_root(spec, root)
     df = build_table(spec, root, code_hash=code_hash, plan=plan)
     return ResultsStore(root, spec.name).write_table(df, swept=spec.axis_names)
+
+
+def refresh_table(spec, root=DEFAULT_ROOT) -> list[Path]:
+    """Rewrite a campaign's ``table.parquet`` (units and meanings in its schema metadata) and ``columns.csv``
+    without running anything: from its committed table (``table.csv`` left as it is: the evidence), else, when
+    there is none, from its run records (``table.csv`` too).  Raises FileNotFoundError naming the folder when
+    there is neither."""
+    from sweep.campaign.archived import read_committed_table
+
+    spec = as_spec(spec)
+    root = results_root(spec, root)
+    store = ResultsStore(root, spec.name)
+    committed = read_committed_table(store.dir)
+    if committed is not None:
+        return store.write_table(committed, swept=spec.axis_names, csv=False)[1:]
+    if store.records():
+        return store.write_table(build_table(spec, root), swept=spec.axis_names)
+    raise FileNotFoundError(f"campaign {spec.name}: no table.parquet or table.csv and no run records in {store.dir}")
 
 
 # ---------------------------------------------------------------------------
@@ -1221,12 +1246,13 @@ def check_not_emptier(store: ResultsStore, table) -> None:
 
 
 def _archived_text(plan: Plan) -> str:
-    """"N (a ok, b failed)" of the archived points, plus the committed rows of runs a sampler added."""
-    ok, bad = len(plan.archived_status("ok")), len(plan.archived_status("failed"))
-    text = f"{ok + bad} ({ok} ok, {bad} failed)"
+    """"N (a ok, b failed)" of the archived points and, for a sampler, the committed rows of the runs it added."""
     extra = plan.unmatched_rows if plan.spec.sampler["kind"] != "grid" else []
+    rows = [plan.archived_rows[k] for _, k in plan.archived] + list(extra)
+    ok = sum(r.get("status") == "ok" for r in rows)
+    text = f"{len(rows)} ({ok} ok, {len(rows) - ok} failed)"
     if extra:
-        text += f", and {len(extra)} rows of runs the sampler added"
+        text += f", {len(extra)} of them runs the sampler added"
     elif plan.unmatched_rows:
         text += f"; {len(plan.unmatched_rows)} committed rows match no point of the spec (left out)"
     return text

@@ -144,7 +144,15 @@ def load_timeseries(source, root="results", *, status: str | None = None):
     for n in swept:
         out[n] = out[n].astype(table[n].dtype)
     out.attrs["campaign_dir"] = str(d)
+    out.attrs["units"] = {**{n: table.attrs["units"].get(n, "?") for n in ("key", *swept, "status")},
+                          **{n: u for n, u in _timeseries_units().items() if n in out.columns}}
     return out
+
+
+def _timeseries_units() -> dict:
+    from solver.output import TIMESERIES_COLUMNS
+
+    return {n: u for n, (u, _) in TIMESERIES_COLUMNS.items()}
 
 
 def _no_timeseries_text(d: Path, table, status) -> str:
