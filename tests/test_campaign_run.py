@@ -18,7 +18,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from sweep.campaign.engine import build_table, plan_campaign, run_campaign, write_report
+from sweep.campaign.table import build_table
+
+from sweep.campaign.plan import plan_campaign
+
+from sweep.campaign.run import run_campaign
+
+from sweep.campaign.report import write_report
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.columns import typed_table
 from sweep.campaign.spec import spec_from_dict
@@ -177,7 +183,7 @@ _INTERRUPTED = textwrap.dedent("""
     signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's Ctrl-C, whatever disposition the test
     sys.path[:0] = [{here!r}, {repo!r}]                        # process passed on (an ignored SIGINT is inherited)
     from test_campaign_run import _spec, gated_runner, VERSION
-    from sweep.campaign.engine import run_campaign
+    from sweep.campaign.run import run_campaign
     spec = _spec(axes={{"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]}})
     run_campaign(spec, {root!r}, runner=gated_runner, jobs=2, code_hash=VERSION, progress=None)
 """)
@@ -388,7 +394,8 @@ def contract_runner(params, options, run_dir):
 
 def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
     pytest.importorskip("sweep.regimes.classify")
-    from sweep.campaign.engine import plot_campaign, reclassify
+    from sweep.campaign.plot import plot_campaign
+    from sweep.campaign.run import reclassify
 
     spec = spec_from_dict({"name": "fmt", "axes": {"eta_o": [0.25, 1.0]},
                            "diagrams": [{"kind": "timeseries", "x": "t", "y": "p_inj", "by": "eta_o"},
@@ -408,8 +415,7 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
 
 def test_dry_run_counts_the_per_run_overhead_of_short_runs(tmp_path):
     """Without bench figures a run of almost no simulated time still costs the default per-run overhead."""
-    from sweep.campaign.engine import (DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2,
-                                estimate_cost)
+    from sweep.campaign.cost import DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost
 
     spec = tmp_path / "clitoy.toml"
     spec.write_text(_CLI_SPEC.replace("t_end = 1.5", "t_end = 0.001"))

@@ -16,7 +16,8 @@ import pytest
 
 from solver import codehash
 from sweep.regimes import provenance
-from sweep.campaign.engine import plan_campaign, run_campaign
+from sweep.campaign.plan import plan_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.spec import spec_from_dict
 

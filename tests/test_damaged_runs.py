@@ -11,7 +11,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from sweep.campaign.engine import DamagedRunsError, build_table, plan_campaign, plot_campaign, reclassify, run_campaign
+from sweep.campaign.plan import DamagedRunsError, plan_campaign
+
+from sweep.campaign.table import build_table
+
+from sweep.campaign.plot import plot_campaign
+
+from sweep.campaign.run import reclassify, run_campaign
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.store import file_manifest, verify_run
 

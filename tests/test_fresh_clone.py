@@ -33,8 +33,10 @@ def no_solver(monkeypatch):
     def refuse(*a, **k):
         raise AssertionError("the solver ran")
 
-    monkeypatch.setattr("solver.simulate.simulate", refuse)
-    monkeypatch.setattr("sweep.campaign.engine._execute", refuse)
+    import solver
+
+    monkeypatch.setattr(solver, "simulate", refuse)
+    monkeypatch.setattr("sweep.campaign.run._execute", refuse)
 
 
 def _counts(table) -> tuple[int, int]:

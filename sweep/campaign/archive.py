@@ -113,7 +113,7 @@ def prune_campaign(spec, root) -> PruneReport:
     Holds the campaign folder's lock, so it refuses to work on a campaign that is running. Runs it cannot
     prune (failed, unlabelled, damaged, already pruned) are left as they are and listed with the reason.
     """
-    from sweep.campaign.engine import as_spec
+    from sweep.campaign.plan import as_spec
     from sweep.campaign.paths import results_root
 
     spec = as_spec(spec)

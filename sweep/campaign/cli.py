@@ -9,6 +9,8 @@
     dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
     dchfrac campaign columns SPEC [--results DIR] [--timeseries]   (column dictionary: name, unit, meaning)
     dchfrac campaign prune SPEC [--results DIR]        (keep of each finished run what its label was read from)
+    dchfrac campaign tables [SPEC...] [--all]         (table.parquet with units, columns.csv, from committed tables)
+    dchfrac campaign redraw [SPEC...] [--all]         (every figure of committed campaigns, from their tables)
 
 ``run`` runs the pending points and reruns damaged runs; runs made by other solver code (stale) only with
 ``--rerun-stale``, archived runs (committed rows without a run folder here) only with ``--rerun-archived``,
@@ -52,7 +54,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune,tables}")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune,tables,redraw}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -93,14 +95,20 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         if name == "report":
             q.add_argument("--html", action="store_true",
                            help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
-    q = sub.add_parser("tables", help="rewrite table.parquet (units in its metadata) and columns.csv of campaigns "
-                                      "from their records or committed tables (no run)")
-    q.add_argument("specs", nargs="*", metavar="SPEC", help="campaign specs (TOML)")
-    q.add_argument("--all", action="store_true",
-                   help="every campaign spec under PROJECT/campaigns/ whose results folder holds a table")
-    q.add_argument("--project", default=".", metavar="PROJECT", help="project folder for --all (default: .)")
-    q.add_argument("--results", default=None, metavar="DIR", help="results root (default: results/ of each spec's project)")
-    q.set_defaults(func=cmd_tables)
+    for name, fn, helptext in (
+        ("tables", cmd_tables, "rewrite table.parquet (units in its metadata) and columns.csv of campaigns from "
+                               "their committed tables or records (no run)"),
+        ("redraw", cmd_redraw, "redraw the figures of campaigns from their committed tables (no run); a figure "
+                               "that needs absent run folders is kept"),
+    ):
+        q = sub.add_parser(name, help=helptext)
+        q.add_argument("specs", nargs="*", metavar="SPEC", help="campaign specs (TOML)")
+        q.add_argument("--all", action="store_true",
+                       help="every campaign spec under PROJECT/campaigns/ whose results folder holds a table")
+        q.add_argument("--project", default=".", metavar="PROJECT", help="project folder for --all (default: .)")
+        q.add_argument("--results", default=None, metavar="DIR",
+                       help="results root (default: results/ of each spec's project)")
+        q.set_defaults(func=fn)
     q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
     q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
     q.add_argument("other", help="second campaign: spec TOML or campaign folder")
@@ -120,7 +128,7 @@ def _guarded(fn):
 
     @functools.wraps(fn)
     def wrapper(args) -> int:
-        from sweep.campaign.engine import DamagedRunsError, EmptierResultError
+        from sweep.campaign.plan import DamagedRunsError, EmptierResultError
         from sweep.campaign.spec import SpecError
 
         try:
@@ -176,14 +184,14 @@ def _input_warnings(spec) -> list[str]:
 
 
 def _fmt_s(s: float) -> str:
-    from sweep.campaign.engine import _hms
+    from sweep.campaign.run import _hms
 
     return _hms(s)
 
 
 def _print_estimate(spec, est, jobs: int, results) -> None:
     """The dry run's lines: the runs of the grid by state, the cost of the runs to do by mesh size."""
-    from sweep.campaign.engine import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2
+    from sweep.campaign.cost import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2
 
     print(f"campaign {spec.name}: {est['grid_size']} runs in the grid ({est['done']} done, {est['failed']} failed, "
           f"{est['archived']} archived, {est['pending']} pending, {est['stale']} made by other code to rerun, "
@@ -204,7 +212,8 @@ def _print_estimate(spec, est, jobs: int, results) -> None:
 
 @_guarded
 def cmd_run(args) -> int:
-    from sweep.campaign.engine import estimate_cost, run_campaign
+    from sweep.campaign.cost import estimate_cost
+    from sweep.campaign.run import run_campaign
 
     spec = _spec(args)
     jobs = args.jobs or int(spec.run.get("jobs", 1))
@@ -259,7 +268,8 @@ def _print_provenance(res) -> None:
 @_guarded
 def cmd_status(args) -> int:
     from sweep.campaign.accounting import campaign_throughput
-    from sweep.campaign.engine import _archived_text, code_counts, plan_campaign, sampler_status
+    from sweep.campaign.plan import _archived_text, code_counts, plan_campaign
+    from sweep.campaign.run import sampler_status
 
     spec = _spec(args, writes=False)
     plan = plan_campaign(spec, args.results)
@@ -288,8 +298,11 @@ def cmd_status(args) -> int:
             f"{st['uncertainty']:.2f} x tolerance (largest half-width of the boundary's band)"
         print(f"{st['sampler']} sampler: round {st['round']}, {st['runs_used']}/{st['budget']} runs of the budget "
               f"({st['pending']} pending), boundary uncertainty {unc}")
+        from sweep.regimes.diagrams import regime_style
+
         for pair, v in sorted(st["uncertainty_by_pair"].items()):
-            print(f"  {pair}: {v:.2f} x tolerance")
+            words = " | ".join(regime_style(x.strip())["label"] for x in str(pair).split("|"))
+            print(f"  boundary {words}: {v:.2f} x tolerance")
         print(f"  stopped: {st['reason']}" if st["stopped"] else "  running: rerun `campaign run` to continue")
     if plan.damaged:
         print(plan.damage_text())
@@ -299,7 +312,7 @@ def cmd_status(args) -> int:
 
 @_guarded
 def cmd_plot(args) -> int:
-    from sweep.campaign.engine import plot_campaign
+    from sweep.campaign.plot import plot_campaign
 
     spec = _spec(args)
     figs = plot_campaign(spec, args.results)
@@ -312,7 +325,7 @@ def cmd_plot(args) -> int:
 
 @_guarded
 def cmd_report(args) -> int:
-    from sweep.campaign.engine import write_report
+    from sweep.campaign.report import write_report
 
     spec = _spec(args)
     path = write_report(spec, args.results)
@@ -326,7 +339,8 @@ def cmd_report(args) -> int:
 
 @_guarded
 def cmd_classify(args) -> int:
-    from sweep.campaign.engine import plan_campaign, reclassify
+    from sweep.campaign.plan import plan_campaign
+    from sweep.campaign.run import reclassify
 
     spec = _spec(args)
     n = reclassify(spec, args.results)
@@ -395,23 +409,38 @@ def committed_specs(project) -> list[Path]:
     return out
 
 
-@_guarded
-def cmd_tables(args) -> int:
-    from sweep.campaign.engine import refresh_table
+def _each_spec(args, fn) -> int:
+    """``fn(spec, root)`` on every spec of ``args`` (SPEC... and --all); prints what each wrote; exit code."""
     from sweep.campaign.spec import load_spec
 
     specs = [Path(s) for s in args.specs] + (committed_specs(args.project) if args.all else [])
     if not specs:
         raise UsageError("give campaign specs or --all")
     root = None if args.results is None else Path(args.results).resolve()
+    rc = 0
     for s in specs:
         try:
-            paths = refresh_table(load_spec(s), root)
+            paths = fn(load_spec(s), root)
         except FileNotFoundError as e:
             print(f"error: {e}", file=sys.stderr)
-            return 1
-        print(f"{s}: " + ", ".join(p.name for p in paths))
-    return 0
+            rc = 1
+            continue
+        print(f"{s}: " + (", ".join(Path(p).name for p in paths) or "nothing written"), flush=True)
+    return rc
+
+
+@_guarded
+def cmd_tables(args) -> int:
+    from sweep.campaign.table import refresh_table
+
+    return _each_spec(args, refresh_table)
+
+
+@_guarded
+def cmd_redraw(args) -> int:
+    from sweep.campaign.plot import plot_campaign
+
+    return _each_spec(args, plot_campaign)
 
 
 @_guarded

@@ -23,7 +23,7 @@ __all__ = ["TABLE_COLUMNS", "column_info", "column_dictionary", "timeseries_dict
 
 LIST_DTYPES = ("list<float>", "list<string>")
 
-# columns made by the campaign (sweep.campaign.engine.build_table, sweep.regimes.numbers, sweep.regimes.classify):
+# columns made by the campaign (sweep.campaign.table.build_table, sweep.regimes.numbers, sweep.regimes.classify):
 # name -> (unit, dtype, meaning)
 TABLE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "index": ("", "Int64", "position of the run in the campaign grid"),
@@ -74,7 +74,7 @@ TABLE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "finished_at": ("", "string", "UTC time the run finished (ISO 8601)"),
 }
 
-# prefixes build_table gives a name that is already taken (sweep.campaign.engine._row)
+# prefixes build_table gives a name that is already taken (sweep.campaign.table._row)
 _PREFIXES = {"num_": "dimensionless number", "swept_": "swept value", "cls_": "classification",
              "m_": "run metric", "param_": "model parameter", "opt_": "run option", "rec_": "run record"}
 # metrics made from a time-series column (sweep.campaign.scheduler._timeseries_metrics): suffix -> meaning
@@ -231,6 +231,7 @@ def typed_table(df, dictionary=None):
     """``df`` with each column cast to its dictionary dtype (nullable pandas types, real lists)."""
     dictionary = column_dictionary(df) if dictionary is None else dictionary
     out = df.copy()
+    out.attrs = {}  # pandas deep-copies attrs at every column operation; the caller sets them on the result
     for name, dtype in zip(dictionary["name"], dictionary["dtype"]):
         if name in out.columns:
             out[name] = _typed_column(out[name], dtype)

@@ -43,15 +43,14 @@ def load_campaign(source, root="results"):
     """
     import pandas as pd
 
-    from sweep.campaign.columns import typed_table
-
     d = campaign_dir(source, root)
     if (d / "table.parquet").is_file():
         df = pd.read_parquet(d / "table.parquet")
     elif (d / "table.csv").is_file():
         df = pd.read_csv(d / "table.csv")
     elif not isinstance(source, (str, os.PathLike)) or Path(source).is_file():
-        from sweep.campaign.engine import as_spec, build_table
+        from sweep.campaign.plan import as_spec
+        from sweep.campaign.table import build_table
 
         df = build_table(as_spec(source), root)
         if df.empty:

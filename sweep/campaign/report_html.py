@@ -60,7 +60,7 @@ def _thumbnail(run_dir: Path) -> str | None:
     """Porosity (0..1) of the last snapshot with the S = 0.5 front, as a small PNG data URI."""
     from matplotlib.figure import Figure
 
-    from sweep.campaign.engine import _snapshot
+    from sweep.campaign.plot import _snapshot
 
     snap = _snapshot(run_dir)
     if snap is None or "phi" not in snap[2]:
@@ -123,7 +123,9 @@ def _paper_block(spec) -> list[str]:
 def write_html_report(spec, root="results", *, code_hash: str | None = None, plot: bool = True) -> Path:
     """Write ``<root>/<name>/report.html`` (self-contained: every image a data URI); returns its path.
     ``plot``: draw the figures first (else the ones in ``figures/`` are shown)."""
-    from sweep.campaign.engine import _archived_text, as_spec, build_table, check_not_emptier, plan_campaign, plot_campaign
+    from sweep.campaign.plan import _archived_text, as_spec, check_not_emptier, plan_campaign
+    from sweep.campaign.table import build_table
+    from sweep.campaign.plot import plot_campaign
     from sweep.campaign.paths import results_root
     from sweep.campaign.store import ResultsStore, write_text_atomic
 

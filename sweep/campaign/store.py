@@ -291,6 +291,8 @@ class ResultsStore:
 
         from sweep.campaign.columns import arrow_schema
 
+        typed = typed.copy()
+        typed.attrs = {}  # a loader's attrs (campaign folder, units) belong to the reader, not the file
         table = pa.Table.from_pandas(typed, schema=arrow_schema(typed, dictionary), preserve_index=False)
         tmp = self.table_parquet.with_name(f".table.{uuid.uuid4().hex[:8]}.parquet")
         pq.write_table(table, tmp)

@@ -35,6 +35,9 @@ __all__ = [
     "plot_ca_star_vs_cement",
     "plot_nf_vs_nb",
     "plot_boundary_sampling",
+    "regime_style",
+    "separatrix_p_value",
+    "SEPARATRIX_P_MAX",
 ]
 
 BLUE = "#1f77b4"
@@ -49,6 +52,47 @@ REGIME_STYLE: dict[str, dict[str, Any]] = {
     "fracturing_fingering": dict(marker="x", color=ORANGE, label="fracturing/fingering",
                                  shade="#e7cb94"),
 }
+# the two labels of the Ca*-C diagram (the ``fracturing`` column: True/False) in the same palette
+_TWO_LABELS = {
+    "fracturing": dict(marker="^", color=ORANGE, label="fracturing", shade="#fdd0a2"),
+    "porous_invasion": dict(marker="o", color=BLUE, label="porous invasion (no fracture)", shade="#c6dbef"),
+}
+_FAILED = dict(marker="x", color="0.45", label="failed (no label)", shade="#dddddd")
+
+
+def regime_style(label: Any) -> dict[str, Any]:
+    """marker, color, label (words, never True/False) and shade of a regime name or a ``fracturing`` value:
+    the one palette of every figure (blue: invasion without fracture, orange: fracturing; grey: no label)."""
+    if label is None or (isinstance(label, float) and label != label):
+        return _FAILED
+    if isinstance(label, (bool, np.bool_)) or str(label) in ("True", "False"):
+        return _TWO_LABELS["fracturing" if str(label) == "True" else "porous_invasion"]
+    name = str(label)
+    if name in REGIME_STYLE:
+        return REGIME_STYLE[name]
+    if name in _TWO_LABELS:
+        return _TWO_LABELS[name]
+    return dict(marker="d", color="0.3", label=name.replace("_", " "), shade="#eeeeee")
+
+
+# fitted separatrices are drawn only when they explain the labels better than a constant fracturing rate at
+# this level (likelihood-ratio test, 2 degrees of freedom: the C and ln Ca* slopes)
+SEPARATRIX_P_MAX = 0.05
+
+
+def separatrix_p_value(C: Any, ca_star: Any, fracturing: Any, ridge: float = 1e-3) -> float:
+    """p-value of the likelihood-ratio test of the logistic fit logit P = b0 + b1 C + b2 ln Ca* (the
+    separatrix's model) against a constant fracturing rate: chi-squared with 2 degrees of freedom."""
+    from scipy.stats import chi2
+
+    fr = np.asarray(fracturing).astype(bool).ravel()
+    X = np.c_[np.asarray(C, float).ravel(), np.log(np.asarray(ca_star, float).ravel())]
+    fit = logistic_fit(X, fr, ridge=ridge)
+    z = fit.beta[0] + X @ np.asarray(fit.beta[1:], float)
+    ll_fit = float(np.sum(fr * -np.logaddexp(0.0, -z) + (~fr) * -np.logaddexp(0.0, z)))
+    q = fr.mean()
+    ll_null = float(fr.sum() * np.log(q) + (~fr).sum() * np.log(1.0 - q))
+    return float(chi2.sf(max(0.0, 2.0 * (ll_fit - ll_null)), 2))
 
 
 # --------------------------------------------------------------------------- separatrix
@@ -292,12 +336,15 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     fig = _new_figure((5.5, 4.2))
     ax = fig.add_subplot(1, 1, 1)
     colours = [ORANGE, BLUE, "#2ca02c", "#d62728", "#9467bd"]
+    one = len(set(src)) == 1
     for k, s in enumerate(sorted(set(src))):
-        col = colours[k % len(colours)]
+        no, yes = regime_style(False), regime_style(True)
+        col_no, col_yes = (no["color"], yes["color"]) if one else (colours[k % len(colours)],) * 2
         m = src == s
-        ax.scatter(C[m & ~fr], cs[m & ~fr], marker="o", facecolors="none", edgecolors=col,
-                   label=f"{s}: porous invasion")
-        ax.scatter(C[m & fr], cs[m & fr], marker="^", color=col, label=f"{s}: fracturing")
+        ax.scatter(C[m & ~fr], cs[m & ~fr], marker=no["marker"], facecolors="none", edgecolors=col_no,
+                   label=no["label"] if one else f"{s}: {no['label']}")
+        ax.scatter(C[m & fr], cs[m & fr], marker=yes["marker"], color=col_yes,
+                   label=yes["label"] if one else f"{s}: {yes['label']}")
     sep, no_fit = None, None
     if fit and fr.any() and (~fr).any() and len(C) >= 3:
         try:
@@ -346,6 +393,10 @@ def _unlocated_reason(sep, C, cs, fr) -> str | None:
         major = "fracturing" if fr.sum() > (~fr).sum() else "porous invasion"
         return (f"{head} puts {wrong} of {fr.size} runs on the wrong side, no fewer than calling every run "
                 f"{major} ({minority}): the labels do not locate it")
+    p = separatrix_p_value(C, cs, fr)
+    if p >= SEPARATRIX_P_MAX:
+        return (f"{head} is not significant: against a constant fracturing rate the likelihood-ratio test "
+                f"gives p = {p:.2g} (>= {SEPARATRIX_P_MAX:g}); none found")
     return None
 
 
@@ -394,9 +445,9 @@ _PALETTE = ("#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#fcbba1", "#d9d9d9")
 def _label_shade(label: str, i: int) -> str:
     if label in REGIME_STYLE:
         return REGIME_STYLE[label]["shade"]
-    return {"True": REGIME_STYLE["invasive_fracturing"]["shade"], "fracturing": REGIME_STYLE["invasive_fracturing"]["shade"],
-            "False": REGIME_STYLE["uniform_invasion"]["shade"],
-            "porous_invasion": REGIME_STYLE["uniform_invasion"]["shade"]}.get(label, _PALETTE[i % len(_PALETTE)])
+    if label in ("True", "False", "fracturing", "porous_invasion"):
+        return regime_style(label)["shade"]
+    return _PALETTE[i % len(_PALETTE)]
 
 
 def _shade_classifier(ax, model, GX, GY, alpha: float = 0.75):
@@ -417,7 +468,8 @@ def _shade_classifier(ax, model, GX, GY, alpha: float = 0.75):
 
 
 def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Mapping[str, Any] | None = None,
-                           title: str | None = None, formats: Sequence[str] = ("svg",), grid: int = 200) -> dict[str, Any]:
+                           title: str | None = None, formats: Sequence[str] = ("svg",), grid: int = 200,
+                           axis_labels: Sequence[str] | None = None) -> dict[str, Any]:
     """The boundary sampler's view of a 2-axis campaign: classifier shading, probability contours, the
     50 % line (the boundary) with its uncertainty band, and the runs numbered and coloured by order.
 
@@ -426,7 +478,8 @@ def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Ma
     band : ``sweep.regimes.regime_model.boundary_band(model)``; the band is the set of points closer to an
         estimated boundary point than its half-width (tolerance units), drawn hatched.
     Two labels: contours of P(second label) at 10, 30, 70, 90 % (thin) and 50 % (thick); more labels:
-    the borders of the most probable label (thick). Writes PNG plus ``formats``; returns {"paths"}.
+    the borders of the most probable label (thick). axis_labels : the two axis labels with units (default:
+    the axis names). Writes PNG plus ``formats``; returns {"paths"}.
     """
     from scipy.spatial import cKDTree
 
@@ -459,7 +512,7 @@ def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Ma
         if m.any():
             sc = ax.scatter(x[m], y[m], c=order[m], cmap="viridis", vmin=0, vmax=max(order.max(), 1),
                             marker=markers.get(lab, "x"), s=28, edgecolor="k", linewidth=0.4, zorder=3,
-                            label=str(lab) if lab is not None else "failed")
+                            label=regime_style(lab)["label"])
     for xv, yv, o in zip(x, y, order):
         ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=4)
     fig.colorbar(sc, ax=ax, label="order of the run", fraction=0.046, pad=0.04)
@@ -468,8 +521,9 @@ def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Ma
             setter("log")
     ax.set_xlim(ax0.lo, ax0.hi)
     ax.set_ylim(ax1.lo, ax1.hi)
-    ax.set_xlabel(ax0.name + (" (log axis)" if ax0.log else ""))
-    ax.set_ylabel(ax1.name + (" (log axis)" if ax1.log else ""))
+    names = tuple(axis_labels) if axis_labels else (ax0.name, ax1.name)
+    ax.set_xlabel(names[0])
+    ax.set_ylabel(names[1])
     if title:
         ax.set_title(title, fontsize=8)
     from matplotlib.patches import Patch
