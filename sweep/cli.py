@@ -65,6 +65,11 @@ def _load_config(path):
     return dict(tables[0]), dict(tables[1])
 
 
+# snapshots of ``dchfrac run`` besides t = 0 and snapshot_times, unless --set frames=N or a --config says
+# otherwise (RunOptions.frames; ``dchfrac animate RUN`` then has a movie of CLI_FRAMES + 1 frames)
+CLI_FRAMES = 20
+
+
 def _run_inputs(args):
     """(Parameters, RunOptions, warnings) of ``dchfrac run``, validated together with the output folder.
 
@@ -81,6 +86,7 @@ def _run_inputs(args):
         odict["h"] = args.h
     if args.t_end is not None:
         odict["t_end"] = args.t_end
+    odict.setdefault("frames", CLI_FRAMES)  # a run from the command line is animated: evenly spaced snapshots
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
     warnings = check_run_inputs(params, options)
@@ -181,7 +187,7 @@ def cmd_report(args) -> int:
 
 def cmd_animate(args) -> int:
     """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
-    from .animate import animate_run, animation_writer, parse_fields
+    from .animate import animate_run, animation_writer, check_animatable, parse_fields
 
     run = Path(args.run)
     try:
@@ -191,6 +197,7 @@ def cmd_animate(args) -> int:
             raise ValueError(f"run {str(run)!r}: not a run folder (no snapshots/mesh.npz)")
         if args.fps < 1:
             raise ValueError(f"--fps {args.fps}: allowed an integer >= 1")
+        check_animatable(run, fields)
     except ValueError as exc:
         print(f"dchfrac animate: {exc}", file=sys.stderr)
         return 2
@@ -205,9 +212,10 @@ def cmd_params(args) -> int:
     from solver.options import OPTION_UNITS, RunOptions, option_docs
     from solver.params import parameter_table
 
-    rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"], r["meaning"]) for r in parameter_table()]
+    rows = [(r["name"], r["unit"] or "", _show(r["default"]), f"{r['meaning']} [allowed: {r['allowed']}]")
+            for r in parameter_table()]
     _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C)",
-                ("name", "unit", "default", "allowed", "meaning"), rows)
+                ("name", "unit", "default", "meaning [allowed values]"), rows)
     docs = option_docs()
     rows = [(f.name, OPTION_UNITS.get(f.name, "?"), _show(getattr(RunOptions(), f.name)), docs.get(f.name, ""))
             for f in fields(RunOptions)]
@@ -221,11 +229,37 @@ def _show(v) -> str:
     return "None" if v is None else str(list(v) if isinstance(v, tuple) else v)
 
 
-def _print_rows(title, header, rows) -> None:
+def plain_text(text: str) -> str:
+    """A docstring fragment without its reStructuredText markup (``x``, :func:`x`, :meth:`x` -> x)."""
+    import re
+
+    return re.sub(r"``([^`]*)``", r"\1", re.sub(r":\w+:`~?([^`]*)`", r"\1", str(text)))
+
+
+def _print_rows(title, header, rows, width: int | None = None) -> None:
+    """A table whose short columns are aligned and whose last one (the meaning) is wrapped to the terminal
+    (``width`` characters, default the terminal's), in plain text."""
+    import shutil
+    import textwrap
+
+    width = width or shutil.get_terminal_size((100, 24)).columns
+    rows = [tuple(r[:-1]) + (plain_text(r[-1]),) for r in rows]
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)]
+    lead = sum(widths[:-1]) + 2 * (len(widths) - 1)
+    room = width - lead
+    if room < 30:  # too narrow beside the columns: the meaning goes below, indented
+        lead, room = 4, max(20, width - 4)
     print(title)
     for r in (header, *rows):
-        print("  ".join(str(x).ljust(w) for x, w in zip(r[:-1], widths)) + "  " + str(r[-1]))
+        cols = "  ".join(str(x).ljust(w) for x, w in zip(r[:-1], widths))
+        lines = textwrap.wrap(str(r[-1]), room) or [""]
+        if lead == 4:
+            print(cols.rstrip())
+            print("\n".join(" " * 4 + ln for ln in lines))
+        else:
+            print(cols + "  " + lines[0])
+            for ln in lines[1:]:
+                print(" " * lead + ln)
 
 
 def version_text() -> str:

@@ -55,7 +55,7 @@ def test_run_reruns_nothing_unless_asked_and_prints_the_cost_first(demo, capsys,
     def no_solver(plan, todo, *a, **k):
         assert not todo, f"campaign run executed {len(todo)} archived runs"
 
-    monkeypatch.setattr("sweep.campaign.engine._execute", no_solver)
+    monkeypatch.setattr("sweep.campaign.run._execute", no_solver)
     rc, out = _cli(capsys, "run", spec, "--quiet")
     assert rc == 0 and "0 executed now" in out and "nothing to rerun: 6 archived" in out
     assert (folder / "table.csv").read_bytes() == before  # a committed table is rewritten only by new runs
@@ -138,3 +138,26 @@ def test_load_timeseries_of_committed_pruned_runs_has_units():
 
     ts = load_timeseries(ROOT / "campaigns" / "studies" / "ca_star_boundary_h2_pockets_tip.toml")
     assert ts["key"].nunique() == 34 and ts.attrs["units"]["p_inj"] == "kPa" and ts.attrs["units"]["cement"] == "%"
+
+
+def test_animate_on_a_pruned_run_names_what_is_missing(capsys):
+    from sweep.cli import main
+
+    runs = ROOT / "results" / "ca_star_boundary_h1_floor" / "runs"
+    run = next(p for p in sorted(runs.iterdir()) if (p / "params.toml").is_file())
+    assert main(["animate", str(run), "--fields", "S,d"]) == 2
+    err = capsys.readouterr().err
+    assert "not d" in err and "pruned" in err and "Traceback" not in err
+    assert main(["animate", str(run), "--fields", "S,phi"]) == 2
+    assert "one snapshot" in capsys.readouterr().err
+
+
+def test_a_command_line_run_writes_frames_for_an_animation(tmp_path):
+    import argparse
+
+    from sweep.cli import CLI_FRAMES, _run_inputs
+
+    args = argparse.Namespace(config=None, set=[], h=None, t_end=None, out=str(tmp_path / "r"))
+    assert _run_inputs(args)[1].frames == CLI_FRAMES >= 10
+    args.set = ["frames=3"]
+    assert _run_inputs(args)[1].frames == 3
