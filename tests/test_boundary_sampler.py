@@ -276,7 +276,7 @@ def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path)
 
     figs, table = _boundary_figure(spec, ResultsStore(tmp_path / "full", "bnd"), build_table(spec, tmp_path / "full",
                                                                                               code_hash="t"))
-    assert [f.name for f in figs] == ["boundary.png", "boundary.svg"] and all(f.stat().st_size > 0 for f in figs)
+    assert [f.name for f in figs] == ["boundary.png", "boundary.pdf"] and all(f.stat().st_size > 0 for f in figs)
     assert sorted(table["order"]) == list(range(full.n_executed))                  # every run numbered by order
     _INTERRUPT_AFTER[0] = 14
     try:

@@ -350,13 +350,15 @@ def test_add_campaign_commands_parses_every_option():
         parser.parse_args(["campaign", "run", "c.toml", "--backend", "spark"])
 
 
-def test_ray_backend_without_ray_says_which_extra(tmp_path):
+def test_ray_backend_without_ray_says_which_extra(tmp_path, monkeypatch):
     try:
         import ray  # noqa: F401
     except ImportError:
         with pytest.raises(ValueError, match=r"dchfrac\[ray\]"):
             run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", code_hash=VERSION, progress=None)
-    else:
+    else:  # the local Ray's workers import the runner from this folder and the project
+        here = Path(__file__).resolve().parent
+        monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(here), str(here.parent), os.environ.get("PYTHONPATH", "")]))
         res = run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", jobs=2, code_hash=VERSION, progress=None)
         assert (res.n_ok, res.n_failed) == (6, 0)
 

@@ -57,7 +57,7 @@ _TWO_LABELS = {
     "fracturing": dict(marker="^", color=ORANGE, label="fracturing", shade="#fdd0a2"),
     "porous_invasion": dict(marker="o", color=BLUE, label="porous invasion (no fracture)", shade="#c6dbef"),
 }
-_FAILED = dict(marker="x", color="0.45", label="failed (no label)", shade="#dddddd")
+_FAILED = dict(marker="X", color="0.45", label="failed (no label)", shade="#dddddd")
 
 
 def regime_style(label: Any) -> dict[str, Any]:
