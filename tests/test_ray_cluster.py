@@ -8,6 +8,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+import tempfile
 
 import pandas as pd
 import pytest
@@ -19,18 +20,22 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture()
-def ray_head(tmp_path):
+def ray_head(tmp_path, monkeypatch):
     if shutil.which("ray") is None:
         pytest.skip("no `ray` command")
+    monkeypatch.setenv("RAY_AUTH_MODE", "disabled")  # a private head on localhost: no token to hand to the driver
     port = _free_port()
-    head = _start(["ray", "start", "--head", "--node-ip-address", "127.0.0.1", "--port", str(port), "--num-cpus", "2",
-                   "--include-dashboard", "false", "--block", "--temp-dir", str(tmp_path / "ray")],
-                  tmp_path / "ray.log")
+    temp = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # Ray's socket paths must stay under 107 bytes
+    log = tmp_path / "ray.log"
+    head = _start(["ray", "start", "--head", "--port", str(port), "--num-cpus", "2",
+                   "--include-dashboard", "false", "--block", "--temp-dir", temp], log)
     try:
-        _wait_for(lambda: _can_connect(port), "the Ray head", limit_s=180)
+        _wait_for(lambda: _can_connect(port) or head.poll() is not None, "the Ray head", limit_s=180)
+        assert head.poll() is None, f"ray start failed: {log.read_text()[-1500:]}"
         yield f"127.0.0.1:{port}"
     finally:
         _stop(head)
+        shutil.rmtree(temp, ignore_errors=True)
 
 
 def test_real_ray_cluster_table_equals_loky(ray_head, tmp_path):
