@@ -2,10 +2,11 @@
 
     python scripts/check_report_browser.py results/demo/report.html [--screenshot shot.png]
 
-Prints ``images=N broken=B`` and exits 0 when the page rendered with N >= 1 images and B = 0, 1 when
-an image failed to load or the page did not render, 2 when no Chromium is found or the file is missing.
-The check loads a copy of the report with a script appended that counts the images that are not
-complete or have no natural width once the page has loaded (the report itself holds no script).
+Prints ``images=N broken=B tables=T empty=E`` and exits 0 when the page rendered with N >= 1 images, B = 0,
+T >= 1 tables and E = 0, 1 when an image failed to load, a table was drawn without rows or with no height, or the
+page did not render, 2 when no Chromium is found or the file is missing.  The check loads a copy of the report
+with a script appended that counts, once the page has loaded, the images that are not complete or have no
+natural width and the tables with no data row or no height (the report itself holds no script).
 """
 from __future__ import annotations
 
@@ -21,9 +22,11 @@ _PROBE = """<script>
 window.addEventListener('load', () => {
   const imgs = Array.from(document.images);
   const broken = imgs.filter(i => !i.complete || i.naturalWidth === 0).length;
+  const tables = Array.from(document.querySelectorAll('table'));
+  const shown = tables.filter(t => t.rows.length > 1 && t.getBoundingClientRect().height > 0).length;
   const m = document.createElement('div');
   m.id = 'dchfrac-check';
-  m.textContent = 'images=' + imgs.length + ' broken=' + broken;
+  m.textContent = 'images=' + imgs.length + ' broken=' + broken + ' tables=' + tables.length + ' empty=' + (tables.length - shown);
   document.body.appendChild(m);
 });
 </script>"""
@@ -40,18 +43,19 @@ def _chromium(browser: str, *args: str) -> subprocess.CompletedProcess:
                            "--virtual-time-budget=15000", *args], capture_output=True, text=True, timeout=180)
 
 
-def check(report: Path, browser: str, screenshot: Path | None = None) -> tuple[int, int]:
-    """(images, broken images) of ``report`` as Chromium renders it; raises RuntimeError if it did not render."""
+def check(report: Path, browser: str, screenshot: Path | None = None) -> tuple[int, int, int, int]:
+    """(images, broken images, tables, empty tables) of ``report`` as Chromium renders it; raises RuntimeError
+    if it did not render."""
     with tempfile.TemporaryDirectory() as d:
         probe = Path(d) / "report_probe.html"
         probe.write_text(report.read_text().replace("</body>", _PROBE + "</body>"))
         r = _chromium(browser, "--dump-dom", probe.as_uri())
-        m = re.search(r'id="dchfrac-check">images=(\d+) broken=(\d+)<', r.stdout)
+        m = re.search(r'id="dchfrac-check">images=(\d+) broken=(\d+) tables=(\d+) empty=(\d+)<', r.stdout)
         if m is None:
             raise RuntimeError(f"the page did not render (chromium exit {r.returncode}): {r.stderr.strip()[-300:]}")
         if screenshot is not None:
             _chromium(browser, f"--screenshot={Path(screenshot).resolve()}", "--window-size=1280,2400", report.resolve().as_uri())
-        return int(m.group(1)), int(m.group(2))
+        return tuple(int(g) for g in m.groups())
 
 
 def main(argv=None) -> int:
@@ -67,12 +71,12 @@ def main(argv=None) -> int:
         print(f"report {str(a.report)!r} not found", file=sys.stderr)
         return 2
     try:
-        n, broken = check(a.report, browser, a.screenshot)
+        n, broken, tables, empty = check(a.report, browser, a.screenshot)
     except RuntimeError as exc:
         print(str(exc), file=sys.stderr)
         return 1
-    print(f"images={n} broken={broken}")
-    return 0 if n >= 1 and broken == 0 else 1
+    print(f"images={n} broken={broken} tables={tables} empty={empty}")
+    return 0 if n >= 1 and broken == 0 and tables >= 1 and empty == 0 else 1
 
 
 if __name__ == "__main__":

@@ -10,8 +10,9 @@
 
 The public loaders::
 
-    from sweep import load_campaign, load_timeseries
+    from sweep import load_campaign, load_timeseries, load_run
 """
 from .campaign.load import load_campaign, load_timeseries
+from .campaign.run_folder import load_run
 
-__all__ = ["load_campaign", "load_timeseries"]
+__all__ = ["load_campaign", "load_timeseries", "load_run"]

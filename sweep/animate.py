@@ -15,7 +15,7 @@ import numpy as np
 
 from solver.output import atomic_path
 
-__all__ = ["ANIMATABLE", "animation_writer", "build_animation", "animate_run", "parse_fields"]
+__all__ = ["ANIMATABLE", "animation_writer", "build_animation", "animate_run", "parse_fields", "check_animatable"]
 
 # scalar snapshot fields (the displacement u is a vector)
 ANIMATABLE = ("S", "phi", "d", "p", "mu", "eps_v", "hoop_stress", "k", "w1_mag")
@@ -29,6 +29,28 @@ def parse_fields(text: str) -> tuple[str, ...]:
     if not names or bad:
         raise ValueError(f"--fields {text!r}: unknown field(s) {bad or '(none given)'}; allowed: {', '.join(ANIMATABLE)}")
     return names
+
+
+def check_animatable(run_dir, fields: Sequence[str]) -> int:
+    """The number of snapshots of ``run_dir`` that hold every field of ``fields``; ValueError naming what is
+    missing (no snapshots, fewer than 2, or fields the snapshots lack: a pruned campaign run keeps one
+    snapshot with t, S and phi)."""
+    from sweep.campaign.run_folder import load_run
+
+    run = load_run(run_dir)
+    pruned = " (pruned: `dchfrac campaign prune` keeps the classified snapshot's t, S, phi)" \
+        if any("(pruned)" in m for m in run.missing) else ""
+    if run.mesh is None or not run.snapshots:
+        raise ValueError(f"run {str(run_dir)!r}: nothing to animate: missing {', '.join(run.missing)}")
+    lacking = sorted({f for s in run.snapshots for f in fields if f not in s})
+    if lacking:
+        held = sorted(k for k in run.snapshots[0] if k in ANIMATABLE)
+        raise ValueError(f"run {str(run_dir)!r}: its snapshots hold {', '.join(held) or 'no field'}, not "
+                         f"{', '.join(lacking)}{pruned}; pick --fields among those")
+    if len(run.snapshots) < 2:
+        raise ValueError(f"run {str(run_dir)!r}: one snapshot (t = {run.times[0]:g} s){pruned}: nothing to animate; "
+                         f"rerun it with --set frames=N")
+    return len(run.snapshots)
 
 
 def animation_writer(out: Path | None):

@@ -67,6 +67,11 @@ def _load_config(path):
     return dict(tables[0]), dict(tables[1])
 
 
+# snapshots of ``dchfrac run`` besides t = 0 and snapshot_times, unless --set frames=N or a --config says
+# otherwise (RunOptions.frames; ``dchfrac animate RUN`` then has a movie of CLI_FRAMES + 1 frames)
+CLI_FRAMES = 20
+
+
 def _run_inputs(args):
     """(Parameters, RunOptions, warnings) of ``dchfrac run``, validated together with the output folder.
 
@@ -96,6 +101,7 @@ def _run_inputs(args):
         raise ValueError(f"unknown parameter or run option {unknown[0]!r}"
                          f"{did_you_mean(unknown, [*Parameters.__dataclass_fields__, *opt_names])} "
                          "(allowed: the names `dchfrac params` lists)")
+    odict.setdefault("frames", CLI_FRAMES)  # a run from the command line is animated: evenly spaced snapshots
     params = Parameters.from_dict(pdict)
     options = RunOptions.from_dict(odict)
     warnings = check_run_inputs(params, options) + check_environment()
@@ -270,7 +276,7 @@ def cmd_animate(args) -> int:
     """Animate a run folder's snapshots (MP4 with ffmpeg, else GIF); bad input: one line, exit code 2."""
     from solver.output import check_writable_dir
 
-    from .animate import animate_run, animation_writer, parse_fields
+    from .animate import animate_run, animation_writer, check_animatable, parse_fields
 
     run = Path(args.run)
     try:
@@ -282,6 +288,7 @@ def cmd_animate(args) -> int:
             raise ValueError(f"run {str(run)!r}: not a run folder (no snapshots/mesh.npz)")
         if args.fps < 1:
             raise ValueError(f"--fps {args.fps}: allowed an integer >= 1")
+        check_animatable(run, fields)
     except ValueError as exc:
         print(f"dchfrac animate: {exc}", file=sys.stderr)
         return 2
@@ -296,12 +303,14 @@ def cmd_params(args) -> int:
     from solver.options import OPTION_UNITS, RunOptions, option_docs
     from solver.params import parameter_table
 
-    rows = [(r["name"], r["unit"] or "", _show(r["default"]), r["allowed"],
-             "" if r["plausible"] is None else "[{:g}, {:g}]".format(*r["plausible"]), r["meaning"])
-            for r in parameter_table()]
+    def _allowed(r) -> str:
+        plaus = "" if r["plausible"] is None else "; plausible: [{:g}, {:g}]".format(*r["plausible"])
+        return f"{r['meaning']} [allowed: {r['allowed']}{plaus}]"
+
+    rows = [(r["name"], r["unit"] or "", _show(r["default"]), _allowed(r)) for r in parameter_table()]
     _print_rows("model parameters (units mm, s, kPa; None: follows its law of the cement ratio C; outside the "
                 "plausible range a run warns, --strict refuses)",
-                ("name", "unit", "default", "allowed", "plausible", "meaning"), rows)
+                ("name", "unit", "default", "meaning [allowed values]"), rows)
     from solver.presets import preset_changes, preset_description, preset_names
 
     print()
@@ -327,11 +336,37 @@ def _show(v) -> str:
     return "None" if v is None else str(list(v) if isinstance(v, tuple) else v)
 
 
-def _print_rows(title, header, rows) -> None:
+def plain_text(text: str) -> str:
+    """A docstring fragment without its reStructuredText markup (``x``, :func:`x`, :meth:`x` -> x)."""
+    import re
+
+    return re.sub(r"``([^`]*)``", r"\1", re.sub(r":\w+:`~?([^`]*)`", r"\1", str(text)))
+
+
+def _print_rows(title, header, rows, width: int | None = None) -> None:
+    """A table whose short columns are aligned and whose last one (the meaning) is wrapped to the terminal
+    (``width`` characters, default the terminal's), in plain text."""
+    import shutil
+    import textwrap
+
+    width = width or shutil.get_terminal_size((100, 24)).columns
+    rows = [tuple(r[:-1]) + (plain_text(r[-1]),) for r in rows]
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)]
+    lead = sum(widths[:-1]) + 2 * (len(widths) - 1)
+    room = width - lead
+    if room < 30:  # too narrow beside the columns: the meaning goes below, indented
+        lead, room = 4, max(20, width - 4)
     print(title)
     for r in (header, *rows):
-        print("  ".join(str(x).ljust(w) for x, w in zip(r[:-1], widths)) + "  " + str(r[-1]))
+        cols = "  ".join(str(x).ljust(w) for x, w in zip(r[:-1], widths))
+        lines = textwrap.wrap(str(r[-1]), room) or [""]
+        if lead == 4:
+            print(cols.rstrip())
+            print("\n".join(" " * 4 + ln for ln in lines))
+        else:
+            print(cols + "  " + lines[0])
+            for ln in lines[1:]:
+                print(" " * lead + ln)
 
 
 def version_text() -> str:

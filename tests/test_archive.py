@@ -15,7 +15,9 @@ import pandas as pd
 import pytest
 
 from sweep.campaign.archive import LABEL_FIELDS, prune_campaign, prune_run
-from sweep.campaign.engine import build_table, plan_campaign, reclassify, run_campaign
+from sweep.campaign.table import build_table
+from sweep.campaign.plan import plan_campaign
+from sweep.campaign.run import reclassify, run_campaign
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.spec import spec_from_dict
 from sweep.campaign.store import ResultsStore, verify_run

@@ -1,7 +1,7 @@
 """The dry-run cost rates that ``dchfrac bench`` writes (``sweep.studies.bench._cost_rates``): from the longest run made at
-each mesh size, never from a failed run, and read back by the dry-run estimate (``sweep.campaign.engine.wall_per_sim_second``)."""
+each mesh size, never from a failed run, and read back by the dry-run estimate (``sweep.campaign.cost.wall_per_sim_second``)."""
 from sweep.studies.bench import _cost_rates
-from sweep.campaign.engine import shared_run_factor, wall_per_sim_second
+from sweep.campaign.cost import shared_run_factor, wall_per_sim_second
 
 
 def _run(t_end, wall, status="ok"):

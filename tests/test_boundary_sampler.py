@@ -30,7 +30,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from sweep.campaign.boundary import BoundarySampler
-from sweep.campaign.engine import _numbers
+from sweep.campaign.table import _numbers
 from sweep.regimes.separatrix import separatrix_profile_interval
 from sweep.regimes.regime_model import unit_grid
 from sweep.campaign.spec import SpecError, spec_from_dict
@@ -262,7 +262,7 @@ def _coords(root):
 def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path):
     import json
 
-    from sweep.campaign.engine import run_campaign
+    from sweep.campaign.run import run_campaign
 
     spec = _campaign_spec()
     full = run_campaign(spec, tmp_path / "full", runner=separatrix_runner, code_hash="t", progress=None)
@@ -270,12 +270,13 @@ def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path)
     assert state["stopped"] and state["runs_used"] == full.n_executed == len(_coords(tmp_path / "full")) <= 40
     st, _ = drive(spec, separatrix_sharp)
     assert sorted(c for r in st.rounds for c in r) == _coords(tmp_path / "full")     # the sequence, stored
-    from sweep.campaign.engine import _boundary_figure, build_table
+    from sweep.campaign.plot import _boundary_figure
+    from sweep.campaign.table import build_table
     from sweep.campaign.store import ResultsStore
 
     figs, table = _boundary_figure(spec, ResultsStore(tmp_path / "full", "bnd"), build_table(spec, tmp_path / "full",
                                                                                               code_hash="t"))
-    assert [f.name for f in figs] == ["boundary.png", "boundary.svg"] and all(f.stat().st_size > 0 for f in figs)
+    assert [f.name for f in figs] == ["boundary.png", "boundary.pdf"] and all(f.stat().st_size > 0 for f in figs)
     assert sorted(table["order"]) == list(range(full.n_executed))                  # every run numbered by order
     _INTERRUPT_AFTER[0] = 14
     try:
@@ -290,7 +291,7 @@ def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path)
 
 
 def test_cli_status_shows_round_budget_and_uncertainty(tmp_path, capsys):
-    from sweep.campaign.engine import run_campaign
+    from sweep.campaign.run import run_campaign
     from sweep.campaign.cli import main as cli_main
 
     path = tmp_path / "bnd.toml"

@@ -18,7 +18,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from sweep.campaign.engine import build_table, plan_campaign, run_campaign, write_report
+from sweep.campaign.table import build_table
+
+from sweep.campaign.plan import plan_campaign
+
+from sweep.campaign.run import run_campaign
+
+from sweep.campaign.report import write_report
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.columns import typed_table
 from sweep.campaign.spec import spec_from_dict
@@ -115,7 +121,7 @@ def test_table_rows_known_answers_and_store_layout(tmp_path):
         assert rec["status"] == "ok" and rec["code_hash"] == VERSION
         assert json.loads((d / "out.json").read_text())["x"] == pytest.approx(rec["params"]["eta_o"] * 10.0)
     assert not [p for p in (tmp_path / "toy" / "runs").iterdir() if p.name.startswith(".")]
-    assert res.table_paths == [tmp_path / "toy" / "table.csv", tmp_path / "toy" / "table.parquet"]
+    assert res.table_paths == [tmp_path / "toy" / f for f in ("table.csv", "table.parquet", "columns.csv")]
     pq = pd.read_parquet(tmp_path / "toy" / "table.parquet")
     pd.testing.assert_frame_equal(_stable(pq), _stable(typed_table(res.table)))
 
@@ -177,7 +183,7 @@ _INTERRUPTED = textwrap.dedent("""
     signal.signal(signal.SIGINT, signal.default_int_handler)  # a terminal's Ctrl-C, whatever disposition the test
     sys.path[:0] = [{here!r}, {repo!r}]                        # process passed on (an ignored SIGINT is inherited)
     from test_campaign_run import _spec, gated_runner, VERSION
-    from sweep.campaign.engine import run_campaign
+    from sweep.campaign.run import run_campaign
     spec = _spec(axes={{"cement": [1.0, 2.0, 3.0, 4.0], "eta_o": [0.1, 0.5, 0.9]}})
     run_campaign(spec, {root!r}, runner=gated_runner, jobs=2, code_hash=VERSION, progress=None)
 """)
@@ -343,18 +349,22 @@ def test_add_campaign_commands_parses_every_option():
     assert (a.spec, a.jobs, a.backend, a.scheduler, a.timeout, a.results) == ("c.toml", 3, "dask", "tcp://h:8786", 5.0, "out")
     assert a.dry_run and a.retry_failed and a.fail_fast and a.func is cmd_run
     b = parser.parse_args(["campaign", "status", "c.toml"])
-    assert b.func is cmd_status and b.results == "results"
+    assert b.func is cmd_status and b.results is None  # the spec's project results/ (sweep.campaign.paths)
+    c = parser.parse_args(["campaign", "run", "c.toml", "--rerun-stale", "--rerun-archived", "--accept-stale"])
+    assert c.rerun_stale and c.rerun_archived and c.accept_stale
     with pytest.raises(SystemExit):
         parser.parse_args(["campaign", "run", "c.toml", "--backend", "spark"])
 
 
-def test_ray_backend_without_ray_says_which_extra(tmp_path):
+def test_ray_backend_without_ray_says_which_extra(tmp_path, monkeypatch):
     try:
         import ray  # noqa: F401
     except ImportError:
         with pytest.raises(ValueError, match=r"dchfrac\[ray\]"):
             run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", code_hash=VERSION, progress=None)
-    else:
+    else:  # the local Ray's workers import the runner from this folder and the project
+        here = Path(__file__).resolve().parent
+        monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(here), str(here.parent), os.environ.get("PYTHONPATH", "")]))
         res = run_campaign(_spec(), tmp_path, runner=toy_runner, backend="ray", jobs=2, code_hash=VERSION, progress=None)
         assert (res.n_ok, res.n_failed) == (6, 0)
 
@@ -392,7 +402,8 @@ def contract_runner(params, options, run_dir):
 
 def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
     pytest.importorskip("sweep.regimes.classify")
-    from sweep.campaign.engine import plot_campaign, reclassify
+    from sweep.campaign.plot import plot_campaign
+    from sweep.campaign.run import reclassify
 
     spec = spec_from_dict({"name": "fmt", "axes": {"eta_o": [0.25, 1.0]},
                            "diagrams": [{"kind": "timeseries", "x": "t", "y": "p_inj", "by": "eta_o"},
@@ -412,8 +423,7 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
 
 def test_dry_run_counts_the_per_run_overhead_of_short_runs(tmp_path):
     """Without bench figures a run of almost no simulated time still costs the default per-run overhead."""
-    from sweep.campaign.engine import (DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2,
-                                estimate_cost)
+    from sweep.campaign.cost import DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost
 
     spec = tmp_path / "clitoy.toml"
     spec.write_text(_CLI_SPEC.replace("t_end = 1.5", "t_end = 0.001"))

@@ -111,7 +111,7 @@ def test_a_different_spec_with_an_existing_campaigns_name_is_refused(tmp_path, c
     import sys
     from pathlib import Path
 
-    from sweep.campaign.engine import run_campaign
+    from sweep.campaign.run import run_campaign
     from sweep.campaign.spec import load_spec
 
     sys.path.insert(0, str(Path(__file__).parent))

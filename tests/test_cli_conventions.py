@@ -132,8 +132,15 @@ def test_run_writes_no_carriage_return_when_not_on_a_terminal(tmp_path):
 
 def test_params_lists_every_parameter_with_unit_default_and_range(capsys):
     assert main(["params"]) == 0
-    out = capsys.readouterr().out.splitlines()
-    rows = {ln.split()[0]: ln for ln in out if ln and not ln.startswith(("model", "run", "name"))}
+    out = capsys.readouterr().out
+    assert "``" not in out and ":func:" not in out  # plain text, wrapped to the terminal
+    rows, last = {}, None
+    for ln in out.splitlines():
+        if ln.startswith(" ") and last:  # a wrapped meaning continues its row
+            rows[last] += " " + ln.strip()
+        elif ln and not ln.startswith(("model", "run", "name")):
+            last = ln.split()[0]
+            rows[last] = ln
     for f in fields(Parameters):
         line = rows[f.name]
         unit = field_unit(f.name)

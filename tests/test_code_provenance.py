@@ -16,7 +16,8 @@ import pytest
 
 from solver import codehash
 from sweep.regimes import provenance
-from sweep.campaign.engine import plan_campaign, run_campaign
+from sweep.campaign.plan import plan_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.spec import spec_from_dict
 
@@ -116,7 +117,8 @@ def _cli(capsys, *args):
     return rc, out.out + out.err
 
 
-def test_a_run_of_other_code_is_stale_rerun_or_reused_only_when_asked(tmp_path, capsys, monkeypatch):
+def test_a_run_of_other_code_is_stale_kept_and_rerun_only_when_asked(tmp_path, capsys, monkeypatch):
+    """Stale decides nothing on its own: status lists the code of the runs, run keeps them unless --rerun-stale."""
     spec = tmp_path / "onerun.toml"
     spec.write_text(_SPEC)
     res = ["--results", str(tmp_path / "res")]
@@ -124,25 +126,28 @@ def test_a_run_of_other_code_is_stale_rerun_or_reused_only_when_asked(tmp_path, 
     rc, out = _cli(capsys, "run", str(spec), *res, "--quiet")
     assert rc == 0 and "1 executed now" in out
     rc, out = _cli(capsys, "status", str(spec), *res)
-    assert "1 done, 0 failed, 0 pending, 0 made by other code (stale)" in out and "aaaaaaaaaaaaaaaa (current): 1" in out
+    assert "1 done, 0 failed, 0 pending, 0 archived, 0 damaged" in out and "aaaaaaaaaaaaaaaa (current): 1" in out
+    assert "made by other code" not in out
 
     _pretend_code(monkeypatch, "bbbbbbbbbbbbbbbb")  # the solver's source changed
     rc, out = _cli(capsys, "status", str(spec), *res)
-    assert "0 done, 0 failed, 0 pending, 1 made by other code (stale)" in out
+    assert "1 done, 0 failed, 0 pending, 0 archived, 0 damaged" in out  # still used
+    assert "1 made by other code (stale)" in out
     assert "aaaaaaaaaaaaaaaa: 1" in out and "current code: solver bbbbbbbbbbbbbbbb" in out
-    rc, out = _cli(capsys, "run", str(spec), *res, "--dry-run")
+    rc, out = _cli(capsys, "run", str(spec), *res, "--quiet")
+    assert rc == 0 and "0 executed now" in out and "kept 1 run(s) made by other solver code" in out
+    for flag in ([], ["--accept-stale"]):  # --accept-stale: the default, kept for old scripts
+        rc, out = _cli(capsys, "run", str(spec), *res, "--quiet", *flag)
+        assert rc == 0 and "0 executed now" in out
+    rc, out = _cli(capsys, "run", str(spec), *res, "--dry-run", "--rerun-stale")
     assert "1 made by other code to rerun" in out
 
-    rc, out = _cli(capsys, "run", str(spec), *res, "--quiet")
+    rc, out = _cli(capsys, "run", str(spec), *res, "--quiet", "--rerun-stale")
     assert rc == 0 and "1 executed now" in out and "reran 1 run(s) made by other solver code" in out
+    assert "1 run(s) to do, estimated" in out  # the cost is printed before the run starts
     key = plan_campaign(spec, tmp_path / "res").keys[0]
     rec = json.loads((tmp_path / "res" / "onerun" / "runs" / key / "record.json").read_text())
     assert rec["code_hash"] == "bbbbbbbbbbbbbbbb"
-
-    _pretend_code(monkeypatch, "cccccccccccccccc")
-    rc, out = _cli(capsys, "run", str(spec), *res, "--quiet", "--accept-stale")
-    assert rc == 0 and "0 executed now" in out
-    assert f"reused 1 run(s) made by other solver code (--accept-stale): {key}" in out
     table = (tmp_path / "res" / "onerun" / "table.csv").read_text()
     assert "bbbbbbbbbbbbbbbb" in table  # the table states the code of each run
 
@@ -159,8 +164,10 @@ def test_a_record_without_a_code_hash_is_stale_and_keeps_its_folder(tmp_path, mo
     rec["solver_version"] = "0.1.0"
     f.write_text(json.dumps(rec))
     plan = plan_campaign(spec, tmp_path)
-    assert [k for _, k in plan.stale] == [plan.keys[0]] and len(plan.done) == 1
-    again = run_campaign(spec, tmp_path, runner=one_run_runner, progress=None)
+    assert [k for _, k in plan.stale] == [plan.keys[0]] and len(plan.done) == 2
+    kept = run_campaign(spec, tmp_path, runner=one_run_runner, progress=None)
+    assert kept.n_executed == 0 and kept.stale_reused == [plan.keys[0]]
+    again = run_campaign(spec, tmp_path, runner=one_run_runner, progress=None, rerun_stale=True)
     assert again.n_executed == 1 and again.stale_rerun == [plan.keys[0]]
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweep.campaign.engine import run_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.compare import compare_campaigns
 from sweep.campaign.spec import spec_from_dict

@@ -11,7 +11,13 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from sweep.campaign.engine import DamagedRunsError, build_table, plan_campaign, plot_campaign, reclassify, run_campaign
+from sweep.campaign.plan import DamagedRunsError, plan_campaign
+
+from sweep.campaign.table import build_table
+
+from sweep.campaign.plot import plot_campaign
+
+from sweep.campaign.run import reclassify, run_campaign
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.store import file_manifest, verify_run
 
@@ -88,7 +94,7 @@ def test_status_names_the_damaged_runs_and_run_repairs_them(campaign, capsys):
     capsys.readouterr()
     assert cli_main(["status", str(spec), "--results", str(root)]) == 1
     out = capsys.readouterr().out
-    assert "1 done, 0 failed, 0 pending, 0 made by other code (stale), 3 damaged" in out
+    assert "1 done, 0 failed, 0 pending, 0 archived, 3 damaged" in out
     assert f"damaged {dirs[0].name} (eta_o=0.25): " in out and "summary.json does not parse" in out
     assert f"damaged {dirs[1].name} (eta_o=0.5): timeseries.csv is missing" in out
     assert f"damaged {dirs[2].name} (eta_o=0.75): snapshots/mesh.npz is missing" in out

@@ -18,7 +18,8 @@ import pytest
 from fake_runs import field_runner
 
 from sweep.campaign import figures
-from sweep.campaign.engine import plot_campaign, run_campaign
+from sweep.campaign.plot import plot_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.spec import spec_from_dict
 
 VERSION = "test-fig"

@@ -17,7 +17,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from sweep import load_campaign, load_timeseries
-from sweep.campaign.engine import run_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.cli import main as cli_main
 from sweep.campaign.spec import spec_from_dict
 
@@ -55,7 +55,7 @@ def campaign(tmp_path_factory):
 
 def test_typed_table_with_failed_runs(campaign, monkeypatch):
     spec, root = campaign
-    monkeypatch.setattr("sweep.campaign.engine.current_code_hash", lambda: VERSION)
+    monkeypatch.setattr("solver.codehash.code_hash", lambda: VERSION)
     d = load_campaign(root / "toy")
     assert len(d) == 6 and d.attrs["campaign_dir"] == str(root / "toy")
     assert str(d["fracturing"].dtype) == "boolean" and d["fracturing"].isna().sum() == 2  # C = 3 failed
@@ -138,7 +138,7 @@ def test_spec_without_a_written_table_builds_it_from_the_records(campaign, tmp_p
     import shutil
 
     spec, root = campaign
-    monkeypatch.setattr("sweep.campaign.engine.current_code_hash", lambda: VERSION)
+    monkeypatch.setattr("solver.codehash.code_hash", lambda: VERSION)
     copy = tmp_path / "toy"
     shutil.copytree(root / "toy", copy)
     for f in ("table.csv", "table.parquet", "columns.csv"):

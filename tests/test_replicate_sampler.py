@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from sweep.campaign.boundary import BoundarySampler
-from sweep.campaign.engine import run_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.spec import SpecError, spec_from_dict
 from sweep.studies.oracle import StochasticOracle
 

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sweep.campaign.engine import run_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.load import load_campaign
 from sweep.campaign.replicates import expand_replicates, point_table
 from sweep.campaign.sampler import grid_points
@@ -94,7 +94,7 @@ def test_replicate_runs_aggregates_resume_and_loaders(tmp_path):
     assert cols.loc["crack_length_mean", "unit"] == "mm" and cols.loc["p_fracturing", "unit"] == "-"
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "reps" / "points.csv"), pts, check_dtype=False)
     # the campaign's Ca*-C diagram is the probability diagram (replicates grouped per point)
-    from sweep.campaign.engine import plot_campaign
+    from sweep.campaign.plot import plot_campaign
 
     spec = _spec({"porosity_seed": 4}, diagrams=[{"kind": "ca_star_vs_cement", "formats": []}])
     paths = plot_campaign(spec, tmp_path, table=table.assign(run_dir=""))

@@ -17,7 +17,7 @@ matplotlib.use("Agg")
 import pytest
 from fake_runs import field_runner
 
-from sweep.campaign.engine import run_campaign
+from sweep.campaign.run import run_campaign
 from sweep.campaign.report_html import paper_sections, write_html_report
 from sweep.campaign.spec import spec_from_dict
 
@@ -69,7 +69,9 @@ def test_chromium_renders_it_with_every_image_loaded(report, tmp_path):
     r = subprocess.run([sys.executable, str(ROOT / "scripts" / "check_report_browser.py"), str(report),
                         "--screenshot", str(shot)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.strip() == "images=6 broken=0" and shot.stat().st_size > 10_000
+    images, tables = r.stdout.strip().split(" tables=")
+    assert images == "images=6 broken=0" and tables.endswith(" empty=0") and int(tables.split()[0]) >= 2
+    assert shot.stat().st_size > 10_000
 
 
 def test_the_browser_check_sees_a_broken_image(report, tmp_path):
@@ -82,7 +84,7 @@ def test_the_browser_check_sees_a_broken_image(report, tmp_path):
     bad.write_text(report.read_text().replace("data:image/png;base64,", "data:image/png;base64,AAAA", 1))
     r = subprocess.run([sys.executable, str(ROOT / "scripts" / "check_report_browser.py"), str(bad)],
                        capture_output=True, text=True, timeout=600)
-    assert r.returncode == 1 and r.stdout.strip() == "images=6 broken=1"
+    assert r.returncode == 1 and r.stdout.strip().startswith("images=6 broken=1 ")
 
 
 def test_cli_report_html(tmp_path, capsys):

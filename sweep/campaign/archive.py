@@ -113,10 +113,11 @@ def prune_campaign(spec, root) -> PruneReport:
     Holds the campaign folder's lock, so it refuses to work on a campaign that is running. Runs it cannot
     prune (failed, unlabelled, damaged, already pruned) are left as they are and listed with the reason.
     """
-    from sweep.campaign.engine import as_spec
+    from sweep.campaign.plan import as_spec
+    from sweep.campaign.paths import results_root
 
     spec = as_spec(spec)
-    store = ResultsStore(root, spec.name)
+    store = ResultsStore(results_root(spec, root), spec.name)
     if not store.runs_dir.is_dir():
         raise ValueError(f"results={str(root)!r}: no runs of campaign {spec.name!r} in {store.runs_dir}")
     report = PruneReport()

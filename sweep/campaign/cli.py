@@ -1,18 +1,22 @@
 """``dchfrac campaign ...`` commands (argparse), added to the main CLI by :func:`add_campaign_commands`.
 
     dchfrac campaign run SPEC [--jobs N] [--backend loky|dask|ray] [--scheduler ADDR] [--dry-run]
-                              [--retry-failed] [--accept-stale] [--fail-fast] [--timeout S] [--retries N]
-                              [--results DIR]
+                              [--retry-failed] [--rerun-stale] [--rerun-archived] [--fail-fast] [--timeout S]
+                              [--retries N] [--results DIR]
     dchfrac campaign status SPEC [--results DIR]       (also: runs made by other code, damaged runs)
     dchfrac campaign plot SPEC [--results DIR]
     dchfrac campaign report SPEC [--results DIR] [--html]
     dchfrac campaign classify SPEC [--results DIR]     (rerun the classifier on finished runs)
     dchfrac campaign columns SPEC [--results DIR] [--timeseries]   (column dictionary: name, unit, meaning)
     dchfrac campaign prune SPEC [--results DIR]        (keep of each finished run what its label was read from)
+    dchfrac campaign tables [SPEC...] [--all]         (table.parquet with units, columns.csv, from committed tables)
+    dchfrac campaign redraw [SPEC...] [--all]         (every figure of committed campaigns, from their tables)
 
-``run`` reruns damaged runs and runs made by other solver code (stale); ``--accept-stale`` keeps
-the stale ones and lists them. ``plot``, ``report`` and ``classify`` refuse (exit 1) while runs
-are damaged, naming them.
+``run`` runs the pending points and reruns damaged runs; runs made by other solver code (stale) only with
+``--rerun-stale``, archived runs (committed rows without a run folder here) only with ``--rerun-archived``,
+and it prints how many runs it will make and their estimated cost first. ``plot``, ``report`` and ``classify``
+refuse (exit 1) while runs are damaged, naming them, and when they would replace a committed table with an
+emptier one. ``--results`` defaults to ``results/`` of the spec's project (``sweep.campaign.paths``).
 
 Also runnable alone: ``python -m sweep.campaign.cli run campaigns/examples/demo.toml``.
 Exit codes: 0 success, 1 failed runs (run), damaged runs (status, plot, report, classify) or errors,
@@ -33,8 +37,9 @@ __all__ = ["add_campaign_commands", "main"]
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("spec", help="campaign spec, a TOML file (see campaigns/)")
-    p.add_argument("--results", default="results", metavar="DIR",
-                   help="results root (default: results); the campaign lives in DIR/<name>/")
+    p.add_argument("--results", default=None, metavar="DIR",
+                   help="results root (default: results/ of the spec's project, the folder holding its campaigns/); "
+                        "the campaign lives in DIR/<name>/")
     p.add_argument("--max-runs", type=int, default=None, metavar="N",
                    help="allow grids of up to N runs (default: spec [run] max_runs, else 10000)")
 
@@ -49,7 +54,7 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune}")
+    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune,tables,redraw}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -60,9 +65,12 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                    help="dask scheduler / ray address (default: a local cluster of --jobs workers)")
     p.add_argument("--dry-run", action="store_true", help="print the grid size and an estimated cost, run nothing")
     p.add_argument("--retry-failed", action="store_true", help="rerun runs recorded as failed")
+    p.add_argument("--rerun-stale", action="store_true",
+                   help="rerun the runs made by other solver code (stale); by default they are kept and listed")
+    p.add_argument("--rerun-archived", action="store_true",
+                   help="rerun the archived runs (rows of the committed table whose run folders are not here)")
     p.add_argument("--accept-stale", action="store_true",
-                   help="keep runs made by other solver code (and labels of other classifier code) instead of "
-                        "rerunning them; they are listed")
+                   help="keep the runs made by other solver code (the default; kept for old scripts)")
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failed run")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="wall-time limit per run, s (default: spec [run] timeout, else none); the run is killed")
@@ -90,10 +98,25 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         if name == "report":
             q.add_argument("--html", action="store_true",
                            help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
+    for name, fn, helptext in (
+        ("tables", cmd_tables, "rewrite table.parquet (units in its metadata) and columns.csv of campaigns from "
+                               "their committed tables or records (no run)"),
+        ("redraw", cmd_redraw, "redraw the figures of campaigns from their committed tables (no run); a figure "
+                               "that needs absent run folders is kept"),
+    ):
+        q = sub.add_parser(name, help=helptext)
+        q.add_argument("specs", nargs="*", metavar="SPEC", help="campaign specs (TOML)")
+        q.add_argument("--all", action="store_true",
+                       help="every campaign spec under PROJECT/campaigns/ whose results folder holds a table")
+        q.add_argument("--project", default=".", metavar="PROJECT", help="project folder for --all (default: .)")
+        q.add_argument("--results", default=None, metavar="DIR",
+                       help="results root (default: results/ of each spec's project)")
+        q.set_defaults(func=fn)
     q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
     q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
     q.add_argument("other", help="second campaign: spec TOML or campaign folder")
-    q.add_argument("--results", default="results", metavar="DIR", help="results root (default: results)")
+    q.add_argument("--results", default=None, metavar="DIR",
+                   help="results root (default: results/ of each spec's project)")
     q.add_argument("--label", default="regime", help="categorical column compared (default: regime)")
     q.add_argument("--columns", default="", metavar="A,B",
                    help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
@@ -108,7 +131,7 @@ def _guarded(fn):
 
     @functools.wraps(fn)
     def wrapper(args) -> int:
-        from sweep.campaign.engine import DamagedRunsError
+        from sweep.campaign.plan import DamagedRunsError, EmptierResultError
         from sweep.campaign.spec import SpecError
 
         try:
@@ -121,7 +144,7 @@ def _guarded(fn):
                 print(f"error: {e}", file=sys.stderr)
                 return 2
             raise
-        except DamagedRunsError as e:
+        except (DamagedRunsError, EmptierResultError) as e:
             print(f"error: {e}", file=sys.stderr)
             return 1
         except RuntimeError as e:
@@ -138,7 +161,10 @@ def _spec(args, writes: bool = True):
     from solver.output import check_writable_dir
     from sweep.campaign.spec import load_spec
 
+    from sweep.campaign.paths import results_root
+
     spec = load_spec(args.spec, max_runs=getattr(args, "max_runs", None))
+    args.results = str(results_root(spec, None) if args.results is None else Path(args.results).resolve())
     if writes:
         try:
             check_writable_dir(f"{args.results}/{spec.name}", "--results campaign folder")
@@ -175,7 +201,7 @@ def _check_environment() -> None:
 def _name_damaged(source, results) -> None:
     """A warning on stderr naming the damaged runs of the campaign ``source`` (spec TOML, or campaign folder
     holding its spec.toml), as ``status`` names them; nothing when the spec is not at hand."""
-    from sweep.campaign.engine import plan_campaign
+    from sweep.campaign.plan import plan_campaign
     from sweep.campaign.spec import load_spec
 
     p = Path(source)
@@ -191,14 +217,36 @@ def _name_damaged(source, results) -> None:
 
 
 def _fmt_s(s: float) -> str:
-    from sweep.campaign.engine import _hms
+    from sweep.campaign.run import _hms
 
     return _hms(s)
 
 
+def _print_estimate(spec, est, jobs: int, results) -> None:
+    """The dry run's lines: the runs of the grid by state, the cost of the runs to do by mesh size."""
+    from sweep.campaign.cost import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2
+
+    print(f"campaign {spec.name}: {est['grid_size']} runs in the grid ({est['done']} done, {est['failed']} failed, "
+          f"{est['archived']} archived, {est['pending']} pending, {est['stale']} made by other code to rerun, "
+          f"{est['stale_kept']} made by other code kept, {est['damaged']} damaged)")
+    for h, d in sorted(est["by_mesh_size"].items()):
+        print(f"  h = {h:g} mm: {d['runs']} runs, {d['sim_s']:.1f} simulated s x {d['wall_s_per_sim_s']:.3g} "
+              f"wall s per simulated s ({d['source']}) + {d['runs']} x {est['per_run_overhead_s']:.3g} s per run "
+              f"({est['per_run_overhead_source']}) = {_fmt_s(d['wall_s'])} CPU")
+    if jobs > 1:
+        print(f"  (each rate x {est['shared_run_factor']:.3g}, a run beside {jobs - 1} other(s) against alone: "
+              f"{est['shared_run_factor_source']})")
+    print(f"estimated cost of the {est['runs_to_do']} run(s) to do: {_fmt_s(est['cpu_s'])} CPU, about "
+          f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s)")
+    if any(d["source"] == "default" for d in est["by_mesh_size"].values()):
+        print(f"  (no {results}/bench/bench.json: default {DEFAULT_WALL_S_PER_SIM_S_H2:g} wall s per "
+              f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")
+
+
 @_guarded
 def cmd_run(args) -> int:
-    from sweep.campaign.engine import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost, run_campaign
+    from sweep.campaign.cost import estimate_cost
+    from sweep.campaign.run import run_campaign
 
     spec = _spec(args)
     _check_environment()
@@ -207,28 +255,20 @@ def cmd_run(args) -> int:
         if warnings:
             raise UsageError(f"--strict refuses: {warnings[0]}"
                              + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
+    jobs = args.jobs or int(spec.run.get("jobs", 1))
+    est = estimate_cost(spec, args.results, jobs=max(1, jobs), retry_failed=args.retry_failed,
+                        rerun_stale=args.rerun_stale, rerun_archived=args.rerun_archived)
     if args.dry_run:
-        jobs = args.jobs or int(spec.run.get("jobs", 1))
-        est = estimate_cost(spec, args.results, jobs=jobs, retry_failed=args.retry_failed,
-                            accept_stale=args.accept_stale)
-        print(f"campaign {spec.name}: {est['grid_size']} runs in the grid ({est['done']} done, "
-              f"{est['failed']} failed, {est['pending']} pending, {est['stale']} made by other code to rerun, "
-              f"{est['damaged']} damaged)")
-        for h, d in sorted(est["by_mesh_size"].items()):
-            print(f"  h = {h:g} mm: {d['runs']} runs, {d['sim_s']:.1f} simulated s x {d['wall_s_per_sim_s']:.3g} "
-                  f"wall s per simulated s ({d['source']}) + {d['runs']} x {est['per_run_overhead_s']:.3g} s per run "
-                  f"({est['per_run_overhead_source']}) = {_fmt_s(d['wall_s'])} CPU")
-        if jobs > 1:
-            print(f"  (each rate x {est['shared_run_factor']:.3g}, a run beside {jobs - 1} other(s) against alone: "
-                  f"{est['shared_run_factor_source']})")
-        print(f"estimated cost of the runs to do: {_fmt_s(est['cpu_s'])} CPU, about {_fmt_s(est['wall_s'])} "
-              f"wall on {jobs} job(s)")
+        _print_estimate(spec, est, jobs, args.results)
         for w in _input_warnings(spec):
             print(f"warning: {w}")
-        if any(d["source"] == "default" for d in est["by_mesh_size"].values()):
-            print(f"  (no {args.results}/bench/bench.json: default {DEFAULT_WALL_S_PER_SIM_S_H2:g} wall s per "
-                  f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")
         return 0
+    if est["runs_to_do"]:  # what is about to be spent, before any run starts
+        print(f"campaign {spec.name}: {est['runs_to_do']} run(s) to do, estimated {_fmt_s(est['cpu_s'])} CPU, about "
+              f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s) (`--dry-run` details them)", flush=True)
+    elif est["archived"] or est["stale_kept"]:
+        print(f"campaign {spec.name}: nothing to rerun: {est['archived']} archived and {est['stale_kept']} stale "
+              f"run(s) kept (`--rerun-archived`, `--rerun-stale` rerun them)", flush=True)
     timeout = "spec" if args.timeout is None else args.timeout
     try:                                        # before anything is run or written
         check_backend(args.backend, args.scheduler)
@@ -237,13 +277,14 @@ def cmd_run(args) -> int:
     try:
         res = run_campaign(spec, args.results, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                            timeout=timeout, retries=args.retries, fail_fast=args.fail_fast,
-                           retry_failed=args.retry_failed, accept_stale=args.accept_stale,
+                           retry_failed=args.retry_failed, rerun_stale=args.rerun_stale,
+                           rerun_archived=args.rerun_archived,
                            progress=None if args.quiet else LogStream("dchfrac.campaign"))
     except KeyboardInterrupt:
         logging.getLogger("dchfrac.campaign").warning("interrupted: finished runs are recorded; rerun the same command to resume")
         return 130
     print(f"campaign {spec.name}: {res.n_points} runs, {res.n_executed} executed now "
-          f"({res.n_ok} ok, {res.n_failed} failed), {res.n_skipped} not executed (already recorded or cancelled)")
+          f"({res.n_ok} ok, {res.n_failed} failed), {res.n_skipped} not executed (already recorded, archived or cancelled)")
     _print_provenance(res)
     for k, reason in res.failures:
         print(f"  failed {k}: {reason}")
@@ -257,7 +298,7 @@ def cmd_run(args) -> int:
 def _print_provenance(res) -> None:
     """What ``campaign run`` did about stale and damaged runs."""
     if res.stale_reused:
-        print(f"  reused {len(res.stale_reused)} run(s) made by other solver code (--accept-stale): "
+        print(f"  kept {len(res.stale_reused)} run(s) made by other solver code (--rerun-stale reruns them): "
               + " ".join(res.stale_reused))
     if res.stale_rerun:
         print(f"  reran {len(res.stale_rerun)} run(s) made by other solver code")
@@ -270,21 +311,27 @@ def _print_provenance(res) -> None:
 @_guarded
 def cmd_status(args) -> int:
     from sweep.campaign.accounting import campaign_throughput
-    from sweep.campaign.engine import code_counts, plan_campaign, sampler_status
+    from sweep.campaign.plan import _archived_text, code_counts, plan_campaign
+    from sweep.campaign.run import sampler_status
 
     spec = _spec(args, writes=False)
     plan = plan_campaign(spec, args.results)
     print(f"campaign {spec.name}: {len(plan.points)} runs: {len(plan.done)} done, {len(plan.failed)} failed, "
-          f"{len(plan.pending)} pending, {len(plan.stale)} made by other code (stale), {len(plan.damaged)} damaged"
+          f"{len(plan.pending)} pending, {len(plan.archived)} archived, {len(plan.damaged)} damaged"
           f"  ({plan.store.dir})")
+    if plan.archived or plan.unmatched_rows:
+        print(f"  archived (rows of the committed table, run folders not here): {_archived_text(plan)}")
     counts = code_counts(plan)
-    print(f"  current code: solver {plan.code_hash}, classifier {plan.classifier_hash}; stored runs by code: "
+    print(f"  current code: solver {plan.code_hash}, classifier {plan.classifier_hash}; runs by code: "
           + ", ".join(f"{h}{' (current)' if h == plan.code_hash else ''}: {n}" for h, n in counts.items()))
-    print("  " + campaign_throughput(plan.store.records()).text())
+    if plan.store.records():
+        print("  " + campaign_throughput(plan.store.records()).text())
     if plan.misclassified:
         print(f"  {len(plan.misclassified)} run(s) labelled by other classifier code (`campaign run` reclassifies)")
-    if plan.stale:
-        print(f"  `campaign run` reruns the {len(plan.stale)} stale run(s); `--accept-stale` keeps them")
+    n_stale = sum(n for h, n in counts.items() if h != plan.code_hash)
+    if n_stale:
+        print(f"  {n_stale} made by other code (stale): used like the others; "
+              "`campaign run --rerun-stale` reruns them")
     for p, k in plan.failed:
         swept = ", ".join(f"{a}={v}" for a, v in p.swept.items())
         print(f"  failed {k} ({swept}): {plan.records[k].get('reason')}")
@@ -294,8 +341,11 @@ def cmd_status(args) -> int:
             f"{st['uncertainty']:.2f} x tolerance (largest half-width of the boundary's band)"
         print(f"{st['sampler']} sampler: round {st['round']}, {st['runs_used']}/{st['budget']} runs of the budget "
               f"({st['pending']} pending), boundary uncertainty {unc}")
+        from sweep.regimes.diagrams import regime_style
+
         for pair, v in sorted(st["uncertainty_by_pair"].items()):
-            print(f"  {pair}: {v:.2f} x tolerance")
+            words = " | ".join(regime_style(x.strip())["label"] for x in str(pair).split("|"))
+            print(f"  boundary {words}: {v:.2f} x tolerance")
         print(f"  stopped: {st['reason']}" if st["stopped"] else "  running: rerun `campaign run` to continue")
     if plan.damaged:
         print(plan.damage_text())
@@ -305,7 +355,7 @@ def cmd_status(args) -> int:
 
 @_guarded
 def cmd_plot(args) -> int:
-    from sweep.campaign.engine import plot_campaign
+    from sweep.campaign.plot import plot_campaign
 
     spec = _spec(args)
     figs = plot_campaign(spec, args.results)
@@ -318,7 +368,7 @@ def cmd_plot(args) -> int:
 
 @_guarded
 def cmd_report(args) -> int:
-    from sweep.campaign.engine import write_report
+    from sweep.campaign.report import write_report
 
     spec = _spec(args)
     path = write_report(spec, args.results)
@@ -326,20 +376,20 @@ def cmd_report(args) -> int:
     if getattr(args, "html", False):
         from sweep.campaign.report_html import write_html_report
 
-        print(f"report: {write_html_report(spec, args.results)}")
+        print(f"report: {write_html_report(spec, args.results, plot=False)}")
     return 0
 
 
 @_guarded
 def cmd_classify(args) -> int:
-    from sweep.campaign.engine import reclassify
-
-    from sweep.campaign.engine import plan_campaign
+    from sweep.campaign.plan import plan_campaign
+    from sweep.campaign.run import reclassify
 
     spec = _spec(args)
     n = reclassify(spec, args.results)
-    print(f"reclassified {n} runs")
-    plan = plan_campaign(spec, args.results, accept_stale=True, verify=False)
+    plan = plan_campaign(spec, args.results, verify=False)
+    print(f"reclassified {n} runs" + (f"; {len(plan.archived)} archived run(s) have no run folder here to read "
+                                       "(their committed labels stay)" if plan.archived else ""))
     errors = [(k, plan.records[k]["metrics"]["classify_error"]) for _, k in plan.done
               if "classify_error" in (plan.records[k].get("metrics") or {})]
     for k, e in errors:
@@ -387,6 +437,56 @@ def cmd_columns(args) -> int:
     return 0
 
 
+def committed_specs(project) -> list[Path]:
+    """The campaign specs of ``project/campaigns`` (twin campaigns of ``discrepancy/`` excepted) whose
+    results folder holds a committed table."""
+    from sweep.campaign.paths import results_root
+    from sweep.campaign.spec import load_spec
+
+    out = []
+    for p in sorted(Path(project, "campaigns").rglob("*.toml")):
+        if "discrepancy" in p.relative_to(Path(project, "campaigns")).parts:
+            continue
+        d = results_root(p, None) / load_spec(p).name
+        if (d / "table.csv").is_file() or (d / "table.parquet").is_file():
+            out.append(p)
+    return out
+
+
+def _each_spec(args, fn) -> int:
+    """``fn(spec, root)`` on every spec of ``args`` (SPEC... and --all); prints what each wrote; exit code."""
+    from sweep.campaign.spec import load_spec
+
+    specs = [Path(s) for s in args.specs] + (committed_specs(args.project) if args.all else [])
+    if not specs:
+        raise UsageError("give campaign specs or --all")
+    root = None if args.results is None else Path(args.results).resolve()
+    rc = 0
+    for s in specs:
+        try:
+            paths = fn(load_spec(s), root)
+        except FileNotFoundError as e:
+            print(f"error: {e}", file=sys.stderr)
+            rc = 1
+            continue
+        print(f"{s}: " + (", ".join(Path(p).name for p in paths) or "nothing written"), flush=True)
+    return rc
+
+
+@_guarded
+def cmd_tables(args) -> int:
+    from sweep.campaign.table import refresh_table
+
+    return _each_spec(args, refresh_table)
+
+
+@_guarded
+def cmd_redraw(args) -> int:
+    from sweep.campaign.plot import plot_campaign
+
+    return _each_spec(args, plot_campaign)
+
+
 @_guarded
 def cmd_compare(args) -> int:
     from solver.output import check_writable_dir
@@ -402,7 +502,8 @@ def cmd_compare(args) -> int:
     for source in (args.spec, args.other):
         _name_damaged(source, args.results)
     try:
-        c = compare_campaigns(args.spec, args.other, args.results, label=args.label, columns=columns)
+        root = "results" if args.results is None else Path(args.results).resolve()
+        c = compare_campaigns(args.spec, args.other, root, label=args.label, columns=columns)
     except (ValueError, FileNotFoundError) as e:
         raise UsageError(str(e)) from None
     text = c.markdown()

@@ -23,7 +23,7 @@ __all__ = ["TABLE_COLUMNS", "column_info", "column_dictionary", "timeseries_dict
 
 LIST_DTYPES = ("list<float>", "list<string>")
 
-# columns made by the campaign (sweep.campaign.engine.build_table, sweep.regimes.numbers, sweep.regimes.classify):
+# columns made by the campaign (sweep.campaign.table.build_table, sweep.regimes.numbers, sweep.regimes.classify):
 # name -> (unit, dtype, meaning)
 TABLE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "index": ("", "Int64", "position of the run in the campaign grid"),
@@ -74,7 +74,7 @@ TABLE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "finished_at": ("", "string", "UTC time the run finished (ISO 8601)"),
 }
 
-# prefixes build_table gives a name that is already taken (sweep.campaign.engine._row)
+# prefixes build_table gives a name that is already taken (sweep.campaign.table._row)
 _PREFIXES = {"num_": "dimensionless number", "swept_": "swept value", "cls_": "classification",
              "m_": "run metric", "param_": "model parameter", "opt_": "run option", "rec_": "run record"}
 # metrics made from a time-series column (sweep.campaign.scheduler._timeseries_metrics): suffix -> meaning
@@ -231,6 +231,7 @@ def typed_table(df, dictionary=None):
     """``df`` with each column cast to its dictionary dtype (nullable pandas types, real lists)."""
     dictionary = column_dictionary(df) if dictionary is None else dictionary
     out = df.copy()
+    out.attrs = {}  # pandas deep-copies attrs at every column operation; the caller sets them on the result
     for name, dtype in zip(dictionary["name"], dictionary["dtype"]):
         if name in out.columns:
             out[name] = _typed_column(out[name], dtype)
@@ -247,10 +248,19 @@ def to_csv_frame(df, dictionary):
 
 
 def arrow_schema(df, dictionary):
-    """The pyarrow schema of a typed table: every column typed (never Arrow null), lists as Arrow lists."""
+    """The pyarrow schema of a typed table: every column typed (never Arrow null), lists as Arrow lists; each
+    field's metadata holds its ``unit`` and ``meaning`` (and ``swept``), the schema's ``dchfrac.columns`` the
+    whole dictionary as JSON (``pyarrow.parquet.read_schema(path).field("cement").metadata``)."""
     import pyarrow as pa
 
     kinds = {"Float64": pa.float64(), "Int64": pa.int64(), "boolean": pa.bool_(), "string": pa.string(),
              "list<float>": pa.list_(pa.float64()), "list<string>": pa.list_(pa.string())}
-    dt = dict(zip(dictionary["name"], dictionary["dtype"]))
-    return pa.schema([pa.field(str(c), kinds[dt.get(c, "string")]) for c in df.columns])
+    info = {r["name"]: r for r in dictionary.to_dict("records")}
+
+    def meta(c):
+        r = info.get(c, {})
+        return {k: str(r.get(k, "")) for k in ("unit", "meaning", "swept") if k in r}
+
+    fields_ = [pa.field(str(c), kinds[info.get(c, {}).get("dtype", "string")], metadata=meta(c)) for c in df.columns]
+    rows = [{k: (bool(v) if k == "swept" else str(v)) for k, v in r.items()} for r in dictionary.to_dict("records")]
+    return pa.schema(fields_, metadata={"dchfrac.columns": json.dumps(rows), "dchfrac.units": "mm, s, kPa"})

@@ -18,15 +18,16 @@ __all__ = ["load_campaign", "load_timeseries", "campaign_dir"]
 
 def campaign_dir(source, root="results") -> Path:
     """The campaign folder of ``source``: a campaign folder, a spec TOML path or a CampaignSpec (``root/<name>``)."""
+    from sweep.campaign.paths import results_root
     from sweep.campaign.spec import CampaignSpec, load_spec
 
     if isinstance(source, CampaignSpec):
-        return Path(root) / source.name
+        return results_root(source, root) / source.name
     p = Path(source)
     if p.is_dir():
         return p
     if p.is_file():
-        return Path(root) / load_spec(p).name
+        return results_root(p, root) / load_spec(p).name
     raise FileNotFoundError(f"campaign {str(source)!r} not found: give a campaign folder or a spec TOML file")
 
 
@@ -55,13 +56,26 @@ def load_campaign(source, root="results", *, points: bool = False):
     elif (d / "table.csv").is_file():
         df = pd.read_csv(d / "table.csv")
     elif not isinstance(source, (str, os.PathLike)) or Path(source).is_file():
-        from sweep.campaign.engine import as_spec, build_table
+        from sweep.campaign.plan import as_spec
+        from sweep.campaign.table import build_table
 
         df = build_table(as_spec(source), root)
+        if df.empty:
+            raise FileNotFoundError(f"campaign {str(source)!r}: no table.parquet or table.csv and no finished run "
+                                    f"in {d} (run it with `dchfrac campaign run`, or give --results / root)")
     else:
         raise FileNotFoundError(f"no table.parquet or table.csv in {d}")
-    df = typed_table(_relative_run_dirs(df), _dictionary(d, df))
+    return typed_frame(d, df)
+
+
+def typed_frame(d: Path, df):
+    """A campaign table read from folder ``d``, typed by its column dictionary; ``attrs``: campaign_dir, units."""
+    from sweep.campaign.columns import typed_table
+
+    dictionary = _dictionary(d, df)
+    df = typed_table(_relative_run_dirs(df), dictionary)
     df.attrs["campaign_dir"] = str(d)
+    df.attrs["units"] = {n: u for n, u in zip(dictionary["name"], dictionary["unit"]) if n in df.columns}
     return df
 
 
@@ -115,7 +129,7 @@ def _damaged_series(d: Path, damaged: list, allow_damaged: bool) -> None:
     msg = (f"campaign {d.name}: {len(damaged)} run(s) with a damaged time series; `dchfrac campaign run SPEC` "
            "reruns them: " + "; ".join(damaged))
     if not allow_damaged:
-        from sweep.campaign.engine import DamagedRunsError
+        from sweep.campaign.plan import DamagedRunsError
 
         raise DamagedRunsError(msg)
     import warnings
@@ -130,7 +144,7 @@ def load_timeseries(source, root="results", *, status: str | None = None, allow_
     None keeps every run that wrote a time series (a failed run's series ends where it failed).
     Columns: ``key``, the swept values (named as the spec's axes), ``status``, then the columns of
     ``timeseries.csv`` (t in s, p_inj in kPa, radii in mm, ...; ``sweep.campaign.columns.timeseries_dictionary``).
-    A run whose series is unreadable, or an "ok" run without one, is damaged: ``sweep.campaign.engine.DamagedRunsError``
+    A run whose series is unreadable, or an "ok" run without one, is damaged: ``sweep.campaign.plan.DamagedRunsError``
     names them all, unless ``allow_damaged`` (then they are left out with a warning naming them).
     """
     import pandas as pd
@@ -156,11 +170,32 @@ def load_timeseries(source, root="results", *, status: str | None = None, allow_
         frames.append(ts.assign(**keys)[[*keys, *ts.columns]])
     _damaged_series(d, damaged, allow_damaged)
     if not frames:
-        return pd.DataFrame(columns=["key", *swept, "status", "t"])
+        raise FileNotFoundError(_no_timeseries_text(d, table, status))
     out = pd.concat(frames, ignore_index=True)
     for c in ("key", "status"):
         out[c] = out[c].astype("string")
     for n in swept:
         out[n] = out[n].astype(table[n].dtype)
     out.attrs["campaign_dir"] = str(d)
+    out.attrs["units"] = {**{n: table.attrs["units"].get(n, "?") for n in ("key", *swept, "status")},
+                          **{n: u for n, u in _timeseries_units().items() if n in out.columns}}
     return out
+
+
+def _timeseries_units() -> dict:
+    from solver.output import TIMESERIES_COLUMNS
+
+    return {n: u for n, (u, _) in TIMESERIES_COLUMNS.items()}
+
+
+def _no_timeseries_text(d: Path, table, status) -> str:
+    """Why no run of a campaign has a time series: which folders are missing, or which status left every run out."""
+    runs = d / "runs"
+    if status is not None and not (table["status"] == status).any():
+        return f"campaign {d}: no run with status {status!r} ({len(table)} runs in its table)"
+    if not runs.is_dir():
+        return (f"campaign {d}: no time series: its run folders ({runs}) are not here (a committed campaign keeps "
+                f"its table, not its runs; `load_campaign` reads the table, `dchfrac campaign run SPEC "
+                f"--rerun-archived` remakes the runs)")
+    return (f"campaign {d}: none of its {len(table)} runs has a timeseries.csv under {runs} (pruned or "
+            f"damaged run folders)")

@@ -60,7 +60,7 @@ def _thumbnail(run_dir: Path) -> str | None:
     """Porosity (0..1) of the last snapshot with the S = 0.5 front, as a small PNG data URI."""
     from matplotlib.figure import Figure
 
-    from sweep.campaign.engine import _snapshot
+    from sweep.campaign.plot import _snapshot
 
     snap = _snapshot(run_dir)
     if snap is None or "phi" not in snap[2]:
@@ -120,16 +120,23 @@ def _paper_block(spec) -> list[str]:
     return out
 
 
-def write_html_report(spec, root="results", *, code_hash: str | None = None) -> Path:
-    """Write ``<root>/<name>/report.html`` (self-contained: every image a data URI); returns its path."""
-    from sweep.campaign.engine import as_spec, build_table, plan_campaign, plot_campaign
+def write_html_report(spec, root="results", *, code_hash: str | None = None, plot: bool = True) -> Path:
+    """Write ``<root>/<name>/report.html`` (self-contained: every image a data URI); returns its path.
+    ``plot``: draw the figures first (else the ones in ``figures/`` are shown)."""
+    from sweep.campaign.plan import _archived_text, as_spec, check_not_emptier, plan_campaign
+    from sweep.campaign.table import build_table
+    from sweep.campaign.plot import plot_campaign
+    from sweep.campaign.paths import results_root
     from sweep.campaign.store import ResultsStore, write_text_atomic
 
     spec = as_spec(spec)
+    root = results_root(spec, root)
     store = ResultsStore(root, spec.name)
     plan = plan_campaign(spec, root, code_hash=code_hash)
     table = build_table(spec, root, plan=plan)
-    figs = [Path(f) for f in plot_campaign(spec, root, code_hash=code_hash, table=table) if Path(f).suffix == ".png"]
+    check_not_emptier(store, table)
+    figs = plot_campaign(spec, root, code_hash=code_hash, table=table) if plot else sorted(store.figures_dir.glob("*"))
+    figs = [Path(f) for f in figs if Path(f).suffix == ".png"]
     if not table.empty:
         store.write_table(table, swept=spec.axis_names)
     e = html.escape
@@ -141,7 +148,9 @@ def write_html_report(spec, root="results", *, code_hash: str | None = None) -> 
     if spec.paper:
         L.append(f"<p>Paper: {e(spec.paper)}</p>")
     L.append(f"<p>Runs in the grid: {len(plan.points)}; done {len(plan.done)}, failed {len(plan.failed)}, "
-             f"pending {len(plan.pending)}. Solver code hash <code>{e(plan.code_hash)}</code>. Units mm, s, kPa.</p>")
+             f"pending {len(plan.pending)}"
+             + (f", archived {e(_archived_text(plan))} (rows of the committed table, run folders not here)"
+                if plan.archived or plan.unmatched_rows else "") + f". Solver code hash <code>{e(plan.code_hash)}</code>. Units mm, s, kPa.</p>")
     if not table.empty and table["regime"].notna().any():
         L.append("<h2>Regimes</h2><table><tr><th class='l'>regime</th><th>runs</th></tr>")
         L += [f"<tr><td class='l'>{e(str(r))}</td><td>{n}</td></tr>"

@@ -6,7 +6,7 @@ interface is two methods, so that a smarter sampler can be dropped in:
 
 * ``initial(spec) -> list[Point]``: the first batch of runs;
 * ``refine(spec, table) -> list[Point]``: more runs given the campaign table so far
-  (one row per finished run, see ``sweep.campaign.engine.build_table``); an empty list ends
+  (one row per finished run, see ``sweep.campaign.table.build_table``); an empty list ends
   the campaign.
 
 :class:`GridSampler` (``kind = "grid"``) returns the whole grid at once and never refines.

@@ -442,7 +442,11 @@ def iter_records(tasks: Sequence[RunTask], cfg: ExecConfig, *, jobs: int = 1, ba
     from joblib import Parallel, delayed
 
     with _backend(backend, jobs, scheduler) as n_jobs:
-        par = Parallel(n_jobs=n_jobs, return_as="generator_unordered", batch_size=1)
+        # Ray's joblib backend returns lists only (it refuses generators): its records reach the campaign when
+        # the round's runs are all done (each run's folder is still written as it finishes, so a killed campaign
+        # resumes alike); fail_fast then stops after the round
+        order = "list" if backend == "ray" else "generator_unordered"
+        par = Parallel(n_jobs=n_jobs, return_as=order, batch_size=1)
         gen = par(delayed(execute_task)(t, cfg) for t in tasks)
         try:
             yield from gen

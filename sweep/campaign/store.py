@@ -254,11 +254,11 @@ class ResultsStore:
     def columns_csv(self) -> Path:
         return self.dir / "columns.csv"
 
-    def write_table(self, df, swept=()) -> list[Path]:
-        """Write the campaign table, typed by its column dictionary (``sweep.campaign.columns``): ``table.csv``,
-        ``table.parquet`` (pyarrow: real lists, every column typed) and ``columns.csv`` (name, unit,
-        dtype, swept, meaning; ``swept``: the spec's axis names), each atomically. ``run_dir`` is written
-        relative to the campaign folder."""
+    def write_table(self, df, swept=(), *, csv: bool = True) -> list[Path]:
+        """Write the campaign table, typed by its column dictionary (``sweep.campaign.columns``): ``table.csv``
+        (unless not ``csv``), ``table.parquet`` (pyarrow: real lists, every column typed, units and meanings in
+        its schema metadata) and ``columns.csv`` (name, unit, dtype, swept, meaning; ``swept``: the spec's axis
+        names), each atomically. ``run_dir`` is written relative to the campaign folder."""
         from sweep.campaign.columns import column_dictionary, to_csv_frame, typed_table
 
         self.dir.mkdir(parents=True, exist_ok=True)
@@ -266,9 +266,10 @@ class ResultsStore:
         dictionary = column_dictionary(df, swept=swept)
         typed = typed_table(df, dictionary)
         write_text_atomic(self.columns_csv, dictionary.to_csv(index=False))
-        write_text_atomic(self.table_csv, to_csv_frame(typed, dictionary).to_csv(index=False))
+        if csv:
+            write_text_atomic(self.table_csv, to_csv_frame(typed, dictionary).to_csv(index=False))
         self._write_parquet(typed, dictionary)
-        return [self.table_csv, self.table_parquet]
+        return [self.table_csv, self.table_parquet, self.columns_csv]
 
     def _relative_run_dirs(self, df):
         if "run_dir" not in df.columns:
@@ -293,6 +294,8 @@ class ResultsStore:
 
         from sweep.campaign.columns import arrow_schema
 
+        typed = typed.copy()
+        typed.attrs = {}  # a loader's attrs (campaign folder, units) belong to the reader, not the file
         table = pa.Table.from_pandas(typed, schema=arrow_schema(typed, dictionary), preserve_index=False)
         with atomic_path(self.table_parquet) as tmp:
             pq.write_table(table, tmp)

@@ -70,6 +70,11 @@ def cmd_init(args) -> int:
     for w in warnings:
         print(f"dchfrac discrepancy: warning: {w}", file=sys.stderr)
     print(f"wrote {path}: edit it, then dchfrac discrepancy run --measured {args.measured} --model {path} --out OUT")
+    from .data import load_measured
+    from .init_spec import too_few_conditions
+
+    if note := too_few_conditions(load_measured(args.measured), args.measured):
+        print(f"warning: {note}", file=sys.stderr)
     return 0
 
 

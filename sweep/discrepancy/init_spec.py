@@ -121,12 +121,20 @@ def _option_tables() -> list[str]:
     return L
 
 
-def starting_spec(data: MeasuredData, folder) -> str:
-    """The commented starting SPEC (TOML text) for ``data`` (read from ``folder``)."""
+def too_few_conditions(data: MeasuredData, folder) -> str | None:
+    """Why ``dchfrac discrepancy run`` cannot use ``data`` (fewer than 2 conditions), None when it can."""
     if len(data.ids) < 2:
-        raise ValueError(f"{folder}: the workflow needs at least 2 conditions (one is held out); "
-                         f"conditions.csv has {len(data.ids)}")
-    return "\n".join(_header(data, Path(folder)) + _model_tables(data) + _option_tables())
+        return (f"{folder}: the workflow needs at least 2 conditions (one is held out); conditions.csv has "
+                f"{len(data.ids)}: add one before `dchfrac discrepancy run`")
+    return None
+
+
+def starting_spec(data: MeasuredData, folder) -> str:
+    """The commented starting SPEC (TOML text) for ``data`` (read from ``folder``); with fewer than 2
+    conditions its header says that ``run`` needs another one."""
+    note = too_few_conditions(data, folder)
+    head = _header(data, Path(folder)) + ([f"# NOTE: {note}.", ""] if note else [])
+    return "\n".join(head + _model_tables(data) + _option_tables())
 
 
 def write_starting_spec(measured, out, force: bool = False, strict: bool = False) -> tuple[Path, list[str]]:

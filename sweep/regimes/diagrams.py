@@ -23,7 +23,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from .classify import REGIMES
-from .separatrix import fit_exponential_separatrix, unlocated_reason
+from .separatrix import SEPARATRIX_P_MAX, fit_exponential_separatrix, separatrix_p_value, unlocated_reason
 
 __all__ = [
     "REGIME_STYLE",
@@ -31,6 +31,9 @@ __all__ = [
     "plot_ca_star_vs_cement",
     "plot_nf_vs_nb",
     "plot_boundary_sampling",
+    "regime_style",
+    "separatrix_p_value",
+    "SEPARATRIX_P_MAX",
 ]
 
 BLUE = "#1f77b4"
@@ -45,8 +48,31 @@ REGIME_STYLE: dict[str, dict[str, Any]] = {
     "fracturing_fingering": dict(marker="x", color=ORANGE, label="fracturing/fingering",
                                  shade="#e7cb94"),
 }
+# the two labels of the Ca*-C diagram (the ``fracturing`` column: True/False) in the same palette
+_TWO_LABELS = {
+    "fracturing": dict(marker="^", color=ORANGE, label="fracturing", shade="#fdd0a2"),
+    "porous_invasion": dict(marker="o", color=BLUE, label="porous invasion (no fracture)", shade="#c6dbef"),
+}
+_FAILED = dict(marker="X", color="0.45", label="failed (no label)", shade="#dddddd")
 
 
+def regime_style(label: Any) -> dict[str, Any]:
+    """marker, color, label (words, never True/False) and shade of a regime name or a ``fracturing`` value:
+    the one palette of every figure (blue: invasion without fracture, orange: fracturing; grey: no label)."""
+    if label is None or (isinstance(label, float) and label != label):
+        return _FAILED
+    if isinstance(label, (bool, np.bool_)) or str(label) in ("True", "False"):
+        return _TWO_LABELS["fracturing" if str(label) == "True" else "porous_invasion"]
+    name = str(label)
+    if name in REGIME_STYLE:
+        return REGIME_STYLE[name]
+    if name in _TWO_LABELS:
+        return _TWO_LABELS[name]
+    return dict(marker="d", color="0.3", label=name.replace("_", " "), shade="#eeeeee")
+
+
+# fitted separatrices are drawn only when they explain the labels better than a constant fracturing rate at
+# this level (likelihood-ratio test, 2 degrees of freedom: the C and ln Ca* slopes)
 # --------------------------------------------------------------------------- helpers
 def _require(df: Any, cols: Sequence[str], fn: str) -> None:
     import pandas as pd
@@ -113,12 +139,15 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     fig = _new_figure((5.5, 4.2))
     ax = fig.add_subplot(1, 1, 1)
     colours = [ORANGE, BLUE, "#2ca02c", "#d62728", "#9467bd"]
+    one = len(set(src)) == 1
     for k, s in enumerate(sorted(set(src))):
-        col = colours[k % len(colours)]
+        no, yes = regime_style(False), regime_style(True)
+        col_no, col_yes = (no["color"], yes["color"]) if one else (colours[k % len(colours)],) * 2
         m = src == s
-        ax.scatter(C[m & ~fr], cs[m & ~fr], marker="o", facecolors="none", edgecolors=col,
-                   label=f"{s}: porous invasion")
-        ax.scatter(C[m & fr], cs[m & fr], marker="^", color=col, label=f"{s}: fracturing")
+        ax.scatter(C[m & ~fr], cs[m & ~fr], marker=no["marker"], facecolors="none", edgecolors=col_no,
+                   label=no["label"] if one else f"{s}: {no['label']}")
+        ax.scatter(C[m & fr], cs[m & fr], marker=yes["marker"], color=col_yes,
+                   label=yes["label"] if one else f"{s}: {yes['label']}")
     sep, no_fit = None, None
     if fit and fr.any() and (~fr).any() and len(C) >= 3:
         try:
@@ -195,9 +224,9 @@ _PALETTE = ("#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#fcbba1", "#d9d9d9")
 def _label_shade(label: str, i: int) -> str:
     if label in REGIME_STYLE:
         return REGIME_STYLE[label]["shade"]
-    return {"True": REGIME_STYLE["invasive_fracturing"]["shade"], "fracturing": REGIME_STYLE["invasive_fracturing"]["shade"],
-            "False": REGIME_STYLE["uniform_invasion"]["shade"],
-            "porous_invasion": REGIME_STYLE["uniform_invasion"]["shade"]}.get(label, _PALETTE[i % len(_PALETTE)])
+    if label in ("True", "False", "fracturing", "porous_invasion"):
+        return regime_style(label)["shade"]
+    return _PALETTE[i % len(_PALETTE)]
 
 
 def _shade_classifier(ax, model, GX, GY, alpha: float = 0.75):
@@ -218,7 +247,8 @@ def _shade_classifier(ax, model, GX, GY, alpha: float = 0.75):
 
 
 def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Mapping[str, Any] | None = None,
-                           title: str | None = None, formats: Sequence[str] = ("svg",), grid: int = 200) -> dict[str, Any]:
+                           title: str | None = None, formats: Sequence[str] = ("svg",), grid: int = 200,
+                           axis_labels: Sequence[str] | None = None) -> dict[str, Any]:
     """The boundary sampler's view of a 2-axis campaign: classifier shading, probability contours, the
     50 % line (the boundary) with its uncertainty band, and the runs numbered and coloured by order.
 
@@ -227,7 +257,8 @@ def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Ma
     band : ``sweep.regimes.regime_model.boundary_band(model)``; the band is the set of points closer to an
         estimated boundary point than its half-width (tolerance units), drawn hatched.
     Two labels: contours of P(second label) at 10, 30, 70, 90 % (thin) and 50 % (thick); more labels:
-    the borders of the most probable label (thick). Writes PNG plus ``formats``; returns {"paths"}.
+    the borders of the most probable label (thick). axis_labels : the two axis labels with units (default:
+    the axis names). Writes PNG plus ``formats``; returns {"paths"}.
     """
     from scipy.spatial import cKDTree
 
@@ -260,7 +291,7 @@ def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Ma
         if m.any():
             sc = ax.scatter(x[m], y[m], c=order[m], cmap="viridis", vmin=0, vmax=max(order.max(), 1),
                             marker=markers.get(lab, "x"), s=28, edgecolor="k", linewidth=0.4, zorder=3,
-                            label=str(lab) if lab is not None else "failed")
+                            label=regime_style(lab)["label"])
     for xv, yv, o in zip(x, y, order):
         ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=4)
     fig.colorbar(sc, ax=ax, label="order of the run", fraction=0.046, pad=0.04)
@@ -269,8 +300,9 @@ def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Ma
             setter("log")
     ax.set_xlim(ax0.lo, ax0.hi)
     ax.set_ylim(ax1.lo, ax1.hi)
-    ax.set_xlabel(ax0.name + (" (log axis)" if ax0.log else ""))
-    ax.set_ylabel(ax1.name + (" (log axis)" if ax1.log else ""))
+    names = tuple(axis_labels) if axis_labels else (ax0.name, ax1.name)
+    ax.set_xlabel(names[0])
+    ax.set_ylabel(names[1])
     if title:
         ax.set_title(title, fontsize=8)
     from matplotlib.patches import Patch

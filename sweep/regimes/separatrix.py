@@ -20,6 +20,8 @@ __all__ = [
     "SeparatrixInterval",
     "separatrix_profile_interval",
     "unlocated_reason",
+    "separatrix_p_value",
+    "SEPARATRIX_P_MAX",
 ]
 
 class ExponentialSeparatrix(NamedTuple):
@@ -196,6 +198,24 @@ def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: fl
                               b_iv, level, separable, float(th[0]))
 
 
+SEPARATRIX_P_MAX = 0.05
+
+
+def separatrix_p_value(C: Any, ca_star: Any, fracturing: Any, ridge: float = 1e-3) -> float:
+    """p-value of the likelihood-ratio test of the logistic fit logit P = b0 + b1 C + b2 ln Ca* (the
+    separatrix's model) against a constant fracturing rate: chi-squared with 2 degrees of freedom."""
+    from scipy.stats import chi2
+
+    fr = np.asarray(fracturing).astype(bool).ravel()
+    X = np.c_[np.asarray(C, float).ravel(), np.log(np.asarray(ca_star, float).ravel())]
+    fit = logistic_fit(X, fr, ridge=ridge)
+    z = fit.beta[0] + X @ np.asarray(fit.beta[1:], float)
+    ll_fit = float(np.sum(fr * -np.logaddexp(0.0, -z) + (~fr) * -np.logaddexp(0.0, z)))
+    q = fr.mean()
+    ll_null = float(fr.sum() * np.log(q) + (~fr).sum() * np.log(1.0 - q))
+    return float(chi2.sf(max(0.0, 2.0 * (ll_fit - ll_null)), 2))
+
+
 def unlocated_reason(sep, C, cs, fr) -> str | None:
     """Why the labels do not locate the separatrix Ca*_c(C) (None when they do); the line is then not drawn.
 
@@ -213,4 +233,8 @@ def unlocated_reason(sep, C, cs, fr) -> str | None:
         major = "fracturing" if fr.sum() > (~fr).sum() else "porous invasion"
         return (f"{head} puts {wrong} of {fr.size} runs on the wrong side, no fewer than calling every run "
                 f"{major} ({minority}): the labels do not locate it")
+    p = separatrix_p_value(C, cs, fr)
+    if p >= SEPARATRIX_P_MAX:
+        return (f"{head} is not significant: against a constant fracturing rate the likelihood-ratio test "
+                f"gives p = {p:.2g} (>= {SEPARATRIX_P_MAX:g}); none found")
     return None

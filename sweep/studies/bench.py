@@ -8,7 +8,7 @@ Measured (wall-clock seconds, this machine):
   steps, factorizations per accepted step, wall seconds per simulated second);
 * the reference case at h = 2 mm to 2 s (not with ``--quick``);
 * optionally the paper's reference run (h = 1 mm to 2 s);
-* the dry-run cost rates ``coupled_run_h{h}_wall_s_per_sim_s`` (``sweep.campaign.engine.wall_per_sim_second``), from
+* the dry-run cost rates ``coupled_run_h{h}_wall_s_per_sim_s`` (``sweep.campaign.cost.wall_per_sim_second``), from
   the longest run made at each h: a campaign run lasts seconds of simulated time, and the short run's rate is
   the start-up's, whose small steps cost several times more per simulated second;
 * ``shared_run_factor``: how much longer the h = 2 reference case takes with one run per core, each in a campaign
@@ -232,7 +232,7 @@ print(json.dumps({"child_s": time.perf_counter() - t0, "solver_s": out["metrics"
 
 def per_run_overhead(h: float = 2.0) -> dict:
     """Fixed wall seconds of one campaign run besides its time loop (the dry-run estimate's per-run term,
-    ``sweep.campaign.engine.per_run_overhead``): a fresh process runs one 1 ms step at mesh size h (mm) through
+    ``sweep.campaign.cost.per_run_overhead``): a fresh process runs one 1 ms step at mesh size h (mm) through
     the campaign runner (imports, mesh and set-up, first factorization, classification, run folder);
     everything counts but the step's share of a long run's time loop, which the per-simulated-second
     figure already holds, so the overhead is the whole child's wall time."""

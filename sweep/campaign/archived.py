@@ -1,0 +1,120 @@
+"""Archived runs: rows of a campaign's committed table whose run folders are not here.
+
+A campaign folder carried by git holds its table (``table.parquet`` / ``table.csv``) but usually not its run
+folders (``runs/`` is pruned or left out).  Such a run is *archived*: its row is the evidence, read as it was
+written, and every reader (status, table, plots, report, loaders) uses it; ``campaign run`` reruns it only when
+asked.  A row belongs to a point of the spec by its run key, else by the point's swept values and blocks (the key
+hashes every parameter and option, so it changes when a parameter is added to the model; the swept values name
+the point the spec asked for).  Floats are compared to 10 significant digits.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+__all__ = ["read_committed_table", "match_committed", "row_values"]
+
+
+def read_committed_table(campaign_dir):
+    """The committed table of a campaign folder (typed pandas DataFrame), None when there is none."""
+    import pandas as pd
+
+    d = Path(campaign_dir)
+    if (d / "table.parquet").is_file():
+        df = pd.read_parquet(d / "table.parquet")
+    elif (d / "table.csv").is_file():
+        df = pd.read_csv(d / "table.csv")
+    else:
+        return None
+    from sweep.campaign.load import typed_frame
+
+    return typed_frame(d, df) if len(df) else None
+
+
+def _plain(v):
+    """A table cell as a plain Python value (NA -> None, numpy scalars -> Python, arrays -> lists)."""
+    if v is None:
+        return None
+    if hasattr(v, "tolist") and not isinstance(v, (str, bytes)):
+        v = v.tolist()
+    if isinstance(v, list):
+        return [_plain(x) for x in v]
+    try:
+        import pandas as pd
+
+        if v is pd.NA or v is pd.NaT:
+            return None
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(v, float) and math.isnan(v):
+        return None
+    return v
+
+
+def row_values(row: Mapping[str, Any]) -> dict:
+    """{column: plain value} of one committed row."""
+    return {str(k): _plain(v) for k, v in dict(row).items()}
+
+
+def _norm(v):
+    from sweep.campaign.spec_model import round_sig
+
+    if isinstance(v, bool) or v is None:
+        return v
+    if isinstance(v, (int, float)):
+        return round_sig(float(v), 10)
+    return str(v)
+
+
+def _signature(swept: Mapping[str, Any], blocks) -> tuple:
+    return (str(blocks or ""),) + tuple((a, _norm(v)) for a, v in sorted(swept.items()))
+
+
+def _row_swept(row: Mapping[str, Any], names: Sequence[str]) -> dict | None:
+    out = {}
+    for a in names:
+        for col in (f"swept_{a}", a):
+            if col in row:
+                out[a] = row[col]
+                break
+        else:
+            return None
+    return out
+
+
+def _row_blocks(row: Mapping[str, Any]):
+    b = row.get("blocks")
+    return ";".join(b) if isinstance(b, list) else b
+
+
+def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mapping[str, Any]]):
+    """(matched, unmatched): ``matched`` {point key: committed row} for the points whose key is not in ``skip``
+    (points with a record or a run folder), by run key first, then by swept values and blocks (rows in table
+    order); ``unmatched``: the rows no point took (runs a sampler added, or points the spec no longer asks for)."""
+    by_key = {r.get("key"): i for i, r in enumerate(rows)}
+    taken: set[int] = {by_key[k] for k in skip if k in by_key}
+    matched: dict[str, dict] = {}
+    for k in keys:
+        if k not in skip and k in by_key and by_key[k] not in taken:
+            matched[k] = rows[by_key[k]]
+            taken.add(by_key[k])
+    index: dict[tuple, dict[tuple, list[int]]] = {}
+    for p, k in zip(points, keys):
+        if k in skip or k in matched:
+            continue
+        names = tuple(sorted(p.swept))
+        if names not in index:
+            index[names] = {}
+            for i, r in enumerate(rows):
+                sw = _row_swept(r, names)
+                if sw is not None:
+                    index[names].setdefault(_signature(sw, _row_blocks(r)), []).append(i)
+                    index[names].setdefault(_signature(sw, None), []).append(i)
+        for sig in (_signature(p.swept, ";".join(p.blocks)), _signature(p.swept, None)):
+            cand = [i for i in index[names].get(sig, []) if i not in taken]
+            if cand:
+                matched[k] = rows[cand[0]]
+                taken.add(cand[0])
+                break
+    return matched, [r for i, r in enumerate(rows) if i not in taken]

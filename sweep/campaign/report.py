@@ -1,0 +1,106 @@
+"""A campaign's Markdown report (``<root>/<name>/report.md``): counts, code, regimes, failures, figures, runs.
+
+    write_report("campaigns/examples/demo.toml")
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from sweep.campaign.paths import DEFAULT_ROOT, results_root
+from sweep.campaign.plan import _archived_text, as_spec, check_intact, check_not_emptier, plan_campaign, provenance_lines
+from sweep.campaign.plot import plot_campaign
+from sweep.campaign.store import ResultsStore, write_text_atomic
+from sweep.campaign.table import build_table
+
+__all__ = ["write_report"]
+
+
+def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot: bool = True,
+                 allow_damaged: bool = False) -> Path:
+    """Markdown summary of a campaign (``<root>/<name>/report.md``): counts, the code that made the runs,
+    regimes, failures with their reasons, the run table's main columns, and the figures (drawn first
+    when ``plot``). DamagedRunsError names damaged runs unless ``allow_damaged`` (then listed)."""
+    spec = as_spec(spec)
+    root = results_root(spec, root)
+    store = ResultsStore(root, spec.name)
+    plan = plan_campaign(spec, root, code_hash=code_hash)
+    check_intact(plan, allow_damaged)
+    table = build_table(spec, root, plan=plan)
+    check_not_emptier(store, table)
+    figs = plot_campaign(spec, root, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
+    if not table.empty:
+        store.write_table(table, swept=spec.axis_names)
+    L = [f"# Campaign `{spec.name}`", ""]
+    if spec.description:
+        L += [spec.description.strip(), ""]
+    if spec.paper:
+        L += [f"Paper: {spec.paper}", ""]
+    L += [f"Spec: `{spec.source}`.", "", *provenance_lines(plan), "",
+          f"- runs in the grid: {len(plan.points)}",
+          f"- done: {len(plan.done)}", f"- failed: {len(plan.failed)}", f"- pending: {len(plan.pending)}"]
+    if plan.archived or plan.unmatched_rows:
+        L.append(f"- archived (rows of the committed table, run folders not here): {_archived_text(plan)}")
+    if plan.damaged:
+        L += [f"- damaged (left out): {len(plan.damaged)}", "", "```", plan.damage_text(), "```"]
+    L.append("")
+    if not table.empty and "wall_time_s" in table.columns:
+        L += [f"Total wall time of the runs: {table['wall_time_s'].sum():.1f} s "
+              f"(median {table['wall_time_s'].median():.1f} s per run).", ""]
+    stored = plan.store.records()  # every run of the folder (a sampler's plan holds only its initial design)
+    if stored:
+        from sweep.campaign.accounting import campaign_throughput
+
+        acc = campaign_throughput(stored).text()
+        L += [f"{acc[0].upper()}{acc[1:]} (`sweep/campaign/accounting.py`).", ""]
+    if not table.empty and table["regime"].notna().any():
+        L += ["## Regimes", "", "| regime | runs |", "|---|---|"]
+        for reg, n in table["regime"].fillna("(none)").value_counts().items():
+            L.append(f"| {reg} | {n} |")
+        L.append("")
+    failed = [(k, plan.records[k].get("reason")) for _, k in plan.failed]
+    failed += [(plan.archived_rows[k].get("key"), plan.archived_rows[k].get("reason")) for _, k in
+               plan.archived_status("failed")]
+    if failed:
+        L += ["## Failures", "", "| key | reason |", "|---|---|"]
+        for k, reason in failed:
+            reason = str(reason).replace("|", "\\|").replace("\n", " ")
+            L.append(f"| `{k}` | {reason} |")
+        L.append("")
+    if figs:
+        L += ["## Figures", ""]
+        pngs = {Path(f).with_suffix("") for f in figs if Path(f).suffix == ".png"}
+        for f in figs:
+            rel = os.path.relpath(f, store.dir)
+            if Path(f).suffix == ".png":
+                L += [f"![{Path(f).stem}]({rel})", ""]
+            elif Path(f).with_suffix("") in pngs:
+                L[-2] += f" ([{Path(f).suffix[1:]}]({rel}))"
+            else:
+                L += [f"[{Path(f).name}]({rel})", ""]
+    if not table.empty:
+        cols = [c for c in ["key", "status", "regime", *spec.axis_names] if c in table.columns]
+        num_cols = [c for c in table.columns if c.lower().replace("*", "_star") in
+                    ("ca_star", "n_f", "n_b", "nf", "nb") and c not in cols]
+        empty = [c for c in num_cols if table[c].isna().all()]
+        cols += [c for c in num_cols if c not in empty] + [c for c in ("wall_time_s",) if c in table.columns]
+        L += ["## Runs", ""]
+        if "N_f" in empty:
+            L += ["N_f = dp_vis / dp_cri is not computed: the spec gives no critical pressure drop dp_cri (an "
+                  "`nf_vs_nb` diagram's `dp_cri`: a number in kPa, or \"estimate\" from the runs' fracturing "
+                  "labels); dp_vis (kPa) is in the table.", ""]
+        L += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+        for _, r in table[cols].iterrows():
+            L.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+        L.append("")
+    L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}` (also `table.parquet`); the unit and meaning of "
+          f"every column: `columns.csv` (`dchfrac campaign columns SPEC`); load both with "
+          f"`sweep.load_campaign` / `sweep.load_timeseries`.", ""]
+    write_text_atomic(store.report_md, "\n".join(L))
+    return store.report_md
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v).replace("|", "\\|")
