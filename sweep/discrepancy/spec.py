@@ -20,6 +20,10 @@ Example (units mm, s, kPa)::
     scaling = { damage_viscosity = "sqrt_cement" }              # optional: parameter = strength * sqrt(C)
     upper = { damage_viscosity = 200.0 }                          # optional: strength bounds / probes
     probe = { damage_viscosity = 40.0 }
+    independent = { compliant_boundary = "0.0095 ± 0.0005" }      # optional: a strength estimated outside the
+                                     # data (e.g. plate bending of an elastic cell), value ± σ in the effect's
+                                     # unit (also [value, sigma]); the report sets the fitted interval beside it
+                                     # and flags a disagreement beyond 2σ
 
     [holdout]                        # whole conditions, never time points
     ids = ["c3"]                     # or  every = 3  (every third condition, starting with the last)
@@ -54,6 +58,10 @@ Example (units mm, s, kPa)::
     [profile]                        # the named strength's profile-likelihood interval
     expand = 3; refine = 2; refine_tol = 0.15; rough_tol = 0.25
     fine = true                      # with [discretization]: correct each profile point where it is
+    correction = "point"             # with fine: "point" (re-estimated at each point) or "linear" (linear in the
+    correction_anchors = 3           # strength from the realizations at correction_anchors strengths over the
+    correction_span = 1.0            # fit ± correction_span Wald half-widths; the same for every point and
+                                     # re-centring: common random numbers, a smooth profile)
     smoothing = "none"               # "quadratic": interval from a quadratic through noisy points (MCAP)
     grid = 4                         # with "quadratic": extra profile points per side
     likelihood = "weighted"          # delta chi2: "weighted" (lag-1 series weights), "gaussian" (whitened chi2),
@@ -146,6 +154,7 @@ class DiscrepancySpec:
     options: dict
     discretization: dict | None = None
     alternatives: tuple = ()
+    independent: dict = field(default_factory=dict)    # effect -> (value, sigma), the effect's unit
     fit: FitOptions = field(default_factory=FitOptions)
     acceptance: AcceptanceOptions = field(default_factory=AcceptanceOptions)
     noise: NoiseOptions = field(default_factory=NoiseOptions)
@@ -251,6 +260,23 @@ def _check_alternatives(cal: tuple, alt: tuple) -> None:
             _bad("alternative.name", n, "a parameter that is not calibrated ([[calibrate]] already fits it)")
 
 
+def _independent(effect: str, v) -> tuple[float, float]:
+    """An independent estimate of ``effect``'s strength, "value ± sigma" (also "+-") or [value, sigma], as
+    (value, sigma) in the effect's unit; sigma > 0 and both finite."""
+    get_effect(effect)
+    try:
+        if isinstance(v, str):
+            parts = v.replace("+-", "±").split("±")
+            val, sig = (float(x) for x in parts) if len(parts) == 2 else (math.nan, math.nan)
+        else:
+            val, sig = (float(x) for x in v)
+    except (TypeError, ValueError):
+        val, sig = math.nan, math.nan
+    if not (math.isfinite(val) and math.isfinite(sig) and sig > 0):
+        _bad(f"candidates.independent.{effect}", v, '"value ± sigma" or [value, sigma], finite, sigma > 0')
+    return val, sig
+
+
 def spec_from_dict(d: dict) -> DiscrepancySpec:
     """Validate a parsed TOML spec (see the module docstring)."""
     from solver import Parameters, RunOptions
@@ -286,6 +312,7 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     probe = {k: float(v) for k, v in cand.get("probe", {}).items()}
     for k in list(upper) + list(probe):
         get_effect(k)
+    independent = {k: _independent(k, v) for k, v in cand.get("independent", {}).items()}
     ho = d.get("holdout", {})
     ids = ho.get("ids")
     every = ho.get("every")
@@ -309,7 +336,8 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     wo = parse_options(d)
     return DiscrepancySpec(base, off, cal, names, scaling, upper, probe,
                            tuple(ids) if ids is not None else None, every, opts,
-                           dict(disc) if disc is not None else None, alt, wo.fit, wo.acceptance, wo.noise, wo.profile)
+                           dict(disc) if disc is not None else None, alt, independent, wo.fit, wo.acceptance,
+                           wo.noise, wo.profile)
 
 
 def load_spec(path) -> DiscrepancySpec:

@@ -68,6 +68,7 @@ class WorkflowRun:
     rivals: list = field(default_factory=list)
     partial: dict | None = None
     emulated: EmulatedRefits | None = None
+    correction_models: dict = field(default_factory=dict)   # effect -> the profile's linear correction or None
 
     @property
     def spec(self) -> DiscrepancySpec:
@@ -308,6 +309,7 @@ def profile_named(run: WorkflowRun) -> None:
         j = names.index("effect:" + a["effect"])
         run.current, pr = profile_recentred(run.problem, run.current, j, run.train, fine_forward=fine,
                                             emulator=run.emulator_of(run.current.params))
+        run.correction_models[a["effect"]] = pr.pop("_correction", None)
         run.profiles[a["effect"]] = pr
         a["strength_interval_wald"] = a["strength_interval"]
         a["strength_interval"] = [pr["lower"], pr["upper"]]
