@@ -67,6 +67,7 @@ def cmd_run(args) -> int:
 
     from .checks import check_data_against_model
     from .data import load_measured
+    from .heldout import heldout_data
     from .forward import SolverForward, fine_forwards
     from .observables import ObservableUnavailable
     from .report import ROUGH_NOTE
@@ -83,6 +84,7 @@ def cmd_run(args) -> int:
         jobs = args.jobs if args.jobs is not None else spec.fit.n_jobs
         fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
         fine = fine_forwards(spec, cache, jobs)      # one per mesh realization ([discretization] mesh_seeds)
+        data = heldout_data(data, spec)             # [holdout] observables
         check_data_against_model(data, spec, [fwd, *fine])
     except ValueError as exc:
         print(f"dchfrac discrepancy: {exc}", file=sys.stderr)

@@ -25,7 +25,9 @@ Example (units mm, s, kPa)::
                                      # unit (also [value, sigma]); the report sets the fitted interval beside it
                                      # and flags a disagreement beyond 2σ
 
-    [holdout]                        # whole conditions, never time points
+    [holdout]                        # whole conditions, never time points; or, with one condition (a single
+                                     # experiment), observables = ["crack_length"]: those observables of every
+                                     # condition are held out, the others fitted (sweep/discrepancy/heldout.py)
     ids = ["c3"]                     # or  every = 3  (every third condition, starting with the last)
 
     [options]                        # solver.RunOptions fields for the workflow's runs
@@ -155,6 +157,7 @@ class DiscrepancySpec:
     discretization: dict | None = None
     alternatives: tuple = ()
     independent: dict = field(default_factory=dict)    # effect -> (value, sigma), the effect's unit
+    holdout_observables: tuple = ()                     # observables held out instead of whole conditions
     fit: FitOptions = field(default_factory=FitOptions)
     acceptance: AcceptanceOptions = field(default_factory=AcceptanceOptions)
     noise: NoiseOptions = field(default_factory=NoiseOptions)
@@ -169,6 +172,9 @@ class DiscrepancySpec:
 
     def holdout(self, ids: list) -> list:
         """Held-out condition ids among ``ids`` (by explicit list or every n-th counting from the last)."""
+        if self.holdout_observables:
+            from .heldout import HELD_SUFFIX
+            return [i for i in ids if str(i).endswith(HELD_SUFFIX)]
         if self.holdout_ids is not None:
             missing = [i for i in self.holdout_ids if i not in ids]
             if missing:
@@ -316,8 +322,16 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     ho = d.get("holdout", {})
     ids = ho.get("ids")
     every = ho.get("every")
-    if ids is None and every is None:
-        _bad("holdout", ho, "ids = [...] or every = n (whole conditions are held out)")
+    hobs = ho.get("observables")
+    if hobs is not None:
+        if ids is not None or every is not None:
+            _bad("holdout", ho, "either ids / every (whole conditions) or observables, not both")
+        from .observables import CURVES
+        if (not isinstance(hobs, list) or not hobs
+                or any(o not in (*CURVES, "regime") for o in hobs)):
+            _bad("holdout.observables", hobs, f"a non-empty list of {[*CURVES, 'regime']}")
+    elif ids is None and every is None:
+        _bad("holdout", ho, "ids = [...], every = n (whole conditions are held out) or observables = [...]")
     if every is not None and (not isinstance(every, int) or every < 2):
         _bad("holdout.every", every, "an integer >= 2")
     opts = dict(d.get("options", {}))
@@ -336,8 +350,8 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     wo = parse_options(d)
     return DiscrepancySpec(base, off, cal, names, scaling, upper, probe,
                            tuple(ids) if ids is not None else None, every, opts,
-                           dict(disc) if disc is not None else None, alt, independent, wo.fit, wo.acceptance,
-                           wo.noise, wo.profile)
+                           dict(disc) if disc is not None else None, alt, independent,
+                           tuple(hobs) if hobs is not None else (), wo.fit, wo.acceptance, wo.noise, wo.profile)
 
 
 def load_spec(path) -> DiscrepancySpec:
