@@ -6,8 +6,8 @@ Known answers: a correction linear in the strength is reproduced exactly by the 
 the toy whose fine realizations jitter in the parameters, the point-wise correction carries that jitter into
 every profile point while the modelled one leaves a profile that is a quadratic to the refits' tolerance; on
 the toy whose fine-minus-coarse difference grows with the strength, a correction held at one strength biases
-the strength, and the linear model gives the fine model's own estimate and interval (the exact answer: the
-fine model fitted to the data directly).  Units kPa, mm, s; strengths in kPa·s.
+the strength, and the linear model gives the fine model's own estimate and interval to 0.2 of its sd (the
+exact answer: the fine model fitted to the data directly).  Units kPa, mm, s; strengths in kPa·s.
 """
 import tempfile
 from pathlib import Path
@@ -130,9 +130,11 @@ def test_a_correction_held_at_one_strength_biases_it_and_the_linear_model_does_n
     add_discretization_error(lin, [fine, fine], {"E": 331.0, "effect:damage_viscosity": 20.0})
     fit, pr = profile_recentred(lin, _fit(lin, params), 1, TRAIN, fine_forward=[fine, fine])
     assert pr["recentred"] and pr["correction"] == "linear" and not pr["non_monotone"]
-    assert float(fit.x[1]) == pytest.approx(s_exact, abs=0.1 * sd)
-    assert pr["lower"] == pytest.approx(exact["lower"], abs=0.1 * sd)     # the held one: 0.22 of the width off
-    assert pr["upper"] == pytest.approx(exact["upper"], abs=0.1 * sd)
+    # within 0.2 sd: the correction also depends on E (τ ∝ 1/E_h), which moves along the profile's path, so
+    # a line in β is not exact there (the held correction: 3 sd off, or 0.22 of the width narrower)
+    assert float(fit.x[1]) == pytest.approx(s_exact, abs=0.2 * sd)
+    assert pr["lower"] == pytest.approx(exact["lower"], abs=0.2 * sd)
+    assert pr["upper"] == pytest.approx(exact["upper"], abs=0.2 * sd)
 
 
 def test_independent_estimates_are_parsed_compared_and_reported(tmp_path):

@@ -443,20 +443,32 @@ def recentre_target(pr: dict, tol: float = 1e-2) -> dict | None:
     return best if best["delta_chi2"] < -floor else None
 
 
-def _refit_under_model(problem: Problem, fit: Fit, j: int, ids, cm: StrengthCorrection, passes: int = 3) -> Fit:
-    """``fit`` refitted under the modelled correction at its own strength, c(x_j), to a fixed point: a refit
-    runs under one correction vector, so it is shifted to c(x_j) at the refit's strength and refitted again
-    until the strength moves by less than 1e-3 of the anchors' span (at most ``passes``; the map contracts by
-    the correction's share of the strength's sensitivity)."""
-    tol = 1e-3 * float(np.ptp(cm.xs))
-    for _ in range(passes):
-        xj = float(fit.x[j])
-        problem.noise.shift_correction(cm.at(xj))
-        fit = problem.fit(fit.params, [np.asarray(fit.x, float)], ids)
-        if abs(float(fit.x[j]) - xj) <= tol:
-            break
-    problem.noise.shift_correction(cm.at(float(fit.x[j])))
-    return fit
+def _profile_minimum(problem: Problem, fit: Fit, j: int, ids, pr: dict, fine_forward, em, cm) -> Fit:
+    """The minimum of the profile under the modelled correction (:class:`StrengthCorrection`), found by a
+    bounded scalar minimization of Δχ²(x) between the lowest evaluated point's neighbours, and the model there
+    as a Fit (the others' refit, residuals and Jacobian under c(x*)).  A joint refit under one correction vector
+    would stop at the fixed point of "refit, then correct where it stopped", which is not the profile's minimum
+    once the correction depends on the strength: the profile's gradient holds the correction's own derivative."""
+    from scipy.optimize import minimize_scalar
+
+    pf = _Profile(problem, fit, j, ids, 3.841, fine_forward, em, cm)
+    xs = sorted(pf.p.to_x(q["value"]) for q in pr["points"])
+    best = pf.p.to_x(min(pr["points"], key=lambda q: q["delta_chi2"])["value"])
+    i = xs.index(best)
+    step = min(abs(b - a) for a, b in zip(xs[:-1], xs[1:]) if b != a) if len(xs) > 1 else 0.1 * (pf.x_hi - pf.x_lo)
+    lo = xs[i - 1] if i > 0 else max(best - step, pf.x_lo)
+    hi = xs[i + 1] if i + 1 < len(xs) else min(best + step, pf.x_hi)
+    res = minimize_scalar(pf.dchi2, bounds=(lo, hi), method="bounded",
+                          options={"xatol": 1e-3 * (hi - lo), "maxiter": 12})
+    xj = float(res.x) if res.fun <= pf.dchi2(best) else best
+    with pf.holding(xj):
+        held = pf.modelled_refit(xj)
+    x = np.insert(np.asarray(held.x, float), j, xj)
+    problem.noise.shift_correction(cm.at(xj))
+    r = problem.residual_batch(fit.params, [x], ids)[0]
+    if em is not None and not em.has(x):
+        em.add([x])                          # the minimum's own run (cached): the design grows by it
+    return Fit(fit.params, x, r, problem.jacobian(fit.params, x, ids), 0.5 * float(r @ r), 0)
 
 
 def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int = 2, fine_forward=None,
@@ -473,8 +485,10 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     ``emulator``: with ``[profile] emulator = "gp"``, an emulator of ``fit``'s parameters on ``ids`` to use
     (the named model's from its emulated refits, its design shared); default one built about the fit
     (:func:`emulator_for`).
-    With ``[profile] correction = "linear"`` the correction's model is built about ``fit`` once and kept for
-    every pass (common random numbers): a re-centring moves the reference, not the likelihood.
+    With ``[profile] correction = "linear"`` the correction's model is built about ``fit`` and kept for every
+    pass (common random numbers): a re-centring moves the reference, not the likelihood, and goes to the
+    profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' span has the model
+    rebuilt about it for the next pass.
     Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima, and
     "_correction": the linear correction's model or None, to be popped before the dict is serialized)."""
     history = []
@@ -488,11 +502,15 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
             break
         history.append({"strength": float(fit.params[j].from_x(fit.x[j])), "min_delta_chi2": best["delta_chi2"],
                         "at": best["value"]})
+        if cm is not None:                   # the same correction function: the profile's own minimum
+            fit = _profile_minimum(problem, fit, j, ids, pr, fine_forward, em, cm)
+            if not cm.xs.min() <= fit.x[j] <= cm.xs.max():
+                cm = None                    # outside the anchors: the next pass models it about the new fit
+            pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
+            continue
         vals = {**best.get("others", {}), fit.params[j].name: best["value"]}
         x0 = np.array([p.to_x(vals[p.name]) for p in fit.params])
-        if cm is not None:                   # the same correction function on every pass
-            problem.noise.shift_correction(cm.at(float(x0[j])))
-        elif fine_forward is not None:
+        if fine_forward is not None:
             problem.noise.shift_correction(correction_at(problem, fine_forward, {**problem.fixed, **{
                 q.name: q.from_x(v) for q, v in zip(fit.params, x0)}}))
         if em is not None and problem.spec.profile.emulate_refits:
@@ -501,8 +519,6 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
             fit = problem.fit(fit.params, [x0], ids)
         if em is not None and not em.has(fit.x):
             em.add([fit.x])                  # the re-centred fit's own run (cached): the design grows by it
-        if cm is not None:
-            fit = _refit_under_model(problem, fit, j, ids, cm)
         pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
     pr["recentred"] = history
     pr["_correction"] = cm       # the linear correction's model (not JSON: the caller pops it), None otherwise
