@@ -96,6 +96,10 @@ def test_hidden_effect_is_named_with_its_strength(tmp_path, hidden, effect, trut
     assert abs(rep["gap_after"]["total"] - 1.0) < 4 * np.sqrt(1 / (2 * 150)) + 0.05
     row = {c["effect"]: c for c in rep["candidates"]}[effect]
     assert row["delta_bic"] <= -10 and row["identifiable"]
+    if effect == "damage_viscosity":       # the profile curve in the report: figure and table
+        md = (tmp_path / "out" / "report.md").read_text()
+        assert (tmp_path / "out" / "profile_damage_viscosity.png").is_file() and "profile_damage_viscosity.png" in md
+        assert "| strength | Δχ² |" in md and rep["profiles"][effect]["non_monotone"] is False
     saved = json.loads((tmp_path / "out" / "report.json").read_text())
     assert saved["named_effect"] == effect and (tmp_path / "out" / "report.md").is_file()
     for key in ("strength", "strength_interval", "verdict", "candidates", "gap_before", "gap_after"):

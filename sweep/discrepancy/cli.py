@@ -87,6 +87,7 @@ def cmd_run(args) -> int:
 
     from .checks import check_data_against_model
     from .data import load_measured
+    from .heldout import heldout_data
     from .forward import SolverForward, fine_forwards
     from .observables import ObservableUnavailable
     from .report import ROUGH_NOTE
@@ -105,6 +106,7 @@ def cmd_run(args) -> int:
             raise ValueError(f"--jobs {args.jobs} is not allowed: an integer in [1, 256] (as [fit] n_jobs)")
         fwd = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), cache, n_jobs=jobs)
         fine = fine_forwards(spec, cache, jobs)      # one per mesh realization ([discretization] mesh_seeds)
+        data = heldout_data(data, spec)             # [holdout] observables
         warnings = check_data_against_model(data, spec, [fwd, *fine], strict=getattr(args, "strict", False))
         warnings += check_environment()
     except ValueError as exc:

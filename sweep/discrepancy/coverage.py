@@ -35,6 +35,7 @@ from .workflow import calibrate, finalize, prepare, search
 __all__ = ["SetUp", "SETUPS", "Variant", "VARIANTS", "one_draw", "wilson", "summarize", "run_study", "combine"]
 
 TIMES = np.linspace(0.02, 0.3, 15)
+LONG_TIMES = np.linspace(0.05, 1.5, 30)
 NOISE = {"p_inj": 2.0, "front_radius_mean": 0.2}
 OFF = ("damage_viscosity", "volumetric_coupling")
 CAL_BOUNDS = {"E": (150.0, 700.0), "kbar": (5e-4, 5e-3), "K_s": (500.0, 6000.0)}
@@ -52,6 +53,17 @@ class SetUp:
     values: tuple
     effect: str
     strength: tuple
+    whole_injection: bool = False     # to 1.5 s with the crack length observed (MeshToy cracks=True)
+
+    @property
+    def times(self) -> np.ndarray:
+        """Observation times, s: 15 in [0.02, 0.3] s, or 30 in [0.05, 1.5] s over the whole injection."""
+        return LONG_TIMES if self.whole_injection else TIMES
+
+    @property
+    def noise(self) -> dict:
+        """Measurement noise per observable (kPa, mm)."""
+        return {**NOISE, "crack_length": 0.2} if self.whole_injection else NOISE
 
     def conditions(self) -> dict:
         """{id: {axis: value}} of the four conditions (ids c0..c3; c3 held out)."""
@@ -59,6 +71,7 @@ class SetUp:
 
 
 RATE, CEMENT, ETA = (30.0, 50.0, 70.0, 40.0), (0.6, 1.2, 2.4, 1.8), (0.15, 0.29, 0.6, 0.4)
+ETA_LONG = (0.10, 0.29, 0.45, 0.19)     # the second outside twin's oil viscosities, the middle one held out
 BETA, COUPLING = (20.0, 80.0), (0.3, 1.5)
 SETUPS = (
     SetUp("E_rate_beta", "E", "w_i", RATE, "damage_viscosity", BETA),
@@ -67,6 +80,7 @@ SETUPS = (
     SetUp("kbar_rate_coupling", "kbar", "w_i", RATE, "volumetric_coupling", COUPLING),
     SetUp("E_cement_coupling", "E", "cement", CEMENT, "volumetric_coupling", COUPLING),
     SetUp("Ks_rate_coupling", "K_s", "w_i", RATE, "volumetric_coupling", COUPLING),
+    SetUp("E_eta_beta_long", "E", "eta_o", ETA_LONG, "damage_viscosity", BETA, whole_injection=True),
 )
 
 
@@ -82,9 +96,10 @@ class Variant:
     tables: dict = field(default_factory=dict)
     shape: str = "smooth"
 
-    def toy(self, h: float, realization: int) -> MeshToy:
-        """The variant's MeshToy on mesh size ``h`` (mm), mesh realization ``realization``."""
-        return MeshToy(h, realization, self.spread, self.bias, self.shape)
+    def toy(self, h: float, realization: int, cracks: bool = False) -> MeshToy:
+        """The variant's MeshToy on mesh size ``h`` (mm), mesh realization ``realization`` (``cracks``: the
+        whole injection)."""
+        return MeshToy(h, realization, self.spread, self.bias, self.shape, cracks=cracks)
 
 
 _REMEDY = {"noise": {"disc_error_fraction": 0.0}, "profile": {"likelihood": "gaussian"}}
@@ -113,6 +128,16 @@ VARIANTS = {v.name: v for v in (
             tables={**_REMEDY, "profile": {"likelihood": "marginal", "fine": False, "emulator": "gp",
                                            "emulate_refits": True}}),
     Variant("wander_remedy_k30", shape="wander", k=30, tables=_REMEDY),
+    Variant("wander_crn_marginal", shape="wander", k=6,
+            tables={**_REMEDY, "profile": {"likelihood": "marginal", "correction": "linear"}}),
+    Variant("wander_point_marginal_k6", shape="wander", k=6, tables={**_REMEDY, "profile": {"likelihood": "marginal"}}),
+    Variant("wander_crn_marginal_emulator_refits", shape="wander", k=6,
+            tables={**_REMEDY, "profile": {"likelihood": "marginal", "correction": "linear", "emulator": "gp",
+                                           "emulate_refits": True}}),
+    Variant("wander_point_marginal_k6_emulator_refits", shape="wander", k=6,
+            tables={**_REMEDY, "profile": {"likelihood": "marginal", "emulator": "gp", "emulate_refits": True}}),
+    Variant("wander_fit_correction_marginal_k6", shape="wander", k=6,
+            tables={**_REMEDY, "profile": {"likelihood": "marginal", "fine": False}}),
     Variant("wander_marginal_refresh8", shape="wander",
             tables={"noise": {"disc_error_fraction": 0.0, "disc_refresh": 8}, "profile": {"likelihood": "marginal"}}),
     Variant("wander_fit_correction", shape="wander", tables={"profile": {"fine": False}}),
@@ -134,7 +159,8 @@ def _spec(su: SetUp, tables: dict):
     return spec_from_dict({"baseline": {"effects_off": list(OFF)},
                            "calibrate": [{"name": su.calibrate, "lower": lo, "upper": hi}],
                            "candidates": {"effects": [su.effect], "upper": {"volumetric_coupling": 3.0}},
-                           "holdout": {"ids": ["c3"]}, "options": {"h": 4.0, "t_end": 0.3}, **tables})
+                           "holdout": {"ids": ["c3"]},
+                           "options": {"h": 4.0, "t_end": float(su.times[-1])}, **tables})
 
 
 def _truth(su: SetUp, draw: int, seed: int) -> tuple[float, float]:
@@ -152,12 +178,13 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
     hidden = {get_effect(o).parameter: get_effect(o).off for o in OFF}
     hidden.update({e.parameter: truth, su.calibrate: cal})
     base = 1000 * (seed * 10007 + draw + 1)            # mesh realizations of this draw: data, then the checks
-    fines = [variant.toy(2.0, base + 1 + i) for i in range(variant.k)]
+    cr = su.whole_injection
+    fines = [variant.toy(2.0, base + 1 + i, cr) for i in range(variant.k)]
     with tempfile.TemporaryDirectory() as tmp:
-        data = load_measured(make_twin(Path(tmp) / "d", variant.toy(2.0, base),
-                                       su.conditions(), TIMES, hidden, noise=NOISE, seed=base,
-                                       observables=tuple(NOISE), regime=False))
-    run = prepare(data, _spec(su, variant.tables), variant.toy(4.0, 0), fines)
+        data = load_measured(make_twin(Path(tmp) / "d", variant.toy(2.0, base, cr),
+                                       su.conditions(), su.times, hidden, noise=su.noise, seed=base,
+                                       observables=tuple(su.noise), regime=False))
+    run = prepare(data, _spec(su, variant.tables), variant.toy(4.0, 0, cr), fines)
     calibrate(run)
     search(run)
     row = {"setup": su.name, "draw": draw, "truth": truth, "cal_truth": cal, "named": bool(run.accepted)}
@@ -182,7 +209,8 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
     em = run.profiles[su.effect].get("emulator")
     if em:
         row["profile_emulator"] = {k: em[k] for k in ("design_points", "forward_runs", "refinements", "confirmed")}
-    pf = _Profile(run.problem, fit, j, run.train, 3.841, run.fine if run.spec.profile.fine else None)
+    pf = _Profile(run.problem, fit, j, run.train, 3.841, run.fine if run.spec.profile.fine else None,
+                  correction=run.correction_models.get(su.effect))
     row.update({"dchi2_truth": pf.dchi2(fit.params[j].to_x(truth)), "threshold": pf.thr,
                 "dchi2_truth_others_fixed": _dchi2_others_fixed(pf, truth)})
     return row
@@ -198,7 +226,9 @@ def _dchi2_others_fixed(pf: _Profile, value: float) -> float:
     problem.fixed = {pf.p.name: value}
     old = None
     try:
-        if pf.fines:
+        if pf.cm is not None:
+            old = problem.noise.shift_correction(pf.cm.at(pf.p.to_x(value)))
+        elif pf.fines:
             vals = {**{q.name: q.from_x(x) for q, x in zip(pf.free, others)}, pf.p.name: value}
             old = problem.noise.shift_correction(correction_at(problem, pf.fines, vals))
         r = problem.residual_batch(pf.free, [others], pf.ids)[0]
@@ -281,13 +311,15 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--combine", nargs="+", metavar="JSON", help="merge these studies of one variant instead")
     a = ap.parse_args(argv)
+    import json
+
     from sweep.campaign.store import write_json_atomic
+
+    from .report import jsonable
 
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
 
     if a.combine:
-        import json
-
         write_json_atomic(Path(a.out), combine([json.loads(Path(f).read_text()) for f in a.combine]))
         return 0
     known = {s.name: s for s in SETUPS}
@@ -297,7 +329,7 @@ def main(argv=None) -> int:
         print(f"coverage: --setups {bad} unknown (allowed {sorted(known)}) or --draws={a.draws} < 1 or --first={a.first} < 0", file=sys.stderr)
         return 2
     res = run_study([known[n] for n in names], a.draws, VARIANTS[a.variant], a.seed, first=a.first,
-                    log=lambda r: print(r["setup"], r["draw"], r.get("covered"), flush=True))
+                    log=lambda r: print(json.dumps(jsonable(r)), flush=True))
     write_json_atomic(Path(a.out), res)
     print({k: v["coverage"] for k, v in res["by_setup"].items()}, res["pooled"])
     return 0

@@ -105,7 +105,9 @@ def _model_tables(data: MeasuredData) -> list[str]:
 STARTING = {("profile", "emulator"): ("gp", "for solver runs (library default \"none\"):"),
             ("profile", "emulate_refits"): (True, "for solver runs (library default false):"),
             ("noise", "disc_error_fraction"): (0.0, "a calibrated interval (library default 0.5):"),
-            ("profile", "likelihood"): ("marginal", "a calibrated interval (library default \"weighted\"):")}
+            ("profile", "likelihood"): ("marginal", "a calibrated interval (library default \"weighted\"):"),
+            ("profile", "correction"): ("linear", "a smooth profile, the correction following the strength "
+                                                  "(library default \"point\"):")}
 
 
 def _option_tables() -> list[str]:

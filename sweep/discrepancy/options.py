@@ -116,6 +116,16 @@ class ProfileOptions(_Checked):
                              doc="flag the interval when the profile falls by this fraction of its threshold")
     fine: bool = _rule(True, "bool", doc="with [discretization]: correct each profile point where it is "
                                          "(false: the fit's correction, far cheaper)")
+    correction: str = _rule("point", "choice", choices=("point", "linear"),
+                            doc="with fine = true: point (the correction re-estimated at each profile point from the "
+                                "realizations) or linear (the correction as a linear function of the strength, fitted "
+                                "once from the realizations at correction_anchors strengths and the same for every "
+                                "point and re-centring: common random numbers, a smooth profile)")
+    correction_anchors: int = _rule(3, "int", 2, 9, doc="with correction = linear: strengths the correction is "
+                                                        "estimated at (the fit and evenly about it)")
+    correction_span: float = _rule(1.0, "float", 0.0, 10.0, lo_open=True,
+                                   doc="with correction = linear: the anchors' reach about the fit, in Wald "
+                                       "half-widths of the 95 % interval")
     smoothing: str = _rule("none", "choice", choices=("none", "quadratic"),
                            doc="quadratic: the interval from a quadratic through noisy profile points (MCAP)")
     grid: int = _rule(4, "int", 2, 20, doc="with quadratic smoothing: extra profile points per side")
@@ -147,6 +157,9 @@ class ProfileOptions(_Checked):
 
     def __post_init__(self):
         super().__post_init__()
+        if self.correction == "linear" and not self.fine:
+            raise ValueError("discrepancy spec: profile.correction=\"linear\" is not allowed with profile.fine=false "
+                             "(the fit's correction for every point): set fine = true or correction = \"point\"")
         if self.emulate_refits and self.emulator == "none":
             raise ValueError("discrepancy spec: profile.emulate_refits=true is not allowed with "
                              "profile.emulator=\"none\": set emulator = \"gp\" or emulate_refits = false")

@@ -10,6 +10,16 @@ parameter; scale: the misfit scale of the Wald interval).  Which χ² is ``[prof
 "gaussian" (the whitened χ², −2 ln of the Gaussian likelihood with the modelled covariance: the exact
 interval of a linear model) or "marginal" (the realization covariance's scale integrated over its sampling
 distribution from k realizations).  Settings: :class:`~.options.ProfileOptions`.  Units: each parameter's own; Δχ² dimensionless.
+
+Which discretization correction each point is compared under (``[profile] fine``, ``correction``): the fit's
+(``fine = false``), re-estimated at each point from the fine realizations (``correction = "point"``), or
+modelled linearly in the strength from the realizations at a few anchor strengths (``"linear"``,
+:class:`StrengthCorrection`).  The linear model is fixed once per profile and kept through its re-centrings, so
+every point is evaluated with the same realizations, the same correction function and the same covariance
+(common random numbers): Δχ² differences then come from the strength alone, and the profile is as smooth as
+the coarse model; a point-wise correction carries the fine realizations' own jitter in the parameters into
+every point (measured on the toy, tests/test_discrepancy_crn.py).  A profile that is not monotone on each side
+of its lowest point is flagged (``non_monotone``); a re-centring is recorded in ``recentred`` and reported.
 """
 from __future__ import annotations
 
@@ -30,14 +40,54 @@ from .report import jsonable
 
 log = logging.getLogger("dchfrac.discrepancy")
 
-__all__ = ["profile_interval", "recentre_target", "profile_recentred", "emulator_for"]
+__all__ = ["profile_interval", "recentre_target", "profile_recentred", "emulator_for", "StrengthCorrection"]
+
+
+class StrengthCorrection:
+    """The discretization correction (fine − coarse, per curve row, kPa / mm) as a linear function of the
+    profiled strength's internal coordinate x: c(x) = a + b (x − x̄), least squares per row through the
+    corrections estimated at the anchors ``xs`` (``corrs``: one row vector each; exact through two anchors).
+
+    The fine-minus-coarse difference of damage- and crack-dependent observables changes with the effect's
+    strength (results/discrepancy/long_bias/README.md); one correction taken at the fit and applied along the
+    profile gives the profile the coarse model's sensitivity to the strength instead of the fine one's.  A
+    linear model in the strength holds the fine model's first-order sensitivity; the other parameters'
+    influence on the correction is taken along the profile's own path (each anchor's others refitted at its
+    strength)."""
+
+    def __init__(self, xs, corrs, values=None):
+        self.xs = np.asarray(xs, float)
+        C = np.vstack([np.asarray(c, float) for c in corrs])
+        if self.xs.size < 2 or C.shape[0] != self.xs.size:
+            raise ValueError(f"StrengthCorrection: {self.xs.size} anchors for {C.shape[0]} corrections (>= 2 each)")
+        self.xbar = float(self.xs.mean())
+        u = self.xs - self.xbar
+        self.a = C.mean(axis=0)
+        self.b = (u @ (C - self.a)) / float(u @ u)
+        self.resid_rms = float(np.sqrt(np.mean((C - self.a - np.outer(u, self.b)) ** 2)))
+        self.values = list(values) if values is not None else [float(x) for x in self.xs]
+
+    def at(self, x: float) -> np.ndarray:
+        """c(x) on every curve row."""
+        return self.a + self.b * (float(x) - self.xbar)
+
+    def summary(self, layout=None) -> dict:
+        """The anchors (parameter units), the slope's RMS change of the correction over the anchors' span and
+        the residual RMS of the line through them (kPa / mm: per observable with ``layout``)."""
+        span = float(np.ptp(self.xs))
+        out = {"model": "linear", "anchors": self.values, "line_residual_rms": self.resid_rms}
+        if layout is not None:
+            from .noise import rms_per_observable
+            out["change_over_anchors_rms"] = rms_per_observable(layout, self.b * span)
+        return out
 
 
 class _Profile:
     """The profile of parameter ``j`` of ``fit`` on the conditions ``ids``: its evaluated points and the
     bracketing of each bound (see :func:`profile_interval`)."""
 
-    def __init__(self, problem, fit: Fit, j: int, ids, level: float, fine_forward, emulator=None):
+    def __init__(self, problem, fit: Fit, j: int, ids, level: float, fine_forward, emulator=None,
+                 correction: StrengthCorrection | None = None):
         self.problem, self.fit, self.j, self.ids, self.level = problem, fit, j, ids, level
         self.em, self.last = emulator, None
         self.po = problem.spec.profile
@@ -55,10 +105,32 @@ class _Profile:
         self.fines = realizations(fine_forward)
         self.checks: list = []
         self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
+        self.cm = None                   # with [profile] correction = "linear": the correction's model
+        if self.fines and self.po.correction == "linear":
+            self.cm = correction if correction is not None else self.linear_correction()
         # the fit's χ² under the correction it was made under, taken as the points' are: on the emulator (its
         # covariance at the fit too) when there is one, so that Δχ² stays within one likelihood
         self.chi2_fit = self.deviance(fit.r) if emulator is None else self.fit_deviance(self.held(float(fit.x[j])))
         self.chi2_hat = self.reference_deviance() if self.fines else self.chi2_fit
+
+    def linear_correction(self) -> StrengthCorrection:
+        """The correction modelled linearly in the strength (:class:`StrengthCorrection`): estimated from the
+        fine realizations at ``correction_anchors`` strengths evenly over the fit ± ``correction_span`` Wald
+        half-widths (clipped to the bounds), the others refitted at each under the fit's correction; on the
+        emulator each taken against the emulator's mean (:meth:`model_correction`)."""
+        po, xh = self.po, float(self.x_hat[self.j])
+        wl, wh = (self.p.to_x(b) if np.isfinite(b) else np.nan for b in self.wald)
+        half = 0.5 * abs(wh - wl) if np.isfinite(wh - wl) and wh != wl else 0.1 * max(abs(xh), 1e-3 * (self.x_hi - self.x_lo))
+        xs = np.unique(np.clip(xh + po.correction_span * half * np.linspace(-1.0, 1.0, po.correction_anchors),
+                               self.x_lo, self.x_hi))
+        if xs.size < 2:
+            xs = np.array([self.x_lo, self.x_hi])
+        corrs = []
+        for x in xs:
+            f = self.held(float(x))
+            corr = correction_at(self.problem, self.fines, {**f.values(), self.p.name: self.p.from_x(float(x))})
+            corrs.append(self.model_correction(corr, f))
+        return StrengthCorrection(xs, corrs, [float(self.p.from_x(x)) for x in xs])
 
     def reference_deviance(self) -> float:
         """With fine models, the χ² every Δχ² is measured from: the fit's own point taken as each profile point
@@ -68,8 +140,22 @@ class _Profile:
         (an offset above the threshold collapses the interval onto the fit)."""
         xj = float(self.x_hat[self.j])
         with self.holding(xj):
-            f, _ = self.corrected_refit(xj, self.fit.values(), self.x_hat, np.delete(self.x_hat, self.j))
+            if self.cm is not None:
+                f = self.modelled_refit(xj)
+            else:
+                f, _ = self.corrected_refit(xj, self.fit.values(), self.x_hat, np.delete(self.x_hat, self.j))
         return self.fit_deviance(f)
+
+    def modelled_refit(self, xj: float) -> Fit:
+        """The others refitted from the fit's values with the parameter at ``xj`` (held by the caller) under
+        the modelled correction c(xj) (:class:`StrengthCorrection`): the same function of the strength for
+        every point."""
+        self.point_correction = self.cm.at(xj)
+        old = self.problem.noise.shift_correction(self.point_correction)
+        try:
+            return self.refit(xj, np.delete(self.x_hat, self.j))
+        finally:
+            self.problem.noise.shift_correction(old)
 
     @contextmanager
     def holding(self, xj: float):
@@ -122,8 +208,8 @@ class _Profile:
         p = self.p
         row = {"value": p.from_x(xj)}
         with self.holding(xj):
-            f = self.refit(xj, np.delete(self.x_hat, self.j))
-            if self.fines:
+            f = self.modelled_refit(xj) if self.cm is not None else self.refit(xj, np.delete(self.x_hat, self.j))
+            if self.fines and self.cm is None:
                 row["delta_chi2_fit_correction"] = float(self.fit_deviance(f) - self.chi2_fit)
                 f, self.point_correction = self.corrected_refit(xj, {**f.values(), p.name: p.from_x(xj)}, f,
                                                                 np.array(f.x, float))
@@ -287,7 +373,7 @@ def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEm
 
 
 def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.841, fine_forward=None,
-                     emulator: CurveEmulator | None = None) -> dict:
+                     emulator: CurveEmulator | None = None, correction: StrengthCorrection | None = None) -> dict:
     """Profile-likelihood interval of parameter ``j`` of ``fit`` (see the module docstring).
 
     Each side starts at the Wald bound and doubles its distance from the fit until the threshold is crossed,
@@ -298,8 +384,16 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     and each end is confirmed with real runs (:meth:`_Profile.confirm`).  Returns lower/upper (parameter
     units), the threshold, the Wald bounds, the roughness (a profile falling away from the fit: its crossings
     set by the model's jitter) and the points (value, Δχ², the others' values); with the emulator also its
-    summary and checks."""
-    pf = _Profile(problem, fit, j, ids, level, fine_forward, emulator)
+    summary and checks.  ``correction``: with ``[profile] correction = "linear"``, the correction's model to
+    use (default: one estimated about ``fit``, :meth:`_Profile.linear_correction`); its summary is
+    "correction".  "non_monotone": the profile falls somewhere walking away from its lowest point by more
+    than ``stats.MONOTONE_TOL`` of the threshold (a second minimum or jitter; flagged, not smoothed away)."""
+    return _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction)[0]
+
+
+def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction) -> tuple:
+    """:func:`profile_interval`'s dict and the correction model it used (None unless linear)."""
+    pf = _Profile(problem, fit, j, ids, level, fine_forward, emulator, correction)
     lo, hi = pf.side(-1), pf.side(+1)
     if emulator is not None:
         lo, hi = (pf.confirm(s, b) if b not in pf.p.x_bounds else b for s, b in ((-1, lo), (+1, hi)))
@@ -313,12 +407,19 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing,
            "reference_offset": float(pf.chi2_hat - pf.chi2_fit)}
+    low = min(points, key=lambda q: q["delta_chi2"])
+    out["monotone_fall"] = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
+                                                   low["value"])
+    out["non_monotone"] = bool(out["monotone_fall"] > stats.MONOTONE_TOL * pf.thr)
+    out["correction"] = ("point" if pf.fines and pf.cm is None else "fit" if not pf.fines else "linear")
+    if pf.cm is not None:
+        out["correction_model"] = pf.cm.summary(problem.layout)
     if emulator is not None:
         out["emulator"] = {**emulator.summary(), "checks": pf.checks,
                            "confirmed": all(c["agrees"] for c in _last_per_side(pf.checks))}
     if po.smoothing == "quadratic":
         _smoothed(out, points, pf.thr, level, pf.p)
-    return out
+    return out, pf.cm
 
 
 def _last_per_side(checks: list) -> list:
@@ -342,6 +443,34 @@ def recentre_target(pr: dict, tol: float = 1e-2) -> dict | None:
     return best if best["delta_chi2"] < -floor else None
 
 
+def _profile_minimum(problem: Problem, fit: Fit, j: int, ids, pr: dict, fine_forward, em, cm) -> Fit:
+    """The minimum of the profile under the modelled correction (:class:`StrengthCorrection`), found by a
+    bounded scalar minimization of Δχ²(x) between the lowest evaluated point's neighbours, and the model there
+    as a Fit (the others' refit, residuals and Jacobian under c(x*)).  A joint refit under one correction vector
+    would stop at the fixed point of "refit, then correct where it stopped", which is not the profile's minimum
+    once the correction depends on the strength: the profile's gradient holds the correction's own derivative."""
+    from scipy.optimize import minimize_scalar
+
+    pf = _Profile(problem, fit, j, ids, 3.841, fine_forward, em, cm)
+    xs = sorted(pf.p.to_x(q["value"]) for q in pr["points"])
+    best = pf.p.to_x(min(pr["points"], key=lambda q: q["delta_chi2"])["value"])
+    i = xs.index(best)
+    step = min(abs(b - a) for a, b in zip(xs[:-1], xs[1:]) if b != a) if len(xs) > 1 else 0.1 * (pf.x_hi - pf.x_lo)
+    lo = xs[i - 1] if i > 0 else max(best - step, pf.x_lo)
+    hi = xs[i + 1] if i + 1 < len(xs) else min(best + step, pf.x_hi)
+    res = minimize_scalar(pf.dchi2, bounds=(lo, hi), method="bounded",
+                          options={"xatol": 1e-3 * (hi - lo), "maxiter": 12})
+    xj = float(res.x) if res.fun <= pf.dchi2(best) else best
+    with pf.holding(xj):
+        held = pf.modelled_refit(xj)
+    x = np.insert(np.asarray(held.x, float), j, xj)
+    problem.noise.shift_correction(cm.at(xj))
+    r = problem.residual_batch(fit.params, [x], ids)[0]
+    if em is not None and not em.has(x):
+        em.add([x])                          # the minimum's own run (cached): the design grows by it
+    return Fit(fit.params, x, r, problem.jacobian(fit.params, x, ids), 0.5 * float(r @ r), 0)
+
+
 def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int = 2, fine_forward=None,
                       emulator: CurveEmulator | None = None) -> tuple:
     """Profile interval of parameter ``j``, re-centred when the profile finds a better fit than ``fit``.
@@ -356,18 +485,29 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     ``emulator``: with ``[profile] emulator = "gp"``, an emulator of ``fit``'s parameters on ``ids`` to use
     (the named model's from its emulated refits, its design shared); default one built about the fit
     (:func:`emulator_for`).
-    Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima)."""
+    With ``[profile] correction = "linear"`` the correction's model is built about ``fit`` and kept for every
+    pass (common random numbers): a re-centring moves the reference, not the likelihood, and goes to the
+    profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' span has the model
+    rebuilt about it for the next pass.
+    Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima, and
+    "_correction": the linear correction's model or None, to be popped before the dict is serialized)."""
     history = []
     em = None
     if problem.spec.profile.emulator == "gp":
         em = emulator if emulator is not None else emulator_for(problem, fit, ids)
-    pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward, emulator=em)
+    pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, None)
     for _ in range(max_passes):
         best = recentre_target(pr)
         if best is None:
             break
         history.append({"strength": float(fit.params[j].from_x(fit.x[j])), "min_delta_chi2": best["delta_chi2"],
                         "at": best["value"]})
+        if cm is not None:                   # the same correction function: the profile's own minimum
+            fit = _profile_minimum(problem, fit, j, ids, pr, fine_forward, em, cm)
+            if not cm.xs.min() <= fit.x[j] <= cm.xs.max():
+                cm = None                    # outside the anchors: the next pass models it about the new fit
+            pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
+            continue
         vals = {**best.get("others", {}), fit.params[j].name: best["value"]}
         x0 = np.array([p.to_x(vals[p.name]) for p in fit.params])
         if fine_forward is not None:
@@ -379,6 +519,7 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
             fit = problem.fit(fit.params, [x0], ids)
         if em is not None and not em.has(fit.x):
             em.add([fit.x])                  # the re-centred fit's own run (cached): the design grows by it
-        pr = profile_interval(problem, fit, j, ids, fine_forward=fine_forward, emulator=em)
+        pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
     pr["recentred"] = history
+    pr["_correction"] = cm       # the linear correction's model (not JSON: the caller pops it), None otherwise
     return fit, pr

@@ -79,10 +79,52 @@ def build_report(run, forward) -> dict:
               "forward_runs_by_stage": run.ledger.stages, **_noise_fields(run),
               "profiles": run.profiles, "partial_explanation": run.partial, "rivals": run.rivals,
               "failed_points": run.failed_points}
+    report["independent_estimates"] = independent_comparison(run.accepted, run.spec.independent)
     if run.emulated is not None:
         report["emulated_refits"] = run.emulated.summary()
     report["code"] = code_provenance()
     return jsonable(report)
+
+
+def independent_comparison(accepted: list, independent: dict) -> dict:
+    """Each independent strength estimate (spec ``[candidates] independent``: effect -> (value, σ)) beside the
+    fitted one: for an accepted effect its 95 % interval, the fitted sd (the interval's half-width / 1.96),
+    z = (fitted − independent)/√(σ² + sd²) and ``disagrees`` when |z| > 2; for one not accepted, the value
+    alone.  Strengths in the effect's unit."""
+    fitted = {a["effect"]: a for a in accepted}
+    out = {}
+    for eff, (v, sig) in independent.items():
+        row = {"value": float(v), "sigma": float(sig), "fitted": None, "interval": None, "z": None,
+               "disagrees": None}
+        a = fitted.get(eff)
+        if a is not None and a.get("strength_interval") and None not in a["strength_interval"]:
+            lo, hi = (float(x) for x in a["strength_interval"])
+            sd = 0.5 * (hi - lo) / 1.96
+            z = (float(a["strength"]) - v) / math.sqrt(sig * sig + sd * sd)
+            row.update({"fitted": float(a["strength"]), "interval": [lo, hi], "fitted_sd": sd, "z": z,
+                        "disagrees": bool(abs(z) > 2.0)})
+        out[eff] = row
+    return out
+
+
+def _independent_lines(report: dict) -> list[str]:
+    """The independent strength estimates beside the fitted intervals, disagreements flagged."""
+    ind = report.get("independent_estimates") or {}
+    if not ind:
+        return []
+    L = ["", "## Independent estimates of the strengths", "",
+         "| effect | independent (value ± σ) | fitted [95 % interval] | z | |", "|---|---|---|---|---|"]
+    for eff, r in ind.items():
+        if r["fitted"] is None:
+            L.append(f"| {eff} | {r['value']:.4g} ± {r['sigma']:.3g} | not named | – | |")
+        else:
+            flag = "**disagrees (> 2σ)**" if r["disagrees"] else "agrees"
+            L.append(f"| {eff} | {r['value']:.4g} ± {r['sigma']:.3g} | {r['fitted']:.4g} {_f(r['interval'])} | "
+                     f"{r['z']:.2f} | {flag} |")
+    L += ["", "z = (fitted − independent)/√(σ² + sd²), sd the fitted interval's half-width / 1.96; a disagreement "
+              "says the data and the independent measurement do not describe the same strength (a model or "
+              "measurement error on one side), not which one is right."]
+    return L
 
 
 def _source_hashes() -> dict:
@@ -132,6 +174,31 @@ def _fig_curves(problem, fit_before, fit_after, path):
             ax.set_ylabel(f"{o} ({UNITS[o]})", fontsize=7)
             ax.tick_params(labelsize=6)
     axes[0, 0].legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _fig_profile(eff: str, pr: dict, path, ind: dict | None = None) -> None:
+    """The profile likelihood of ``eff``: Δχ² at each evaluated strength, the threshold, the interval and, when
+    given, the independent estimate ± 2σ (strength in the effect's unit)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = sorted(pr["points"], key=lambda q: q["value"])
+    fig, ax = plt.subplots(figsize=(4.6, 3.2))
+    ax.plot([q["value"] for q in pts], [q["delta_chi2"] for q in pts], "k-o", ms=3, label="profile points")
+    ax.axhline(pr["threshold"], color="C3", ls="--", lw=1, label=f"threshold {pr['threshold']:.3g}")
+    ax.axvspan(pr["lower"], pr["upper"], color="C0", alpha=0.15, label="95 % interval")
+    if ind:
+        ax.errorbar([ind["value"]], [0.0], xerr=[[2 * ind["sigma"]], [2 * ind["sigma"]]], fmt="s", color="C2",
+                    capsize=3, label="independent ± 2σ")
+    ax.set_xlabel(f"{eff} strength")
+    ax.set_ylabel("Δχ²")
+    title = "non-monotone" if pr.get("non_monotone") else ""
+    ax.set_title(title, fontsize=8, color="C3")
+    ax.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -343,10 +410,25 @@ def _profile_lines(report: dict) -> list[str]:
                       "monotonically; this one jitters with the strength (the coarse model's outputs, typically the "
                       "front radius, are not smooth in it), so the bounds are set by that jitter: read the interval "
                       "as a lower bound on the uncertainty."]
+        if pr.get("non_monotone"):
+            L += ["", f"**Non-monotone profile**: walking away from its lowest point, Δχ² falls by up to "
+                      f"{pr['monotone_fall']:.3g} (more than {100 * stats.MONOTONE_TOL:.0f} % of the threshold): a second "
+                      "minimum or a likelihood that is not a smooth function of the strength.  The interval is the "
+                      "crossings' as evaluated; it is not smoothed or re-centred away."]
+        cm = pr.get("correction_model")
+        if cm:
+            L += ["", f"Discretization correction along the profile: linear in the strength (`[profile] correction = "
+                      f"\"linear\"`), from the fine realizations at {_f(cm['anchors'])}; the same function for every point "
+                      f"and re-centring (common random numbers).  Its change over the anchors, RMS: "
+                      + ", ".join(f"{o} {v:.3g}" for o, v in (cm.get("change_over_anchors_rms") or {}).items())
+                      + f"; the line's residual RMS {cm['line_residual_rms']:.3g}."]
+        if pr.get("points"):
+            L += ["", f"![Profile likelihood of {eff}](profile_{eff}.png)"]
         L += _emulator_lines(pr.get("emulator"))
         for h in pr.get("recentred", []):
-            L += ["", f"Re-centred: the profile found Δχ² = {h['min_delta_chi2']:.3g} at {h['at']:.4g} below the fit at "
-                      f"{h['strength']:.4g} (the joint fit had stopped short of the minimum); refitted from there."]
+            L += ["", f"**Re-centred**: the profile found Δχ² = {h['min_delta_chi2']:.3g} at {h['at']:.4g} below the fit at "
+                      f"{h['strength']:.4g} (the joint fit had stopped short of the minimum); refitted from there and the "
+                      "profile evaluated again about the new fit (the points above are the last pass's)."]
     return L
 
 
@@ -429,10 +511,14 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
             if fit_after is not fit_before:
                 _fig_residuals(problem, fit_after, out / "residuals_after.png", "with named effect")
                 figs.append(("Residual map, final model", "residuals_after.png"))
+            for eff, pr in (report.get("profiles") or {}).items():
+                if pr.get("points"):
+                    _fig_profile(eff, pr, out / f"profile_{eff}.png",
+                                 (report.get("independent_estimates") or {}).get(eff))
         except Exception as exc:  # figures are optional; the verdict is not
             figs.append((f"figures failed: {type(exc).__name__}: {exc}", None))
     L = (_verdict_lines(report) + _caveat_lines(report) + _noise_lines(report) + _candidate_lines(report)
-         + _profile_lines(report) + _emulated_refit_lines(report.get("emulated_refits"))
+         + _profile_lines(report) + _independent_lines(report) + _emulated_refit_lines(report.get("emulated_refits"))
          + _gap_and_localization_lines(report))
     for cap, f in figs:
         L += [f"![{cap}]({f})" if f else cap, ""]

@@ -20,8 +20,14 @@ Example (units mm, s, kPa)::
     scaling = { damage_viscosity = "sqrt_cement" }              # optional: parameter = strength * sqrt(C)
     upper = { damage_viscosity = 200.0 }                          # optional: strength bounds / probes
     probe = { damage_viscosity = 40.0 }
+    independent = { compliant_boundary = "0.0095 ± 0.0005" }      # optional: a strength estimated outside the
+                                     # data (e.g. plate bending of an elastic cell), value ± σ in the effect's
+                                     # unit (also [value, sigma]); the report sets the fitted interval beside it
+                                     # and flags a disagreement beyond 2σ
 
-    [holdout]                        # whole conditions, never time points
+    [holdout]                        # whole conditions, never time points; or, with one condition (a single
+                                     # experiment), observables = ["crack_length"]: those observables of every
+                                     # condition are held out, the others fitted (sweep/discrepancy/heldout.py)
     ids = ["c3"]                     # or  every = 3  (every third condition, starting with the last)
 
     [options]                        # solver.RunOptions fields for the workflow's runs
@@ -54,6 +60,10 @@ Example (units mm, s, kPa)::
     [profile]                        # the named strength's profile-likelihood interval
     expand = 3; refine = 2; refine_tol = 0.15; rough_tol = 0.25
     fine = true                      # with [discretization]: correct each profile point where it is
+    correction = "point"             # with fine: "point" (re-estimated at each point) or "linear" (linear in the
+    correction_anchors = 3           # strength from the realizations at correction_anchors strengths over the
+    correction_span = 1.0            # fit ± correction_span Wald half-widths; the same for every point and
+                                     # re-centring: common random numbers, a smooth profile)
     smoothing = "none"               # "quadratic": interval from a quadratic through noisy points (MCAP)
     grid = 4                         # with "quadratic": extra profile points per side
     likelihood = "weighted"          # delta chi2: "weighted" (lag-1 series weights), "gaussian" (whitened chi2),
@@ -146,6 +156,8 @@ class DiscrepancySpec:
     options: dict
     discretization: dict | None = None
     alternatives: tuple = ()
+    independent: dict = field(default_factory=dict)    # effect -> (value, sigma), the effect's unit
+    holdout_observables: tuple = ()                     # observables held out instead of whole conditions
     fit: FitOptions = field(default_factory=FitOptions)
     acceptance: AcceptanceOptions = field(default_factory=AcceptanceOptions)
     noise: NoiseOptions = field(default_factory=NoiseOptions)
@@ -160,6 +172,9 @@ class DiscrepancySpec:
 
     def holdout(self, ids: list) -> list:
         """Held-out condition ids among ``ids`` (by explicit list or every n-th counting from the last)."""
+        if self.holdout_observables:
+            from .heldout import HELD_SUFFIX
+            return [i for i in ids if str(i).endswith(HELD_SUFFIX)]
         if self.holdout_ids is not None:
             missing = [i for i in self.holdout_ids if i not in ids]
             if missing:
@@ -261,7 +276,8 @@ _SHAPES = (("baseline", None, dict, "a table"), ("candidates", None, dict, "a ta
            ("candidates", "effects", list, "a list of effect names"),
            ("candidates", "scaling", dict, "a table {effect = scaling}"),
            ("candidates", "upper", dict, "a table {effect = number}"),
-           ("candidates", "probe", dict, "a table {effect = number}"))
+           ("candidates", "probe", dict, "a table {effect = number}"),
+           ("candidates", "independent", dict, 'a table {effect = "value ± sigma"}'))
 
 
 def _check_shapes(d: dict) -> None:
@@ -289,6 +305,23 @@ def _check_shapes(d: dict) -> None:
         for k, v in d.get("candidates", {}).get(key, {}).items():
             if isinstance(v, bool) or not isinstance(v, (int, float)):
                 _bad(f"candidates.{key}.{k}", v, "a number")
+
+
+def _independent(effect: str, v) -> tuple[float, float]:
+    """An independent estimate of ``effect``'s strength, "value ± sigma" (also "+-") or [value, sigma], as
+    (value, sigma) in the effect's unit; sigma > 0 and both finite."""
+    get_effect(effect)
+    try:
+        if isinstance(v, str):
+            parts = v.replace("+-", "±").split("±")
+            val, sig = (float(x) for x in parts) if len(parts) == 2 else (math.nan, math.nan)
+        else:
+            val, sig = (float(x) for x in v)
+    except (TypeError, ValueError):
+        val, sig = math.nan, math.nan
+    if not (math.isfinite(val) and math.isfinite(sig) and sig > 0):
+        _bad(f"candidates.independent.{effect}", v, '"value ± sigma" or [value, sigma], finite, sigma > 0')
+    return val, sig
 
 
 def spec_from_dict(d: dict) -> DiscrepancySpec:
@@ -327,6 +360,7 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     probe = {k: float(v) for k, v in cand.get("probe", {}).items()}
     for k in list(upper) + list(probe):
         get_effect(k)
+    independent = {k: _independent(k, v) for k, v in cand.get("independent", {}).items()}
     ho = d.get("holdout", {})
     if not isinstance(ho, dict):
         _bad("holdout", ho, "a table: ids = [...] or every = n")
@@ -334,8 +368,16 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     every = ho.get("every")
     if ids is not None and (not isinstance(ids, list) or not all(isinstance(i, str) for i in ids)):
         _bad("holdout.ids", ids, "a list of condition ids (text), e.g. [\"w65\"]")
-    if ids is None and every is None:
-        _bad("holdout", ho, "ids = [...] or every = n (whole conditions are held out)")
+    hobs = ho.get("observables")
+    if hobs is not None:
+        if ids is not None or every is not None:
+            _bad("holdout", ho, "either ids / every (whole conditions) or observables, not both")
+        from .observables import CURVES
+        if (not isinstance(hobs, list) or not hobs
+                or any(o not in (*CURVES, "regime") for o in hobs)):
+            _bad("holdout.observables", hobs, f"a non-empty list of {[*CURVES, 'regime']}")
+    elif ids is None and every is None:
+        _bad("holdout", ho, "ids = [...], every = n (whole conditions are held out) or observables = [...]")
     if every is not None and (not isinstance(every, int) or every < 2):
         _bad("holdout.every", every, "an integer >= 2")
     opts = dict(d.get("options", {}))
@@ -354,7 +396,8 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     wo = parse_options(d)
     return DiscrepancySpec(base, off, cal, names, scaling, upper, probe,
                            tuple(ids) if ids is not None else None, every, opts,
-                           dict(disc) if disc is not None else None, alt, wo.fit, wo.acceptance, wo.noise, wo.profile)
+                           dict(disc) if disc is not None else None, alt, independent,
+                           tuple(hobs) if hobs is not None else (), wo.fit, wo.acceptance, wo.noise, wo.profile)
 
 
 def load_spec(path) -> DiscrepancySpec:

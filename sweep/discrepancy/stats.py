@@ -135,6 +135,12 @@ def pooled_lag1(dev_series: list) -> float:
     return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
 
 
+# a profile falling by more than this fraction of its threshold walking away from its lowest point is
+# non-monotone (2 %, ~0.08 in Δχ² at 95 %: above the refits' convergence tolerance, below any jitter that
+# moves a bound)
+MONOTONE_TOL = 0.02
+
+
 def profile_roughness(values, delta_chi2, center: float) -> float:
     """How far a profile likelihood falls when it should rise: the largest drop of Δχ² met walking away from
     ``center`` (the fit) on either side, i.e. max over points of (highest Δχ² nearer the fit on that side − Δχ²

@@ -99,7 +99,17 @@ class MeshToy(ForwardModel):
                from t = 0, interpolated): the exponential correlation in time the workflow's covariance assumes.
 
     The draws come from (realization, condition), so a realization is the same mesh whatever the fitted
-    parameters.  Counts evaluations in ``n_runs``.
+    parameters.  ``jitter`` (kPa; default 0) adds the jitter of a mesh that barely resolves the front: a
+    curve-wide offset jitter·(P0/483)·g(t)·z in p_inj and 0.1·jitter·g(t)·z' in the front radius, z, z' standard
+    normal drawn per (realization, condition, parameter values): independent between parameter values however
+    close, as the solver's outputs jump when an S = 0.5 contour crosses a node.  Counts evaluations in ``n_runs``.
+
+    ``cracks`` (the whole injection, ``crack_length`` observable; default off, the curves above): the crack initiates at
+    t_i = 0.4 (331/E_h)^0.5 (1 + β_h'/60) s with β_h' = β (1 + a_c h), a_c = 0.1 ``bias`` (damage on a mesh that
+    barely resolves l_d delays initiation, and more so for a stronger damage viscosity: a discretization
+    error that depends on the strength), grows as crack = 12 (t − t_i)₊ rate (η_o/0.29)^0.3 mm, and the
+    pressure falls after it by 0.25 P0 σ((t − t_i)/0.04); the realization deviation of the crack is
+    spread·0.6·u_c(t)·min(1, (t − t_i)₊/0.1) mm (u_c a unit Ornstein–Uhlenbeck process, τ = 0.2 s).
     """
 
     regime_labels = ("porous_invasion",)
@@ -107,18 +117,43 @@ class MeshToy(ForwardModel):
     SHAPES = ("smooth", "wander")
 
     def __init__(self, h: float = 4.0, realization: int = 0, spread: float = 1.0, bias: float = 1.0,
-                 shape: str = "smooth"):
-        if not (h > 0 and spread >= 0 and bias >= 0 and int(realization) >= 0 and shape in self.SHAPES):
+                 shape: str = "smooth", jitter: float = 0.0, cracks: bool = False):
+        if not (h > 0 and spread >= 0 and bias >= 0 and int(realization) >= 0 and shape in self.SHAPES
+                and jitter >= 0):
             raise ValueError(f"MeshToy: h={h!r} (> 0), spread={spread!r} (>= 0), bias={bias!r} (>= 0), "
-                             f"realization={realization!r} (integer >= 0), shape={shape!r} (one of {self.SHAPES})")
+                             f"realization={realization!r} (integer >= 0), shape={shape!r} (one of {self.SHAPES}), "
+                             f"jitter={jitter!r} (>= 0)")
         self.h, self.realization, self.spread, self.bias = float(h), int(realization), float(spread), float(bias)
-        self.shape = shape
+        self.shape, self.jitter, self.cracks = shape, float(jitter), bool(cracks)
         self.n_runs = 0
+
+    def _key(self, p) -> list:
+        """The condition of ``p`` as integers (the realization deviation's seed with the realization)."""
+        return [self.realization, int(round(p.w_i * 1e3)), int(round(p.cement * 1e4)), int(round(p.eta_o * 1e6))]
+
+    def _jitter(self, p, P0: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(p_inj, front) jitter of this realization at the parameter values of ``p`` (class docstring)."""
+        if self.jitter == 0.0:
+            return np.zeros_like(t), np.zeros_like(t)
+        vals = (p.damage_viscosity, p.volumetric_coupling, p.E, p.kbar * 1e6, p.K_s)
+        rng = np.random.default_rng(self._key(p) + [int(round(v * 1e6)) % (2**62) for v in vals])
+        z = rng.standard_normal(2)
+        g = self.jitter * (1 - np.exp(-t / 0.05))
+        return (P0 / 483.0) * g * z[0], 0.1 * g * z[1]
+
+    def _crack(self, p, rate: float, hb: float, t: np.ndarray, E_h: float) -> tuple[np.ndarray, float]:
+        """The crack length (mm) and initiation time t_i (s) on this mesh, with its realization deviation."""
+        ti = 0.4 * math.sqrt(331.0 / E_h) * (1 + p.damage_viscosity * (1 + 0.1 * hb) / 60.0)
+        grown = np.clip(t - ti, 0, None)
+        c = 12.0 * grown * rate * (p.eta_o / 0.29) ** 0.3
+        if self.spread:
+            rng = np.random.default_rng(self._key(p) + [3])
+            c = c + self.spread * 0.6 * _ou(rng, t, 0.2) * np.minimum(1.0, grown / 0.1)
+        return np.maximum(c, 0.0), ti
 
     def _deviation(self, p, P0: float, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(δp, δf) of this realization for the condition of ``p`` at times ``t``."""
-        key = [self.realization, int(round(p.w_i * 1e3)), int(round(p.cement * 1e4)), int(round(p.eta_o * 1e6))]
-        rng = np.random.default_rng(key)
+        rng = np.random.default_rng(self._key(p))
         if self.shape == "wander":
             g = self.spread * (1 - np.exp(-t / 0.05))
             return 3.0 * (P0 / 483.0) * g * _ou(rng, t, 0.1), 0.4 * g * _ou(rng, t, 0.1)
@@ -138,20 +173,28 @@ class MeshToy(ForwardModel):
         tau = 0.3 * (331.0 / (p.E * (1 + 0.01 * hb))) * (0.5 + 800.0 / p.K_s)
         beta = p.damage_viscosity * (1 + 0.05 * hb)
         v = p.volumetric_coupling
+        E_h = p.E * (1 + 0.01 * hb)
         out = {}
         for obs, t in times.items():
             t = np.asarray(t, float)
             dp, df = self._deviation(p, P0, t)
+            jp, jf = self._jitter(p, P0, t)
             if obs == "p_inj":
                 out[obs] = (P0 * (1 - np.exp(-t / tau)) * (1 + 0.005 * hb)
-                            + (0.5 * beta * rate * math.sqrt(p.cement / 1.2) + 25 * v) * np.exp(-t / 0.2) + dp)
+                            + (0.5 * beta * rate * math.sqrt(p.cement / 1.2) + 25 * v) * np.exp(-t / 0.2) + dp + jp)
+                if self.cracks:                       # the whole injection: the fall after initiation
+                    ti = self._crack(p, rate, hb, t, E_h)[1]
+                    out[obs] = out[obs] - 0.25 * P0 / (1 + np.exp(-(t - ti) / 0.04))
             elif obs == "front_radius_mean":
                 out[obs] = (5 + 15 * t * rate * (p.eta_o / 0.29) ** -0.2 * (p.kbar / 0.0015) ** 0.3
-                            * (1 + 0.1 * v) * (1 - 0.01 * hb) + df)
+                            * (1 + 0.1 * v) * (1 - 0.01 * hb) + df + jf)
+            elif obs == "crack_length" and self.cracks:
+                out[obs] = self._crack(p, rate, hb, t, E_h)[0]
             elif obs == "regime":
                 out[obs] = "porous_invasion"
             else:
-                raise ValueError(f"MeshToy: observable {obs!r} is not modelled (p_inj, front_radius_mean, regime)")
+                raise ValueError(f"MeshToy: observable {obs!r} is not modelled (p_inj, front_radius_mean, regime; "
+                                 "crack_length with cracks=True)")
         return out
 
 

@@ -22,6 +22,7 @@ from . import stats
 from .checks import check_data_against_model
 from .data import MeasuredData
 from .emulated import EmulatedRefits
+from .heldout import heldout_data
 from .evidence import compare_passing, free_columns, gap, localize, refit, rival_refits, screen, wald_bounds
 from .ledger import RunLedger
 from .noise import add_discretization_error, add_model_jitter, rms_per_observable
@@ -71,6 +72,7 @@ class WorkflowRun:
     partial: dict | None = None
     emulated: EmulatedRefits | None = None
     failed_points: dict = field(default_factory=dict)
+    correction_models: dict = field(default_factory=dict)   # effect -> the profile's linear correction or None
 
     @property
     def spec(self) -> DiscrepancySpec:
@@ -104,6 +106,7 @@ def prepare(data: MeasuredData, spec: DiscrepancySpec, forward, fine_forward) ->
     """The problem, the training/held-out split, and the noise model before any fit: the discretization
     correction from the fine models and, with ``model_jitter = "estimated"``, the coarse model's jitter at
     the initial baseline (so the baseline's χ² and every candidate's refit see the same jitter term)."""
+    data = heldout_data(data, spec)        # [holdout] observables: held-out rows as twin conditions
     problem = Problem(data, spec, forward)
     fine = realizations(fine_forward) or None
     holdout = spec.holdout(data.ids)
@@ -333,6 +336,7 @@ def profile_named(run: WorkflowRun) -> None:
         j = names.index("effect:" + a["effect"])
         run.current, pr = profile_recentred(run.problem, run.current, j, run.train, fine_forward=fine,
                                             emulator=run.emulator_of(run.current.params))
+        run.correction_models[a["effect"]] = pr.pop("_correction", None)
         run.profiles[a["effect"]] = pr
         a["strength_interval_wald"] = a["strength_interval"]
         a["strength_interval"] = [pr["lower"], pr["upper"]]
@@ -394,6 +398,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     the fine mesh and porosity field): the data are corrected by their mean difference to ``forward`` and
     their deviations enter the covariance (noise.add_discretization_error).
     """
+    data = heldout_data(data, spec)
     check_data_against_model(data, spec, [forward, *realizations(fine_forward)])  # before any forward run
     run = prepare(data, spec, forward, fine_forward)
     calibrate(run)
