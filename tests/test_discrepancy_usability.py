@@ -155,9 +155,13 @@ def test_init_refuses_to_overwrite_and_says_run_needs_two_conditions(tmp_path, c
     assert "exists" in capsys.readouterr().err and out.read_text() == "# mine\n"
     assert main(["discrepancy", "init", "--measured", str(folder), "--out", str(out), "--force"]) == 0
     one = _folder(tmp_path / "one", cond="id,w_i\na,35\n", obs="condition,observable,time,value,uncertainty\na,p_inj,0.1,1,1\n")
-    assert main(["discrepancy", "init", "--measured", str(one), "--out", str(tmp_path / "x.toml")]) == 0
-    assert "at least 2 conditions" in capsys.readouterr().err  # init writes the SPEC, run will need a second
-    assert "# NOTE:" in (tmp_path / "x.toml").read_text() and "at least 2 conditions" in (tmp_path / "x.toml").read_text()
+    # one condition observing p_inj only: nothing to hold out, refused by init as by run (one validator)
+    assert main(["discrepancy", "init", "--measured", str(one), "--out", str(tmp_path / "x.toml")]) == 2
+    assert "at least 2 conditions" in capsys.readouterr().err and not (tmp_path / "x.toml").exists()
+    two = _folder(tmp_path / "two", cond="id,w_i\na,35\n", obs="condition,observable,time,value,uncertainty\n"
+                  "a,p_inj,0.1,1,1\na,front_radius_mean,0.1,10,1\n")
+    assert main(["discrepancy", "init", "--measured", str(two), "--out", str(tmp_path / "y.toml")]) == 0
+    assert 'observables = ["front_radius_mean"]' in (tmp_path / "y.toml").read_text()  # held out of the fit
 
 
 def test_init_runs_on_the_readme_example(tmp_path, capsys):

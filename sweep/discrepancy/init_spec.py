@@ -80,8 +80,7 @@ def _model_tables(data: MeasuredData) -> list[str]:
     L += [f"effects = {_toml(names)}",
           "# upper = { damage_viscosity = 300.0 }       # optional: a candidate's upper bound / probe strength",
           "# scaling = { damage_viscosity = \"sqrt_cement\" }   # optional: parameter = strength * sqrt(C)", ""]
-    L += ["[holdout]                        # whole conditions the fit never sees: the held-out gap is measured there",
-          f"ids = {_toml(data.ids[-1:])}", ""]
+    L += _holdout_lines(data)
     t_end = float(max(data.curves.time.max() if len(data.curves) else 0.0,
                       max((t for t, _ in data.regimes.values()), default=0.0)))
     t_end = math.ceil(t_end * 100.0) / 100.0
@@ -123,11 +122,29 @@ def _option_tables() -> list[str]:
     return L
 
 
+def held_out_observables(data: MeasuredData) -> list[str]:
+    """With a single condition, the observables held out of the fit: every observable but the injection
+    pressure, which the fit sees (empty when the data hold nothing else)."""
+    observed = set(data.curves["observable"]) | ({"regime"} if data.regimes else set())
+    return sorted(observed - {"p_inj"}) if "p_inj" in observed else []
+
+
+def _holdout_lines(data: MeasuredData) -> list[str]:
+    """[holdout]: the last condition with two or more; with one, its observables other than p_inj."""
+    if len(data.ids) < 2 and held_out_observables(data):
+        return ["[holdout]                        # one condition: the fit sees p_inj, these observables are held out",
+                f"observables = {_toml(held_out_observables(data))}", ""]
+    return ["[holdout]                        # whole conditions the fit never sees: the held-out gap is measured there",
+            f"ids = {_toml(data.ids[-1:])}", ""]
+
+
 def too_few_conditions(data: MeasuredData, folder) -> str | None:
-    """Why ``dchfrac discrepancy run`` cannot use ``data`` (fewer than 2 conditions), None when it can."""
-    if len(data.ids) < 2:
-        return (f"{folder}: the workflow needs at least 2 conditions (one is held out); conditions.csv has "
-                f"{len(data.ids)}: add one before `dchfrac discrepancy run`")
+    """Why ``dchfrac discrepancy run`` cannot use ``data`` (one condition whose only observable is p_inj: nothing
+    to hold out), None when it can."""
+    if len(data.ids) < 2 and not held_out_observables(data):
+        return (f"{folder}: the workflow needs at least 2 conditions (one is held out), or one condition with an "
+                f"observable besides p_inj to hold out; conditions.csv has {len(data.ids)}: add one before "
+                "`dchfrac discrepancy run`")
     return None
 
 
@@ -156,11 +173,16 @@ def write_starting_spec(measured, out, force: bool = False, strict: bool = False
     if out.is_dir():
         raise ValueError(f"--out {str(out)!r} is a folder (allowed: a SPEC file name, e.g. spec.toml)")
     data = load_measured(measured)
+    few = too_few_conditions(data, measured)
+    if few:
+        raise ValueError(few)
     text = starting_spec(data, measured)
     import tomllib
 
     spec = spec_from_dict(tomllib.loads(text))          # what is written loads as written
-    warnings = check_data_against_model(data, spec, spec_models(spec), strict=strict)
+    from .heldout import heldout_data
+
+    warnings = check_data_against_model(heldout_data(data, spec), spec, spec_models(spec), strict=strict)
     out.parent.mkdir(parents=True, exist_ok=True)     # its writability was checked before any work
     atomic_write_text(out, text)
     return out, warnings
