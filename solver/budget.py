@@ -218,7 +218,7 @@ def _measure_iteration(h: float = 2.0) -> float:
 def calibration(linear_solver: str, kernels: str) -> dict:
     """{"factor": this machine's Newton iteration at h = 2 mm on the path over the reference's, "iteration_s",
     "code_hash"}: measured once per code hash and path (about 2 s) and kept in ``$DCHFRAC_CACHE/budget``."""
-    from .codegen import cache_dir
+    from .jitcache import cache_dir
     from .codehash import code_hash
 
     path = cache_dir().parent / "budget" / f"calibration_{code_hash()}_{linear_solver}_{kernels}.json"

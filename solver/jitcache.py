@@ -47,7 +47,6 @@ def is_cached(dispatchers) -> bool:
 def compile_estimate_s() -> float:
     """The last compile time measured on this machine (s, kept in the kernel cache directory), else
     ``DEFAULT_COMPILE_S``."""
-    from .codegen import cache_dir
 
     try:
         return float((cache_dir() / _ESTIMATE_FILE).read_text())
@@ -86,7 +85,6 @@ def finished(key) -> None:
         del _PENDING[key]
     seconds = time.perf_counter() - t0
     LOG.info("kernels compiled in %.0f s (cached for later runs)", seconds)
-    from .codegen import cache_dir
 
     try:
         tmp = cache_dir() / f".{_ESTIMATE_FILE}.{os.getpid()}.tmp"
@@ -107,14 +105,7 @@ def warn_unwritable(root: Path, used: Path, exc: Exception) -> None:
                 getattr(exc, "strerror", None) or exc, used)
 
 
-def warmup() -> dict:
-    """Compile (or load) the kernels of the default model structure ahead of the first run: a one-step run on a
-    coarse mesh (h = 8 mm), nothing written.  Returns {"compiled": whether they had to be compiled, "wall_s": wall
-    time in s, "path": the run's path (solver.simulate.run_path)}."""
-    from . import Parameters, RunOptions, simulate
-
-    t0, n0 = time.perf_counter(), _ANNOUNCED[0]
-    res = simulate(Parameters(), RunOptions(h=8.0, t_end=1e-3, dt0=1e-3, snapshot_times=[], write_xdmf=False))
-    if res.status != "ok":
-        raise RuntimeError(f"warm-up run failed: {res.reason}")
-    return {"compiled": _ANNOUNCED[0] > n0, "wall_s": time.perf_counter() - t0, "path": res.path}
+def cache_dir() -> Path:
+    """Directory of the generated kernel modules: ``$DCHFRAC_CACHE/kernels`` or ``~/.cache/dchfrac/kernels``."""
+    root = os.environ.get("DCHFRAC_CACHE") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "dchfrac"
+    return Path(root) / "kernels"

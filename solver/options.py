@@ -393,7 +393,8 @@ def check_environment() -> list[str]:
     backend, numba installed when asked for) and ``DCHFRAC_ASSEMBLY_THREADS`` (a positive integer) raise
     ValueError naming the variable, its value and what is allowed.  Returns warnings: a kernel cache
     (``DCHFRAC_CACHE``) that cannot be written, so that every run compiles its kernels again (about 20 s)."""
-    from . import codegen, fem, kernels
+    from . import fem, kernels
+    from .jitcache import cache_dir
     from .output import check_writable_dir
     from .paths import check_environment as check_path_variables
 
@@ -402,7 +403,7 @@ def check_environment() -> list[str]:
     if kernels.backend() != "numba":
         return []
     try:
-        check_writable_dir(codegen.cache_dir(), "kernel cache DCHFRAC_CACHE")
+        check_writable_dir(cache_dir(), "kernel cache DCHFRAC_CACHE")
     except ValueError as exc:
         return [f"{exc}: every run compiles its kernels again (about 20 s each); set DCHFRAC_CACHE to a writable "
                 "folder"]

@@ -207,8 +207,8 @@ def cmd_bench(args) -> int:
 
 
 def cmd_warmup(args) -> int:
-    """Compile (or load) the numba kernels ahead of the first run (solver.jitcache.warmup)."""
-    from solver.jitcache import warmup
+    """Compile (or load) the numba kernels ahead of the first run (solver.simulate.warmup)."""
+    from solver.simulate import warmup
     from solver.paths import describe
 
     print(describe())

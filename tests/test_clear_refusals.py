@@ -102,7 +102,7 @@ def test_compare_names_a_campaign_without_runs(tmp_path, capsys):
     spec = tmp_path / "c.toml"
     spec.write_text(_SPEC)
     _one_line(capsys, main(["compare", str(spec), str(spec), "--results", str(tmp_path / "r")]),
-              "campaign 'c': no finished runs in")
+              "no finished run in")
     _one_line(capsys, main(["compare", str(tmp_path / "missing.toml"), str(spec), "--results", str(tmp_path)]),
               "missing.toml' not found")
 
