@@ -1,6 +1,6 @@
 """PARDISO options on one Jacobian of the reference case: factorization and substitution times and fill.
 
-    MKL_NUM_THREADS=1 python results/bench/round3/pardiso_options.py H CONFIGS    # e.g. 2 base,vbsr80,twolevel
+    MKL_NUM_THREADS=1 python results/archive/bench/round3/pardiso_options.py H CONFIGS    # e.g. 2 base,vbsr80,twolevel
 
 H: mesh size, mm; CONFIGS: comma-separated names of CONFIGS below.  Each configuration gets its own PARDISO
 handle with the solver's settings of round three (solver/linsolve.py before the two-level factorization became

@@ -1,7 +1,7 @@
 """p_inj at t_end as a function of E (kPa) near Table A's value, for the two step controllers: roughness of the
 curve (rms of the residual of a quadratic fit, relative) and of its finite-difference derivative.
 
-    python results/bench/round3/smoothness.py results/bench/round3/smoothness_E_h6.json
+    python results/archive/bench/round3/smoothness.py results/archive/bench/round3/smoothness_E_h6.json
 """
 import json, sys, time
 import numpy as np

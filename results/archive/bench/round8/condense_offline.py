@@ -1,6 +1,6 @@
 """Static condensation of the projected gradient on one saved Jacobian of the reference run (eighth round).
 
-    python results/bench/round8/condense_offline.py H T_END K [REPEATS]
+    python results/archive/bench/round8/condense_offline.py H T_END K [REPEATS]
 
 runs the reference case (Parameters() defaults) at mesh size H mm to T_END s with the fast path, keeps the K-th
 factorized Jacobian and its right-hand side, and factorizes it with SuperLU as the default path does (rows

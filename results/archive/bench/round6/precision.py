@@ -3,7 +3,7 @@ precision (iparm(28)), with the solver's settings (solver.linsolve._pardiso_solv
 and 5 substitutions, the relative residual of the single solve, and the largest difference of the two solutions
 per field, relative to the field's largest value (s, dimensionless).
 
-    python results/bench/round6/precision.py J.npz b.npy
+    python results/archive/bench/round6/precision.py J.npz b.npy
 """
 import sys
 import time

@@ -2,7 +2,7 @@
 folder (each made by ``dchfrac bench --profile --h H --out FILE``; default: this script's folder, the fourth
 round), and p_inj(t) of each "after" run against its "before" run and against the committed reference curve.
 
-    python results/bench/round4/tables.py [FOLDER]      # e.g. results/bench/round5
+    python results/archive/bench/round4/tables.py [FOLDER]      # e.g. results/archive/bench/round5
 """
 import sys
 from pathlib import Path

@@ -2,7 +2,7 @@
 single-precision measurement (``precision.py``): every ``EVERY``-th factorization of the run at mesh size H mm
 to T_END s goes to ``OUT/J_h{H}_{k}.npz`` and ``OUT/b_h{H}_{k}.npy``.
 
-    python results/bench/round6/capture.py H T_END EVERY OUT      # e.g. 1.0 1.2 50 /tmp/jac
+    python results/archive/bench/round6/capture.py H T_END EVERY OUT      # e.g. 1.0 1.2 50 /tmp/jac
 """
 import os
 import sys

@@ -1,7 +1,7 @@
 """Print the tables of results/archive/bench_rounds.md, third round, from the JSON files beside this script
 (each made by ``dchfrac bench --profile --h H --out FILE [--option K=V ...]``).
 
-    python results/bench/round3/tables.py
+    python results/archive/bench/round3/tables.py
 """
 import json
 from pathlib import Path
