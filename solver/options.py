@@ -44,7 +44,9 @@ class RunOptions:
         :meth:`to_dict` when None, like h_inner.
     mesh_seed : perturbation seed of the mesh generator (None = deterministic default).
     t_end : final time, s.
-    dt0, dt_min, dt_max : initial, minimum and maximum time step, s.
+    dt0 : time step of the first step, s (later steps follow ``step_control``).
+    dt_min : smallest time step, s: a step that would be cut below it fails the run.
+    dt_max : largest time step, s: the controller never grows dt beyond it.
     step_control : the step-size controller after an accepted step (``solver.simulate._next_dt``):
         "state_change" (default): the step that would change the state by about ``dt_change_target``,
         dt_next = dt 2c / (Δ + c) with Δ the step's largest nodal change of S or d, at most ``dt_grow`` dt.  It

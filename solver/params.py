@@ -117,7 +117,7 @@ class Parameters:
         "damage viscosity β, kPa·s; None -> 65.7 √C (Sec. 3.6; Eq. fracture_equation)",
         plausible=(0.0, 1e4))
     cell_height: float = _param(1.96, "mm", "> 0",
-        "Hele–Shaw gap h, mm (Table A: 1.96; k_max = h²/12)",
+        "Hele–Shaw cell gap (the paper's h; not the mesh size --h), mm (Table A: 1.96; k_max = gap²/12)",
         plausible=(0.01, 100.0))
     r_inner: float = _param(5.0, "mm", "> 0",
         "inner radius of the annulus r_i, mm (Sec. 3.5: 5)",
