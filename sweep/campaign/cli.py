@@ -469,6 +469,10 @@ def _each_spec(args, fn) -> int:
             print(f"error: {e}", file=sys.stderr)
             rc = 1
             continue
+        except Exception as e:  # one campaign that cannot be drawn never stops the others
+            print(f"error: {s}: {type(e).__name__}: {e}", file=sys.stderr)
+            rc = 1
+            continue
         print(f"{s}: " + (", ".join(Path(p).name for p in paths) or "nothing written"), flush=True)
     return rc
 

@@ -120,7 +120,7 @@ def _field_rows(spec, ok, rows_col):
     if rows_col == "blocks":
         rows = []
         for b in spec.blocks:
-            sub = ok[ok["blocks"].str.split(";").apply(lambda ls, lab=b.label: lab in ls)]
+            sub = ok[ok["blocks"].fillna("").astype(str).str.split(";").apply(lambda ls, lab=b.label: lab in ls)]
             if b.axes and b.axes[0].name in sub.columns:
                 sub = sub.sort_values(b.axes[0].name, kind="stable")
             rows.append((b.label if len(spec.blocks) > 1 else "", sub))
