@@ -191,7 +191,7 @@ def test_the_reference_experiment_is_valid_measured_data():
 
 def test_the_reference_experiment_starts_a_spec_and_its_spec_checks_against_it(tmp_path):
     """`dchfrac discrepancy init` accepts results/fidelity/experiment (issue #52) and holds out the shape; the
-    real experiment's SPEC (campaigns/discrepancy/experiment_reference.toml) loads and passes the data-model
+    real experiment's SPEC (results/experiment_model/discrepancy/spec.toml) loads and passes the data-model
     checks, and both condition ids map to one forward run (one experiment, issue #47)."""
     from pathlib import Path
 
@@ -205,7 +205,7 @@ def test_the_reference_experiment_starts_a_spec_and_its_spec_checks_against_it(t
     folder = root / "results" / "fidelity" / "experiment"
     assert main(["discrepancy", "init", "--measured", str(folder), "--out", str(tmp_path / "s.toml")]) in (0, None)
     assert load_spec(tmp_path / "s.toml").holdout(["reference_pressure", "reference_shape"]) == ["reference_shape"]
-    spec = load_spec(root / "campaigns" / "discrepancy" / "experiment_reference.toml")
+    spec = load_spec(root / "results" / "experiment_model" / "discrepancy" / "spec.toml")
     data = load_measured(folder)
     fw = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), tmp_path / "cache")
     check_data_against_model(data, spec, [fw, *fine_forwards(spec, tmp_path / "cache")])
