@@ -177,11 +177,40 @@ def test_the_reference_experiment_is_valid_measured_data():
     """results/fidelity/experiment (the paper's Sec. 3.5 figures) loads with the workflow's validating loader."""
     from pathlib import Path
 
+    from solver.presets import measured_injection_velocity
     from sweep.discrepancy.data import load_measured
 
     m = load_measured(Path(__file__).resolve().parents[1] / "results" / "fidelity" / "experiment")
     assert set(m.curves["observable"]) == {"p_inj", "front_radius_branches", "crack_length"}
-    assert m.regimes == {"reference": (2.0, "invasive_fracturing")}
+    assert m.regimes == {"reference_shape": (2.0, "invasive_fracturing")}
+    # one experiment as two ids with the same inputs: p_inj trains, the shape is held out (issue #47)
+    assert set(m.curves.loc[m.curves.condition == "reference_pressure", "observable"]) == {"p_inj"}
+    assert m.conditions.loc["reference_pressure"].equals(m.conditions.loc["reference_shape"])
+    assert m.conditions.loc["reference_pressure", "w_i"] == pytest.approx(measured_injection_velocity(), rel=1e-12)
+
+
+def test_the_reference_experiment_starts_a_spec_and_its_spec_checks_against_it(tmp_path):
+    """`dchfrac discrepancy init` accepts results/fidelity/experiment (issue #52) and holds out the shape; the
+    real experiment's SPEC (results/experiment_model/discrepancy/spec.toml) loads and passes the data-model
+    checks, and both condition ids map to one forward run (one experiment, issue #47)."""
+    from pathlib import Path
+
+    from sweep.cli import main
+    from sweep.discrepancy.checks import check_data_against_model
+    from sweep.discrepancy.data import load_measured
+    from sweep.discrepancy.forward import SolverForward, fine_forwards
+    from sweep.discrepancy.spec import load_spec
+
+    root = Path(__file__).resolve().parents[1]
+    folder = root / "results" / "fidelity" / "experiment"
+    assert main(["discrepancy", "init", "--measured", str(folder), "--out", str(tmp_path / "s.toml")]) in (0, None)
+    assert load_spec(tmp_path / "s.toml").holdout(["reference_pressure", "reference_shape"]) == ["reference_shape"]
+    spec = load_spec(root / "results" / "experiment_model" / "discrepancy" / "spec.toml")
+    data = load_measured(folder)
+    fw = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), tmp_path / "cache")
+    check_data_against_model(data, spec, [fw, *fine_forwards(spec, tmp_path / "cache")])
+    runs = {fw.run_dir(data.conditions.loc[c].to_dict()) for c in data.ids}
+    assert len(runs) == 1
 
 
 def test_every_fidelity_variant_is_a_valid_model():
