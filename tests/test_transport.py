@@ -182,17 +182,16 @@ def test_the_reference_experiment_is_valid_measured_data():
 
     m = load_measured(Path(__file__).resolve().parents[1] / "results" / "fidelity" / "experiment")
     assert set(m.curves["observable"]) == {"p_inj", "front_radius_branches", "crack_length"}
-    assert m.regimes == {"reference_shape": (2.0, "invasive_fracturing")}
-    # one experiment as two ids with the same inputs: p_inj trains, the shape is held out (issue #47)
-    assert set(m.curves.loc[m.curves.condition == "reference_pressure", "observable"]) == {"p_inj"}
-    assert m.conditions.loc["reference_pressure"].equals(m.conditions.loc["reference_shape"])
-    assert m.conditions.loc["reference_pressure", "w_i"] == pytest.approx(measured_injection_velocity(), rel=1e-12)
+    assert m.regimes == {"reference": (2.0, "invasive_fracturing")}
+    # one experiment at the measured rate (issue #47)
+    assert m.conditions.loc["reference", "w_i"] == pytest.approx(measured_injection_velocity(), rel=1e-12)
 
 
 def test_the_reference_experiment_starts_a_spec_and_its_spec_checks_against_it(tmp_path):
-    """`dchfrac discrepancy init` accepts results/fidelity/experiment (issue #52) and holds out the shape; the
-    real experiment's SPEC (results/experiment_model/discrepancy/spec.toml) loads and passes the data-model
-    checks, and both condition ids map to one forward run (one experiment, issue #47)."""
+    """`dchfrac discrepancy init` accepts results/fidelity/experiment (issue #52) and holds out the shape (the
+    observables other than p_inj of its one condition); the real experiment's SPEC
+    (results/experiment_model/discrepancy/spec.toml) loads and passes the data-model checks on the held-out data,
+    and the condition and its held-out twin map to one forward run (one experiment, issue #47)."""
     from pathlib import Path
 
     from sweep.cli import main
@@ -204,9 +203,11 @@ def test_the_reference_experiment_starts_a_spec_and_its_spec_checks_against_it(t
     root = Path(__file__).resolve().parents[1]
     folder = root / "results" / "fidelity" / "experiment"
     assert main(["discrepancy", "init", "--measured", str(folder), "--out", str(tmp_path / "s.toml")]) in (0, None)
-    assert load_spec(tmp_path / "s.toml").holdout(["reference_pressure", "reference_shape"]) == ["reference_shape"]
+    from sweep.discrepancy.heldout import heldout_data
+
+    assert 'observables = ["crack_length", "front_radius_branches", "regime"]' in (tmp_path / "s.toml").read_text()
     spec = load_spec(root / "results" / "experiment_model" / "discrepancy" / "spec.toml")
-    data = load_measured(folder)
+    data = heldout_data(load_measured(folder), spec)
     fw = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), tmp_path / "cache")
     check_data_against_model(data, spec, [fw, *fine_forwards(spec, tmp_path / "cache")])
     runs = {fw.run_dir(data.conditions.loc[c].to_dict()) for c in data.ids}
