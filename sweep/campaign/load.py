@@ -158,7 +158,7 @@ def load_timeseries(source, root="results", *, status: str | None = None, allow_
         if status is not None and row["status"] != status:
             continue
         if not f.is_file():
-            if row["status"] == "ok":
+            if row["status"] == "ok" and f.parent.is_dir():  # an absent run folder is archived, not damaged
                 damaged.append(f"{row['key']} ({f}: missing)")
             continue
         try:
