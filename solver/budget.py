@@ -10,7 +10,7 @@ M = 2 N − N_boundary.
 Memory (:func:`memory_bytes`): a run's peak resident memory is the interpreter and libraries (``BASE_BYTES``) plus
 a part that grows with the unknowns n = 7 N: the Jacobian (≈ 340 nonzeros per node), its factors (nested
 dissection in 2D: fill ∝ n log n) and the element arrays.  The coefficient of n log₂ n is fitted per path on the
-peak RSS of short runs at h = 4, 2, 1 mm (``MEMORY_PER_NLOGN``, measured 2026-11-28 on x86_64 Linux: h = 4, 2, 1 mm
+peak RSS of short runs at h = 4, 2, 1 mm (``MEMORY_PER_NLOGN``, measured on x86_64 Linux, results/bench/memory_peak_rss.jsonl: h = 4, 2, 1 mm
 peaked at 311, 439, 968 MB on the fast path, the model gives 325, 447, 991 MB).  Extrapolated to h = 0.5 mm it
 gives 3.4 GB, an upper bound (fill grows slower than n log n with nested dissection's separators).
 
@@ -46,7 +46,7 @@ N_FIELDS = 7  # unknowns per node: u (2), p, S, μ, G (2)
 BASE_BYTES = 290e6
 #: peak-RSS bytes per n log2 n (n = unknowns) above BASE_BYTES, per (linear solver, kernels) path: the slope of
 #: the peak RSS of 3-step runs between h = 2 and 1 mm (pypardiso 579, SuperLU 724 B with numba kernels; numpy
-#: kernels measured at h = 4 and 2 mm only, 639 B with SuperLU), rounded up (2026-11-28, x86_64 Linux)
+#: kernels measured at h = 4 and 2 mm only, 639 B with SuperLU), rounded up (results/bench/memory_peak_rss.jsonl)
 MEMORY_PER_NLOGN = {("pypardiso", "numba"): 600.0, ("superlu", "numba"): 750.0,
                     ("pypardiso", "numpy"): 750.0, ("superlu", "numpy"): 800.0}
 #: results/bench/bench.json (quiet reference machine): wall seconds of one Newton iteration (assembly on one

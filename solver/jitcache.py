@@ -3,7 +3,7 @@
 The compiled kernels (:mod:`solver.kernels`, and the generated point-wise physics of :mod:`solver.codegen`)
 are compiled by numba on their first call and kept on disk (``cache=True``): the first run on a machine, or the
 first after a change of the physics, compiles them (about 50 s of CPU for the default model structure: one core
-of a 2-core x86_64 machine, 2026-11), every later run loads them in a fraction of a second.  This module says so
+of a 2-core x86_64 machine, results/bench/README.md), every later run loads them in a fraction of a second.  This module says so
 when it happens (:func:`announce`, :func:`finished`, logger ``dchfrac.solver``), warns once when the cache
 directory is not writable (:func:`warn_unwritable`), and :func:`warmup` compiles them ahead (``dchfrac warmup``).
 """

@@ -67,37 +67,50 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
             reason = str(reason).replace("|", "\\|").replace("\n", " ")
             L.append(f"| `{k}` | {reason} |")
         L.append("")
-    if figs:
-        L += ["## Figures", ""]
-        pngs = {Path(f).with_suffix("") for f in figs if Path(f).suffix == ".png"}
-        for f in figs:
-            rel = os.path.relpath(f, store.dir)
-            if Path(f).suffix == ".png":
-                L += [f"![{Path(f).stem}]({rel})", ""]
-            elif Path(f).with_suffix("") in pngs:
-                L[-2] += f" ([{Path(f).suffix[1:]}]({rel}))"
-            else:
-                L += [f"[{Path(f).name}]({rel})", ""]
+    L += _figure_lines(figs, store.dir)
     if not table.empty:
-        cols = [c for c in ["key", "status", "regime", *spec.axis_names] if c in table.columns]
-        num_cols = [c for c in table.columns if c.lower().replace("*", "_star") in
-                    ("ca_star", "n_f", "n_b", "nf", "nb") and c not in cols]
-        empty = [c for c in num_cols if table[c].isna().all()]
-        cols += [c for c in num_cols if c not in empty] + [c for c in ("wall_time_s",) if c in table.columns]
-        L += ["## Runs", ""]
-        if "N_f" in empty:
-            L += ["N_f = dp_vis / dp_cri is not computed: the spec gives no critical pressure drop dp_cri (an "
-                  "`nf_vs_nb` diagram's `dp_cri`: a number in kPa, or \"estimate\" from the runs' fracturing "
-                  "labels); dp_vis (kPa) is in the table.", ""]
-        L += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-        for _, r in table[cols].iterrows():
-            L.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
-        L.append("")
+        L += _run_table_lines(spec, table)
     L += [f"Table: `{os.path.relpath(store.table_csv, store.dir)}` (also `table.parquet`); the unit and meaning of "
           f"every column: `columns.csv` (`dchfrac campaign columns SPEC`); load both with "
           f"`sweep.load_campaign` / `sweep.load_timeseries`.", ""]
     write_text_atomic(store.report_md, "\n".join(L))
     return store.report_md
+
+
+def _figure_lines(figs, folder: Path) -> list[str]:
+    """The report's "Figures" section: each PNG inline, its vector copy linked beside it."""
+    if not figs:
+        return []
+    L = ["## Figures", ""]
+    pngs = {Path(f).with_suffix("") for f in figs if Path(f).suffix == ".png"}
+    for f in figs:
+        rel = os.path.relpath(f, folder)
+        if Path(f).suffix == ".png":
+            L += [f"![{Path(f).stem}]({rel})", ""]
+        elif Path(f).with_suffix("") in pngs:
+            L[-2] += f" ([{Path(f).suffix[1:]}]({rel}))"
+        else:
+            L += [f"[{Path(f).name}]({rel})", ""]
+    return L
+
+
+def _run_table_lines(spec, table) -> list[str]:
+    """The report's "Runs" section: key, status, regime, swept values, the dimensionless numbers that were
+    computed and the wall time; why N_f is empty when the spec gives no dp_cri."""
+    cols = [c for c in ["key", "status", "regime", *spec.axis_names] if c in table.columns]
+    num_cols = [c for c in table.columns if c.lower().replace("*", "_star") in
+                ("ca_star", "n_f", "n_b", "nf", "nb") and c not in cols]
+    empty = [c for c in num_cols if table[c].isna().all()]
+    cols += [c for c in num_cols if c not in empty] + [c for c in ("wall_time_s",) if c in table.columns]
+    L = ["## Runs", ""]
+    if "N_f" in empty:
+        L += ["N_f = dp_vis / dp_cri is not computed: the spec gives no critical pressure drop dp_cri (an "
+              "`nf_vs_nb` diagram's `dp_cri`: a number in kPa, or \"estimate\" from the runs' fracturing "
+              "labels); dp_vis (kPa) is in the table.", ""]
+    L += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in table[cols].iterrows():
+        L.append("| " + " | ".join(_fmt(r[c]) for c in cols) + " |")
+    return L + [""]
 
 
 def _fmt(v) -> str:

@@ -137,30 +137,18 @@ def run_campaign(
     store.acquire_lock()
     try:
         store.clean_tmp()
-        check_same_campaign(spec, store, _keys(sampler.initial(spec)))
+        points = sampler.initial(spec)
+        check_same_campaign(spec, store, _keys(points))
         cfg = ExecConfig(root=str(Path(root).resolve()), campaign=spec.name, runner=runner_fn, timeout=timeout,
                          retries=retries, isolate=isolate, blas_threads=1 if jobs > 1 or backend != "loky" else None,
                          code_hash=code_hash)
-        points = sampler.initial(spec)
         result = CampaignResult(spec.name, 0, 0, 0, 0, 0, False, [])
         plan = None
         while points:
-            plan = plan_campaign(spec, root, code_hash=code_hash, points=points, rerun_stale=rerun_stale)
-            todo = _todo(plan, retry_failed, rerun_archived)
-            _book_round(result, plan, len(points), rerun_stale)
-            if progress is not None:
-                print(f"[{spec.name}] {len(points)} runs: {_counts_text(plan)}; executing {len(todo)} on {backend} "
-                      f"with {jobs} job(s)", file=progress, flush=True)
-            if todo:
-                _save_spec(spec, store)
-            try:
-                _execute(plan, todo, cfg, result, jobs=jobs, backend=backend, scheduler=scheduler,
-                         fail_fast=fail_fast, progress=progress, table_interval=table_interval)
-            finally:
-                # whatever happened (Ctrl-C included), the table reflects every finished run
-                plan = plan_campaign(spec, root, code_hash=code_hash, points=points, rerun_stale=rerun_stale)
-                if todo or not store.table_csv.is_file():  # a committed table is rewritten only by new runs
-                    result.table_paths = write_table(spec, root, plan=plan)
+            todo, plan = _run_round(spec, root, store, cfg, result, points, code_hash=code_hash,
+                                    retry_failed=retry_failed, rerun_stale=rerun_stale, rerun_archived=rerun_archived,
+                                    jobs=jobs, backend=backend, scheduler=scheduler, fail_fast=fail_fast,
+                                    progress=progress, table_interval=table_interval)
             if result.aborted:
                 break
             result.reclassified += _reclassify_keys(plan, [k for _, k in plan.misclassified], spec.classify)
@@ -173,6 +161,29 @@ def run_campaign(
     finally:
         store.clean_tmp()
         store.release_lock()
+
+
+def _run_round(spec, root, store, cfg, result, points, *, code_hash, retry_failed, rerun_stale, rerun_archived,
+               jobs, backend, scheduler, fail_fast, progress, table_interval):
+    """One round of a campaign: plan ``points``, execute what is to do, and rewrite the table from every finished
+    run (Ctrl-C included).  Returns (the runs executed, the plan after them)."""
+    plan = plan_campaign(spec, root, code_hash=code_hash, points=points, rerun_stale=rerun_stale)
+    todo = _todo(plan, retry_failed, rerun_archived)
+    _book_round(result, plan, len(points), rerun_stale)
+    if progress is not None:
+        print(f"[{spec.name}] {len(points)} runs: {_counts_text(plan)}; executing {len(todo)} on {backend} "
+              f"with {jobs} job(s)", file=progress, flush=True)
+    if todo:
+        _save_spec(spec, store)
+    try:
+        _execute(plan, todo, cfg, result, jobs=jobs, backend=backend, scheduler=scheduler,
+                 fail_fast=fail_fast, progress=progress, table_interval=table_interval)
+    finally:
+        # whatever happened (Ctrl-C included), the table reflects every finished run
+        plan = plan_campaign(spec, root, code_hash=code_hash, points=points, rerun_stale=rerun_stale)
+        if todo or not store.table_csv.is_file():  # a committed table is rewritten only by new runs
+            result.table_paths = write_table(spec, root, plan=plan)
+    return todo, plan
 
 
 def _book_round(result: CampaignResult, plan: Plan, n_points: int, rerun_stale: bool) -> None:
