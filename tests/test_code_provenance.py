@@ -171,7 +171,7 @@ def test_a_record_without_a_code_hash_is_stale_and_keeps_its_folder(tmp_path, mo
     assert again.n_executed == 1 and again.stale_rerun == [plan.keys[0]]
 
 
-def test_labels_of_other_classifier_code_are_reclassified_not_rerun(tmp_path, monkeypatch):
+def test_labels_of_other_classifier_code_are_kept_unless_relabel_is_asked(tmp_path, monkeypatch):
     pytest.importorskip("sweep.regimes.classify")
     from test_campaign_run import contract_runner
 
@@ -181,12 +181,20 @@ def test_labels_of_other_classifier_code_are_reclassified_not_rerun(tmp_path, mo
 
     spec = spec_from_dict({"name": "relabel", "axes": {"eta_o": [0.25]}})
     first = run_campaign(spec, tmp_path, runner=labelled_by_old_classifier, progress=None, isolate="none")
-    assert first.reclassified == [first.table["key"][0]]  # relabelled at once: its label is of other code
-    rec = json.loads((tmp_path / "relabel" / "runs" / first.table["key"][0] / "record.json").read_text())
+    key = first.table["key"][0]
+    record = tmp_path / "relabel" / "runs" / key / "record.json"
+    assert first.reclassified == [] and first.labels_kept == [key]       # kept, listed, not relabelled
+    assert json.loads(record.read_text())["classifier_hash"] == "0ld0ld0ld0ld0ld0"
+    assert first.table["regime"][0] == "viscous_fingering"
+    assert first.table["classifier_hash"][0] == "0ld0ld0ld0ld0ld0"     # the table shows which code labelled it
+    asked = run_campaign(spec, tmp_path, runner=labelled_by_old_classifier, progress=None, isolate="none",
+                         relabel=True)
+    assert asked.n_executed == 0 and asked.reclassified == [key]
+    rec = json.loads(record.read_text())
     assert rec["classifier_hash"] == provenance.classifier_code_hash()
     assert rec["classification"]["regime"] == "uniform_invasion"  # S = 1 inside a circle, no crack
     again = run_campaign(spec, tmp_path, runner=labelled_by_old_classifier, progress=None, isolate="none")
-    assert again.n_executed == 0 and again.reclassified == []
+    assert again.n_executed == 0 and again.reclassified == [] and again.labels_kept == []
 
 
 # ---------------------------------------------------------------------------

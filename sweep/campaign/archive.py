@@ -9,7 +9,7 @@ the other snapshots and the ParaView copy of them all (:data:`FIELD_COPIES`). Th
 that remain (with their SHA-256, so :func:`sweep.campaign.store.verify_run` checks them as before) and says what was
 removed (``record["pruned"]``).
 
-A pruned run is a finished run: a resumed campaign reuses it, relabels it with a changed classifier (as long as
+A pruned run is a finished run: a resumed campaign reuses it, relabels it with a changed classifier on request (``--relabel``) (as long as
 the classifier reads no other field), and draws it in every diagram; a grid of field maps of another field leaves
 it out with a warning. The removed snapshots are gone: to have them again, rerun the run.
 

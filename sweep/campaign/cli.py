@@ -69,6 +69,8 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                    help="rerun the runs made by other solver code (stale); by default they are kept and listed")
     p.add_argument("--rerun-archived", action="store_true",
                    help="rerun the archived runs (rows of the committed table whose run folders are not here)")
+    p.add_argument("--relabel", action="store_true",
+                   help="relabel finished runs labelled by other classifier code (default: keep their labels)")
     p.add_argument("--accept-stale", action="store_true",
                    help="keep the runs made by other solver code (the default; kept for old scripts)")
     p.add_argument("--fail-fast", action="store_true", help="stop at the first failed run")
@@ -278,7 +280,7 @@ def cmd_run(args) -> int:
         res = run_campaign(spec, args.results, jobs=args.jobs, backend=args.backend, scheduler=args.scheduler,
                            timeout=timeout, retries=args.retries, fail_fast=args.fail_fast,
                            retry_failed=args.retry_failed, rerun_stale=args.rerun_stale,
-                           rerun_archived=args.rerun_archived,
+                           rerun_archived=args.rerun_archived, relabel=args.relabel,
                            progress=None if args.quiet else LogStream("dchfrac.campaign"))
     except KeyboardInterrupt:
         logging.getLogger("dchfrac.campaign").warning("interrupted: finished runs are recorded; rerun the same command to resume")
@@ -305,7 +307,10 @@ def _print_provenance(res) -> None:
     if res.damaged_rerun:
         print(f"  reran {len(res.damaged_rerun)} damaged run(s): " + " ".join(res.damaged_rerun))
     if res.reclassified:
-        print(f"  reclassified {len(res.reclassified)} run(s) labelled by other classifier code")
+        print(f"  relabelled {len(res.reclassified)} run(s) labelled by other classifier code (--relabel)")
+    if res.labels_kept:
+        print(f"  kept the labels of {len(res.labels_kept)} run(s) labelled by other classifier code "
+              "(`--relabel` or `campaign classify` relabels them)")
 
 
 @_guarded
@@ -327,7 +332,7 @@ def cmd_status(args) -> int:
     if plan.store.records():
         print("  " + campaign_throughput(plan.store.records()).text())
     if plan.misclassified:
-        print(f"  {len(plan.misclassified)} run(s) labelled by other classifier code (`campaign run` reclassifies)")
+        print(f"  {len(plan.misclassified)} run(s) labelled by other classifier code (kept; `campaign run --relabel` or `campaign classify` relabels them)")
     n_stale = sum(n for h, n in counts.items() if h != plan.code_hash)
     if n_stale:
         print(f"  {n_stale} made by other code (stale): used like the others; "

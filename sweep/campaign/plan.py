@@ -115,7 +115,8 @@ class Plan:
 
     @property
     def misclassified(self):
-        """Done runs labelled by sweep.regimes.classify of other classifier code (reclassified by run_campaign)."""
+        """Done runs labelled by sweep.regimes.classify of other classifier code (kept; relabelled only by
+        ``run_campaign(relabel=True)`` or ``reclassify``)."""
         return [(p, k) for p, k in self.done
                 if self.records[k].get("classifier_hash") not in (None, self.classifier_hash)]
 

@@ -5,9 +5,10 @@
 
 A rerun skips every key with an intact record ("ok" or "failed"; ``retry_failed=True`` reruns the failures),
 so an interrupted campaign loses at most its runs in flight.  It reruns damaged runs
-(:func:`sweep.campaign.store.verify_run`) and reclassifies runs labelled by other classifier code.  Runs made by
-other solver code (stale) are kept unless ``rerun_stale=True``; archived runs (committed rows without a run folder
-here) unless ``rerun_archived=True``.
+(:func:`sweep.campaign.store.verify_run`).  Runs made by other solver code (stale) are kept unless
+``rerun_stale=True``; archived runs (committed rows without a run folder here) unless ``rerun_archived=True``;
+labels made by other classifier code unless ``relabel=True``.  Nothing made by other code is redone silently: the
+table's ``code_hash`` and ``classifier_hash`` columns show what made each row.
 """
 from __future__ import annotations
 
@@ -47,6 +48,7 @@ class CampaignResult:
     stale_reused: list[str] = field(default_factory=list)
     damaged_rerun: list[str] = field(default_factory=list)
     reclassified: list[str] = field(default_factory=list)
+    labels_kept: list[str] = field(default_factory=list)   # labelled by other classifier code, kept (no relabel)
 
 
 class Progress:
@@ -103,6 +105,7 @@ def run_campaign(
     retry_failed: bool = False,
     rerun_stale: bool = False,
     rerun_archived: bool = False,
+    relabel: bool = False,
     runner: Callable | str | None = None,
     isolate: str | None = None,
     code_hash: str | None = None,
@@ -120,6 +123,8 @@ def run_campaign(
     rerun_stale : rerun the runs made by other solver code (by default they are kept, listed in
         ``stale_reused``, like archived rows made by other code).
     rerun_archived : rerun the archived points (committed rows without a run folder here).
+    relabel : relabel the finished runs whose labels were made by other classifier code (by default they keep
+        their labels, are listed in ``labels_kept`` and the table shows each row's ``classifier_hash``).
     runner : callable or "module:function" (default spec ``[run] runner`` or DefaultRunner).
     isolate : "auto" | "process" | "none" (default spec ``[run] isolate`` or "auto").
     code_hash : the solver code recorded in each record (default :func:`sweep.campaign.store.current_code_hash`).
@@ -151,7 +156,11 @@ def run_campaign(
                                     progress=progress, table_interval=table_interval)
             if result.aborted:
                 break
-            result.reclassified += _reclassify_keys(plan, [k for _, k in plan.misclassified], spec.classify)
+            other_labels = [k for _, k in plan.misclassified]
+            if relabel:
+                result.reclassified += _reclassify_keys(plan, other_labels, spec.classify)
+            else:
+                result.labels_kept = sorted(set(result.labels_kept) | set(other_labels))
             points = _refined_points(sampler, spec, root, plan, store, points, write=bool(todo))
         result.n_skipped = result.n_points - result.n_executed
         if result.reclassified:
