@@ -2,8 +2,9 @@
 
 Public API::
 
-    from solver import Parameters, RunOptions, simulate
+    from solver import Parameters, RunOptions, preset_parameters, simulate
     res = simulate(Parameters(cement=1.2), RunOptions(h=1.0, t_end=2.0), out_dir="runs/ref")
+    res = simulate(preset_parameters("experiment"), RunOptions(h=1.0, t_end=2.0))   # a named model
 
 Units everywhere: mm, s, kPa (viscosity kPa·s, permeability mm², toughness kPa·mm).
 ``code_hash()`` names the solver source that made a result (recorded in every summary.json).
@@ -12,6 +13,7 @@ __version__ = "0.1.0"
 
 from .options import RunOptions
 from .params import Parameters
+from .presets import preset_parameters
 from .simulate import SimulationResult, simulate
 
 
@@ -21,4 +23,4 @@ def code_hash() -> str:
 
     return _code_hash()
 
-__all__ = ["__version__", "code_hash", "Parameters", "RunOptions", "simulate", "SimulationResult"]
+__all__ = ["__version__", "code_hash", "Parameters", "preset_parameters", "RunOptions", "simulate", "SimulationResult"]

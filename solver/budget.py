@@ -192,9 +192,10 @@ def check_fits(params, options) -> Estimate:
 def _measure_iteration(h: float = 2.0) -> float:
     """Best wall time (s) of one Newton iteration (assembly, factorization, solve) at mesh size h (mm) on the
     active path, after one warm-up iteration (compilation, symbolic analysis)."""
-    from . import Parameters, linsolve
+    from . import linsolve
     from .mesh import annulus_mesh
     from .model import build_discretization, residual_and_jacobian, step_data
+    from .params import Parameters
     from .porosity import initial_porosity
 
     p = Parameters()

@@ -20,7 +20,7 @@ import hashlib
 from pathlib import Path
 from typing import Iterable
 
-__all__ = ["source_hash", "directory_hash", "code_hash", "git_code_hash", "HASH_DIGITS"]
+__all__ = ["source_hash", "directory_hash", "code_hash", "git_code_hash", "hash_command", "HASH_DIGITS"]
 
 HASH_DIGITS = 16
 SOLVER_DIR = Path(__file__).resolve().parent
@@ -62,23 +62,32 @@ def _git(repo, *args) -> bytes:
     return subprocess.run(["git", "-C", str(repo), *args], check=True, capture_output=True).stdout
 
 
-def main(argv=None) -> int:
+def hash_command(argv, *, prog: str, description: str, current, at_revision) -> int:
+    """The command line of a hash module: print one ``name hash`` line per hash of this copy (``current()``), or with
+    ``--git REV [--repo DIR]`` of that git revision (``at_revision(rev, repo)``); both return {name: hash}.
+    Exit status 2, with git's message, when the revision cannot be read."""
     import argparse
     import subprocess
     import sys
 
-    ap = argparse.ArgumentParser(prog="python -m solver.codehash", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog=prog, description=description)
     ap.add_argument("--git", metavar="REV", help="hash the sources at this git revision instead of this copy")
     ap.add_argument("--repo", default=".", metavar="DIR", help="git checkout for --git (default: .)")
     a = ap.parse_args(argv)
     try:
-        hashes = {"code_hash": git_code_hash(a.git, a.repo) if a.git else code_hash()}
+        hashes = at_revision(a.git, a.repo) if a.git else current()
     except subprocess.CalledProcessError as e:
         print(f"error: --git {a.git}: {e.stderr.decode(errors='replace').strip()}", file=sys.stderr)
         return 2
     for k, v in hashes.items():
         print(f"{k} {v}")
     return 0
+
+
+def main(argv=None) -> int:
+    return hash_command(argv, prog="python -m solver.codehash", description=__doc__.split("\n")[0],
+                        current=lambda: {"code_hash": code_hash()},
+                        at_revision=lambda rev, repo: {"code_hash": git_code_hash(rev, repo)})
 
 
 if __name__ == "__main__":

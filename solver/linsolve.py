@@ -28,7 +28,7 @@
   pivots) is improved by iterative refinement with the same factors.
 
 Static condensation (``factorize(..., condense=g)``, SuperLU only): unknowns g whose block A_gg is
-diagonal, as the lumped gradient projection G = Π∇S is (solver/model.py), are eliminated before the
+diagonal, as the lumped gradient projection G = Π∇S is (solver/forms.py), are eliminated before the
 factorization, and SuperLU factorizes the Schur complement K = A_rr − A_rg A_gg⁻¹ A_gr of the other unknowns r:
 
   x_r = K⁻¹ (b_r − A_rg A_gg⁻¹ b_g),   x_g = A_gg⁻¹ (b_g − A_gr x_r).

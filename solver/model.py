@@ -1,284 +1,30 @@
-"""The poromechanics block of the model: weak form, residual and exact Jacobian.
+"""The model assembled: step data, the residual and exact Jacobian of the coupled poromechanics block, element fields.
 
-Unknowns on P1 nodes (node-major): u_x, u_y (mm), p (kPa), S (-), μ (kPa),
-and, when the Korteweg terms are on, the L2-projected saturation gradient
-G = Π∇S (1/mm).  Damage d (nodal, -) is frozen here (staggered scheme,
-Sec. 3.1) and solved in :mod:`solver.damage`.
+The weak form is written once, point-wise, in :mod:`solver.forms`; :mod:`solver.discretization` holds the mesh-dependent
+operators and boundary conditions.  Here the forms are evaluated over the elements (compiled kernels of
+:mod:`solver.codegen`, else :class:`solver.ad.Dual` arrays), the boundary terms are added, and the element fields of the
+outputs are computed with the same constitutive chain.  Damage d (nodal, -) is frozen here (staggered scheme,
+Sec. 3.1) and solved in :mod:`solver.damage`.  Units mm, s, kPa.
 
-Weak form, test functions v (vector), q, r, ϱ, ϑ (Eq. summary_equations and
-summary_equations_secondary, backward Euler with step Δt, second-order terms
-scaled by the ``volumetric_coupling`` strength c_v):
-
-  momentum      ∫ σ : ∇v  + ∫_Γi p n·v  [+ ∫_Γo u·v / c_o]           = 0
-  total mass    ∫ q [(φ − φ_n)/Δt + c_v φ ε̇_v] − ∫ ∇q·w − ∫_Γi q w_i  = 0
-  invading      ∫ r [(φS − φ_n S_n)/Δt + c_v φ S ε̇_v] − ∫ ∇r·(w_1 − M∇μ) = 0
-  chem. pot.    ∫ ϱ [μ − (12γ/l_S) f'(S)] − (3γ l_S/2) ∫ ∇ϱ·∇S       = 0
-  projection    ∫_h ϑ (G − ∇S) = 0   (vertex quadrature: a diagonal mass)
-
-with σ = g(d) ∂ψ_A/∂ε + ∂ψ_I/∂ε − κ ∇S⊗∇S − b p I (Miehe split, plane strain),
-φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p/K_s, w_α = −λ_α (∇p + φ⁻¹ κ ∇·(G⊗G)),
-λ_α = k(φ) k_rα / η_α, M = k/η̄.  n is the outward normal of the domain: on
-the inner circle the total traction is σn = −p n (the injection pressure
-loads the skeleton), and the invading fluid enters with Darcy velocity w_i.
-
-The Korteweg force ∇·(κ∇S⊗∇S) contains second derivatives of S, which are
-zero inside P1 elements; evaluated element-wise it would silently vanish.
-We therefore carry G = Π∇S, the lumped L2 projection of ∇S, as two extra
-nodal unknowns (a local equation per node, so the stencil does not widen),
-and evaluate ∇·(G⊗G) = (∇·G) G + (∇G) G from its P1 interpolant.  In the
-effective stress, which enters the weak form without derivatives, ∇S itself
-is used.  κ = 3γl_S/2 follows from the free energy (Eq. fluid_free_energy);
-the paper's dimensionless section writes 3γl_S/4, which is inconsistent with it.
+This module is also the face of the model for its callers: the field indices, :func:`build_discretization`,
+:func:`step_data` and :func:`residual_and_jacobian` are imported from here.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import fields
 
 import numpy as np
-import scipy.sparse as sp
 
 from . import ad, codegen, fem, kernels, physics
 from .ad import Dual
-from .options import TRANSPORTS
+from .discretization import Discretization, build_discretization
+from .forms import (FIELD_NAMES, GX, GY, MU, NOT_ELEMENT_DATA, P, S, UX, UY, Constitutive, StepData, constitutive,
+                    darcy_fluxes, pointwise_forms, projection_forms)
 
-UX, UY, P, S, MU, GX, GY = range(7)
-FIELD_NAMES = ("ux", "uy", "p", "S", "mu", "Gx", "Gy")
-
-
-@dataclass(frozen=True)
-class Discretization:
-    """Everything that depends on the mesh and parameters but not on the state."""
-
-    points: np.ndarray
-    triangles: np.ndarray
-    geom: fem.Geometry
-    asm: fem.BlockAssembler
-    n_fields: int
-    inner_nodes: np.ndarray
-    outer_nodes: np.ndarray
-    inner_edges: np.ndarray
-    outer_edges: np.ndarray
-    phi0: np.ndarray  # (M,)
-    boundary_slots: np.ndarray  # CSR slots of the constant boundary couplings, each once
-    boundary_vals: np.ndarray  # their values, summed per slot
-    boundary_op: sp.csr_matrix  # the same couplings as a matrix (for the residual)
-    inject: np.ndarray  # constant residual part (ndof,)
-    dirichlet: fem.DirichletRows
-    dirichlet_values: np.ndarray
-    lumped_mass: np.ndarray  # (N,) mm²
-    inner_length: float  # mm
-    upwind_length: np.ndarray | None = None  # (M,) mm, h_e/2 with transport = "upwind"; None: Galerkin
-    supg_length: np.ndarray | None = None  # (M,) mm, h_e = √(2 A_e) with transport = "supg"; None: no SUPG term
-    stab_tau: np.ndarray | None = None  # (M,) mm²/kPa, pressure stabilization τ_e; None: plain Galerkin
-    chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
-    outlet: "Outlet | None" = None  # the outflow condition's rows (outer_saturation_bc = "outflow"); None: off
-    inner_weights: np.ndarray | None = None  # ∫_Γi N_a ds (mm) of the inner nodes, with line_compliance; None: off
-    # arrays reused by every assembly (by name; see _element_matrices)
-    workspace: dict = field(default_factory=dict, repr=False, compare=False)
-
-    @property
-    def n_nodes(self) -> int:
-        return len(self.points)
-
-    @property
-    def projection_dofs(self) -> np.ndarray | None:
-        """Unknowns of the projected gradient G (None without the Korteweg terms).  Their equations are
-        local (vertex quadrature), so their Jacobian block is the diagonal lumped mass: a solver may
-        eliminate them (solver.linsolve, ``condense``)."""
-        if self.n_fields != 7:
-            return None
-        nodes = np.arange(self.n_nodes) * self.n_fields
-        return np.sort(np.concatenate([nodes + GX, nodes + GY]))
-
-
-def _boundary_couplings(pts, tri, inner_e, outer_e, params, nf: int):
-    """The constant boundary couplings (rows, cols, values) and the inner edges' lengths L (mm): the injection
-    pressure's load on the skeleton ∫_Γi p n·v, and the outer spring ∫_Γo u·v / c_o when c_o > 0 (mm/kPa)."""
-    L, nrm = fem.outward_normals(pts, inner_e, tri)
-    loc = np.array([[2.0, 1.0], [1.0, 2.0]]) / 6.0  # ∫ N_a N_b ds / L
-    rows, cols, vals = [], [], []
-    for a in range(2):
-        for b in range(2):
-            w = L * loc[a, b]
-            for c in range(2):  # velocity component of the test function
-                rows.append(nf * inner_e[:, a] + c)
-                cols.append(nf * inner_e[:, b] + P)
-                vals.append(w * nrm[:, c])
-    if params.outer_compliance > 0:
-        Lo, _ = fem.edge_geometry(pts, outer_e)
-        for a in range(2):
-            for b in range(2):
-                for c in range(2):
-                    rows.append(nf * outer_e[:, a] + c)
-                    cols.append(nf * outer_e[:, b] + c)
-                    vals.append(Lo * loc[a, b] / params.outer_compliance)
-    rows, cols, vals = (np.concatenate(x) for x in (rows, cols, vals))
-    return rows, cols, vals, L
-
-
-@dataclass(frozen=True)
-class Outlet:
-    """CSR slots of the outlet condition (``outer_saturation_bc = "outflow"``): for each outer node a, the slots
-    of its p row (``src``) and of its S row (``dst``, the same columns in the same order: the block pattern),
-    ``owner`` the position of the slot's node in ``nodes``, and ``diag`` the slots (S_a, S_a)."""
-
-    nodes: np.ndarray
-    src: np.ndarray
-    dst: np.ndarray
-    owner: np.ndarray
-    diag: np.ndarray
-
-
-def _outlet(asm: fem.BlockAssembler, outer_n: np.ndarray, nf: int) -> Outlet:
-    """The :class:`Outlet` slots of the outer nodes."""
-    ptr = asm.indptr.astype(np.int64)
-    starts_p, starts_s = ptr[nf * outer_n + P], ptr[nf * outer_n + S]
-    counts = ptr[nf * outer_n + P + 1] - starts_p
-    owner = np.repeat(np.arange(len(outer_n)), counts)
-    offset = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    return Outlet(nodes=outer_n, src=np.repeat(starts_p, counts) + offset, dst=np.repeat(starts_s, counts) + offset,
-                  owner=owner, diag=asm.diag_slot[nf * outer_n + S])
-
-
-def outlet_water_outflow(disc: Discretization, params, U: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Water leaving each outer node (mm²/s), :func:`solver.physics.outlet_water_flux` of the node's S and total
-    outflow Q_a = −R_p,a, the reaction of its p = 0 row in the unconstrained residual ``R`` (ndof,)."""
-    nf, nodes = disc.n_fields, disc.outlet.nodes
-    return physics.outlet_water_flux(U[nodes, S], -R[nf * nodes + P], params.viscosity_ratio)
-
-
-def _add_outlet(disc: Discretization, params, U: np.ndarray, R: np.ndarray, J) -> None:
-    """Add the outlet's water outflow f(S_a) Q_a⁺ to the S rows of the outer nodes (the boundary term
-    ∫_Γo r w_1·n of the invading balance, lumped on the nodes); J (or None) gets its exact derivative
-    f(S_a) [Q_a > 0] ∂Q_a/∂U + f'(S_a) Q_a⁺ ∂S_a/∂U, with ∂Q_a/∂U = −(the p row of a)."""
-    nf, out = disc.n_fields, disc.outlet
-    Q = -R[nf * out.nodes + P]
-    S_a = ad.Dual.variables([U[out.nodes, S]])[0]
-    f = physics.fractional_flow(S_a, params.viscosity_ratio)
-    R[nf * out.nodes + S] += f.v * np.maximum(Q, 0.0)
-    if J is None:
-        return
-    J.data[out.dst] -= (f.v * (Q > 0.0))[out.owner] * J.data[out.src]
-    J.data[out.diag] += f.d[:, 0] * np.maximum(Q, 0.0)
-
-
-def _dirichlet_conditions(inner_n, outer_n, params, nf: int):
-    """The Dirichlet unknowns (sorted) and their values (Sec. 3.4): S = 1 and μ = μ_i on r_i; p = 0 on r_o, and
-    S = 0, μ = μ_o and u = 0 there as the options choose."""
-    dofs, values = [], []
-
-    def fix(nodes, field, value):
-        dofs.append(nf * nodes + field)
-        values.append(np.full(len(nodes), float(value)))
-
-    fix(inner_n, S, 1.0)
-    fix(inner_n, MU, params.mu_i)
-    fix(outer_n, P, 0.0)
-    if params.outer_saturation_bc == "dirichlet":
-        fix(outer_n, S, 0.0)
-    if params.mu_outer_bc == "dirichlet":
-        fix(outer_n, MU, params.mu_o)
-    if params.outer_compliance == 0:
-        fix(outer_n, UX, 0.0)
-        fix(outer_n, UY, 0.0)
-    dofs = np.concatenate(dofs)
-    values = np.concatenate(values)
-    order = np.argsort(dofs)
-    return dofs[order], values[order]
-
-
-def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galerkin",
-                         pressure_stabilization: float | None = None) -> Discretization:
-    """Assemble the mesh-dependent operators for ``params`` (units mm, s, kPa).
-
-    ``transport``: "galerkin" (mobilities at the point's saturation), "upwind" (mobilities at the
-    saturation shifted upstream by half the element size, see :func:`upwind_saturation`) or "supg" (the
-    Galerkin form plus :func:`supg_flux`).
-    ``pressure_stabilization``: factor s of :func:`pressure_stabilization_tau` (None or 0: none).
-    """
-    if transport not in TRANSPORTS:
-        raise ValueError(f"transport={transport!r}: allowed one of {TRANSPORTS}")
-    pts, tri = np.asarray(mesh.points, float), np.asarray(mesh.triangles)
-    n = len(pts)
-    nf = 7 if params.korteweg_factor > 0 else 5
-    geom = fem.geometry(pts, tri)
-    asm = fem.BlockAssembler(tri, n, nf)
-    inner_e = np.asarray(mesh.boundary_edges["inner"])
-    outer_e = np.asarray(mesh.boundary_edges["outer"])
-    inner_n = np.unique(inner_e)
-    outer_n = np.unique(outer_e)
-
-    rows, cols, vals, L = _boundary_couplings(pts, tri, inner_e, outer_e, params, nf)
-    op = sp.csr_matrix((vals, (rows, cols)), shape=(asm.ndof, asm.ndof))
-    slots = asm.slots(rows, cols)
-
-    inject = np.zeros(asm.ndof)
-    inject[P::nf] = -fem.edge_load(pts, inner_e, n, params.w_i)
-    dofs, values = _dirichlet_conditions(inner_n, outer_n, params, nf)
-    lumped = np.bincount(tri.ravel(), weights=np.repeat(geom.areas / 3, 3), minlength=n)
-    slots, inverse = np.unique(slots, return_inverse=True)  # one value per slot: J.data[slots] += vals
-    vals = np.bincount(inverse.ravel(), weights=vals, minlength=len(slots))
-    return Discretization(
-        points=pts, triangles=tri, geom=geom, asm=asm, n_fields=nf,
-        inner_nodes=inner_n, outer_nodes=outer_n, inner_edges=inner_e, outer_edges=outer_e,
-        phi0=np.asarray(phi0, float), boundary_slots=slots, boundary_vals=vals, boundary_op=op,
-        inject=inject, dirichlet=asm.dirichlet_rows(dofs), dirichlet_values=values,
-        lumped_mass=lumped, inner_length=float(L.sum()), chunks=fem.element_chunks(len(tri)),
-        upwind_length=0.5 * np.sqrt(2.0 * geom.areas) if transport == "upwind" else None,
-        supg_length=np.sqrt(2.0 * geom.areas) if transport == "supg" else None,
-        stab_tau=pressure_stabilization_tau(pts, tri, params, phi0, pressure_stabilization),
-        outlet=_outlet(asm, outer_n, nf) if params.outer_saturation_bc == "outflow" else None,
-        inner_weights=fem.edge_load(pts, inner_e, n, 1.0)[inner_n] if params.line_compliance > 0 else None,
-    )
-
-
-def pressure_stabilization_tau(pts, tri, params, phi0, factor: float | None):
-    """τ_e = s b (1 − φ0) h_e² / (4 (λ + 2μ)) per element, mm²/kPa (None when s is None or 0).
-
-    The equal-order P1 / P1 pair of (u, p) is not inf-sup stable in the undrained limit
-    k Δt / η ≪ h² / (λ + 2μ); there the pressure oscillates from node to node (Murad and Loula 1994).
-    The perturbation τ_e ∫ ∇q·∇(p − p_n)/Δt of the mass balance (Aguilar et al. 2008) with
-    τ = α_m α_f h² / (4 (λ + 2μ)) (Rodrigo et al. 2016, the coupling coefficients of the momentum balance,
-    b, and of the mass balance, 1 − φ0 in φ = φ0 + (1 − φ0)(ε_v + p/K_s)) removes them; it vanishes as
-    O(h²) ∂p/∂t.  h_e is the element's longest edge (mm); λ + 2μ the undamaged P-wave modulus (kPa).
-    """
-    if not factor:
-        return None
-    e = pts[tri[:, [1, 2, 0]]] - pts[tri]
-    h2 = np.max(np.sum(e * e, axis=2), axis=1)
-    p_modulus = params.lame_lambda + 2.0 * params.lame_mu
-    return factor * params.biot * (1.0 - np.asarray(phi0, float)) * h2 / (4.0 * p_modulus)
-
-
-@dataclass(frozen=True)
-class StepData:
-    """Data of the previous time step seen by the poromechanics residual."""
-
-    dt: float  # s
-    d_q: np.ndarray  # damage at quadrature points (M, nq), frozen
-    phi_n: np.ndarray  # porosity at quadrature points (M, nq)
-    S_n: np.ndarray  # saturation at quadrature points (M, nq)
-    ev_n: np.ndarray  # volumetric strain per element (M,)
-    up_x: np.ndarray | None = None  # upwind shift per element (M,), mm (None: Galerkin transport)
-    up_y: np.ndarray | None = None
-    tau: np.ndarray | None = None  # pressure stabilization τ_e per element (M,), mm²/kPa (None: none)
-    px_n: np.ndarray | None = None  # previous pressure gradient per element (M,), kPa/mm (with tau)
-    py_n: np.ndarray | None = None
-    supg_h: np.ndarray | None = None  # element size h_e per element (M,), mm, with transport = "supg"
-    gap_n: np.ndarray | None = None  # previous gap storage δ/h at quadrature points (M, nq), with cell_compliance
-    p_nodal_n: np.ndarray | None = None  # previous nodal pressure (N,), kPa, with line_compliance (not element data)
-
-    def take(self, sl: slice) -> "StepData":
-        """The same data restricted to the elements of ``sl`` (views, no copies)."""
-        cut = lambda a: None if a is None else a[sl]
-        return StepData(dt=self.dt, d_q=self.d_q[sl], phi_n=self.phi_n[sl], S_n=self.S_n[sl], ev_n=self.ev_n[sl],
-                        gap_n=cut(self.gap_n), p_nodal_n=self.p_nodal_n,
-                        up_x=cut(self.up_x), up_y=cut(self.up_y), tau=cut(self.tau), px_n=cut(self.px_n),
-                        py_n=cut(self.py_n), supg_h=cut(self.supg_h))
-
-
-# the fields of StepData that are not per-element arrays (the compiled forms and the element chunks skip them)
-_NOT_ELEMENT_DATA = ("dt", "p_nodal_n")
+__all__ = ["UX", "UY", "P", "S", "MU", "GX", "GY", "FIELD_NAMES", "Discretization", "StepData", "build_discretization",
+           "step_data", "porosity_state", "storage_fraction", "residual_and_jacobian", "compiled_forms",
+           "element_residuals", "line_stored_rate", "outlet_water_outflow", "korteweg_force", "project_gradient",
+           "element_fields"]
 
 
 def step_data(disc: Discretization, params, U_n: np.ndarray, d: np.ndarray, dt: float) -> StepData:
@@ -330,177 +76,26 @@ def upwind_shift(disc: Discretization, grad_p: np.ndarray) -> tuple[np.ndarray, 
     return disc.upwind_length * grad_p[:, 0] / norm, disc.upwind_length * grad_p[:, 1] / norm
 
 
-@dataclass
-class Constitutive:
-    """The constitutive chain at a set of points (one definition for the residual, Jacobian and outputs).
-
-    Units: φ (-), stresses kPa (σ' effective, total = σ' − b p I), k mm², mobilities mm²/(kPa·s),
-    Darcy fluxes mm/s, ψ_A kPa.
-    """
-
-    phi: object
-    sxx: object  # total stress σ = σ' − b p I, kPa
-    syy: object
-    sxy: object
-    psi_a: object
-    k: object
-    lam1: object
-    lam2: object
-    w1x: object
-    w1y: object
-    wx: object
-    wy: object
-    M: object
-    yx: object = None  # the Darcy drive ∇p + φ⁻¹ κ ∇·(∇S⊗∇S), kPa/mm (filled by darcy_fluxes)
-    yy: object = None
+def outlet_water_outflow(disc: Discretization, params, U: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Water leaving each outer node (mm²/s), :func:`solver.physics.outlet_water_flux` of the node's S and total
+    outflow Q_a = −R_p,a, the reaction of its p = 0 row in the unconstrained residual ``R`` (ndof,)."""
+    nf, nodes = disc.n_fields, disc.outlet.nodes
+    return physics.outlet_water_flux(U[nodes, S], -R[nf * nodes + P], params.viscosity_ratio)
 
 
-def upwind_saturation(Sat, Sx, Sy, up_x, up_y):
-    """S shifted upstream by the vector (up_x, up_y) (mm, :func:`upwind_shift`): S + up·∇S.
-
-    Evaluating the phase mobilities at this saturation upwinds the convective transport of S (first-order
-    streamline upwinding of the fractional flow, artificial diffusion of about |v_S| h_e/2 along the flow);
-    it tends to S as h -> 0.
-    """
-    return Sat + up_x * Sx + up_y * Sy
-
-
-def supg_flux(c: Constitutive, params, Sat, Sx, Sy, accumulation, h_e, dt: float):
-    """The SUPG term of the invading-fluid balance as a flux (mm/s) tested with ∇r: τ v R (Brooks and Hughes 1982).
-
-    The balance ∂(φS)/∂t + c_v φ S ε̇_v + ∇·w_1 − ∇·(M∇μ) = 0 transports S with the velocity
-    v = (∂λ_1/∂S)(−Y)/φ (mm/s, Y = c.yx, c.yy the Darcy drive), since ∇·w_1 = φ v·∇S + ... within an element.
-    R = accumulation + φ v·∇S (1/s) is its strong residual on a P1 element: ``accumulation`` is the time and
-    volumetric-coupling part; the Cahn–Hilliard flux's divergence (second derivatives of μ, zero on P1) and the
-    ∇k, ∇φ parts of ∇·w_1 are left out.  Tested with τ (v·∇r), τ = [(2/Δt)² + (2|v|/h_e)²]^(−1/2) (s; the
-    transient form of Tezduyar and Osawa 2000), it adds diffusion τ v⊗v along the flow only where R ≠ 0.  R
-    vanishes for the exact solution up to the parts left out, so the term is consistent to O(h_e) and tends to
-    zero as h_e -> 0.  Being a flux in divergence form, it keeps the discrete volume balance.  ``h_e`` (mm) per
-    element, shaped to broadcast against the points.
-    """
-    slope = physics.invading_permeability_slope(Sat, params.viscosity_ratio)
-    dlam = c.k * slope / params.eta_w
-    vx, vy = -dlam * c.yx / c.phi, -dlam * c.yy / c.phi
-    root = ad.sqrt if isinstance(vx, Dual) else np.sqrt
-    rate = 2.0 * root(vx * vx + vy * vy + 1e-24) / h_e  # 2|v|/h_e, 1/s (smooth at v = 0)
-    tau = 1.0 / root((2.0 / dt) ** 2 + rate * rate)
-    res = accumulation + c.phi * (vx * Sx + vy * Sy)
-    return tau * vx * res, tau * vy * res
-
-
-def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -> Constitutive:
-    """Porosity, stress, permeability, mobilities, Darcy fluxes and Cahn–Hilliard mobility (Sec. 2.9).
-
-    Strains exx, eyy, exy (-), pressure p (kPa), saturation S and its gradient (1/mm), degradation g(d) (-);
-    ``S_flow``: the saturation the phase mobilities see (default S; upwind transport:
-    :func:`upwind_saturation`).  Numpy arrays, Duals or traced symbols alike.  The Darcy fluxes follow
-    from :func:`darcy_fluxes`.
-
-    * φ = φ0 + (1 − φ0) ε_v + (1 − φ0) p/K_s (Eq. summary_equations_3), with the optional porosity floor and
-      ceiling;
-    * k from :func:`solver.physics.permeability` (Eq. permeability), with the optional permeability floor;
-    * σ = g(d) σ_A + σ_I − κ ∇S⊗∇S − b p I with Miehe's split (Eq. summary_equations_4, _secondary_3);
-    * w_α = −λ_α (∇p + φ⁻¹ κ ∇·(∇S⊗∇S)), λ_α = k k_rα/η_α (Eq. fluid_equation);
-    * M from :func:`solver.physics.ch_mobility` (Sec. 2.8, option ``ch_mobility``).
-    """
-    kap = params.kappa * params.korteweg_factor
-    phi = physics.porosity(phi0, exx + eyy, p, params.K_s, params.porosity_floor, params.porosity_ceiling)
-    (ax, ay, axy), (ex, ey, exy_s), psi_a = physics.spectral_split(exx, eyy, exy, params.lame_lambda, params.lame_mu)
-    deg = gd - 1.0  # σ' = σ_elastic + (g − 1) σ_A
-    sxx = ex + ax * deg - params.biot * p
-    syy = ey + ay * deg - params.biot * p
-    sxy = exy_s + axy * deg
-    if kap > 0:
-        sxx = sxx - kap * Sx * Sx
-        syy = syy - kap * Sy * Sy
-        sxy = sxy - kap * Sx * Sy
-    k = physics.permeability(phi, phi0, params.kbar, params.k_max, params.crack_permeability,
-                             params.permeability_floor)
-    if params.cell_compliance > 0:  # the opened gap above the pack carries both fluids in parallel
-        k = k + physics.gap_permeability(p, params.cell_compliance, params.cell_height)
-    kr1, kr2 = physics.relative_permeabilities(Sat if S_flow is None else S_flow, params.viscosity_ratio)
-    lam1 = k * kr1 / params.eta_w
-    lam2 = k * kr2 / params.eta_o
-    return Constitutive(phi=phi, sxx=sxx, syy=syy, sxy=sxy, psi_a=psi_a, k=k, lam1=lam1, lam2=lam2,
-                        w1x=None, w1y=None, wx=None, wy=None,
-                        M=physics.ch_mobility(k, Sat, params.eta_o, params.eta_w, params.ch_mobility))
-
-
-def darcy_fluxes(c: Constitutive, px, py, force=None) -> Constitutive:
-    """Fill the Darcy fluxes w_1, w = w_1 + w_2 (mm/s) of ``c`` from ∇p (kPa/mm) and the Korteweg force."""
-    Yx, Yy = px, py
-    if force is not None:
-        Yx = Yx + force[0] / c.phi
-        Yy = Yy + force[1] / c.phi
-    c.yx, c.yy = Yx, Yy
-    c.w1x, c.w1y = -c.lam1 * Yx, -c.lam1 * Yy
-    lam = c.lam1 + c.lam2
-    c.wx, c.wy = -lam * Yx, -lam * Yy
-    return c
-
-
-def pointwise_forms(X: list, params, phi0: np.ndarray, data: StepData, n_fields: int) -> list:
-    """f0/f1 of the five equations at the Strang points: ``F[i][k]`` (M, nq), None = structural zero.
-
-    ``X[3 f + k]`` is field f's value (k = 0) or gradient component (k = 1, 2).
-    """
-    g = lambda f, k: X[3 * f + k]
-    kap = params.kappa * params.korteweg_factor
-    cv = params.volumetric_coupling
-    dt = data.dt
-
-    exx, eyy = g(UX, 1), g(UY, 2)
-    exy = 0.5 * (g(UX, 2) + g(UY, 1))
-    ev = exx + eyy
-    p, Sat, mu = g(P, 0), g(S, 0), g(MU, 0)
-    Sx, Sy = g(S, 1), g(S, 2)
-    S_flow = None
-    if data.up_x is not None:
-        S_flow = upwind_saturation(Sat, Sx, Sy, data.up_x[:, None], data.up_y[:, None])
-    c = constitutive(params, phi0[:, None], exx, eyy, exy, p, Sat, Sx, Sy,
-                     physics.degradation(data.d_q, params.m), S_flow)
-    force = None
-    if n_fields == 7:
-        # κ ∇·(G⊗G) = κ ((∇·G) G + (∇G) G) from the projected gradient G = Π∇S
-        Gx, Gy = g(GX, 0), g(GY, 0)
-        divG = g(GX, 1) + g(GY, 2)
-        force = (kap * (divG * Gx + g(GX, 1) * Gx + g(GX, 2) * Gy),
-                 kap * (divG * Gy + g(GY, 1) * Gx + g(GY, 2) * Gy))
-    darcy_fluxes(c, g(P, 1), g(P, 2), force)
-    phi = c.phi
-
-    dev = (ev - data.ev_n[:, None]) / dt
-    c_mu = 12.0 * params.gamma / params.l_S
-    c_grad = c_mu * params.l_S**2 / 8.0
-    fx, fy = -c.wx, -c.wy
-    f1x, f1y = -c.w1x + c.M * g(MU, 1), -c.w1y + c.M * g(MU, 2)
-    if data.tau is not None:  # pressure stabilization τ ∇(p − p_n)/Δt (see pressure_stabilization_tau)
-        sx = data.tau[:, None] * (g(P, 1) - data.px_n[:, None]) / dt
-        sy = data.tau[:, None] * (g(P, 2) - data.py_n[:, None]) / dt
-        frac = c.lam1 / (c.lam1 + c.lam2 + 1e-300)
-        fx, fy = fx + sx, fy + sy
-        f1x, f1y = f1x + frac * sx, f1y + frac * sy
-    store, store_n = phi, data.phi_n  # the storage: the pores, and the gap of an elastic cell
-    if data.gap_n is not None:
-        store = phi + physics.gap_storage(p, params.cell_compliance, params.cell_height)
-        store_n = data.phi_n + data.gap_n
-    invading = (store * Sat - store_n * data.S_n) / dt + cv * phi * Sat * dev
-    if data.supg_h is not None:
-        sx, sy = supg_flux(c, params, Sat, Sx, Sy, invading, data.supg_h[:, None], dt)
-        f1x, f1y = f1x + sx, f1y + sy
-    return [
-        [None, c.sxx, c.sxy],
-        [None, c.sxy, c.syy],
-        [(store - store_n) / dt + cv * phi * dev, fx, fy],
-        [invading, f1x, f1y],
-        [mu - c_mu * physics.double_well_prime(Sat), -c_grad * Sx, -c_grad * Sy],
-    ]
-
-
-def projection_forms(X: list) -> list:
-    """f0 of the gradient projection G − ∇S at the vertex points (two equations)."""
-    g = lambda f, k: X[3 * f + k]
-    return [[g(GX, 0) - g(S, 1), None, None], [g(GY, 0) - g(S, 2), None, None]]
+def _add_outlet(disc: Discretization, params, U: np.ndarray, R: np.ndarray, J) -> None:
+    """Add the outlet's water outflow f(S_a) Q_a⁺ to the S rows of the outer nodes (the boundary term
+    ∫_Γo r w_1·n of the invading balance, lumped on the nodes); J (or None) gets its exact derivative
+    f(S_a) [Q_a > 0] ∂Q_a/∂U + f'(S_a) Q_a⁺ ∂S_a/∂U, with ∂Q_a/∂U = −(the p row of a)."""
+    nf, out = disc.n_fields, disc.outlet
+    Q = -R[nf * out.nodes + P]
+    S_a = ad.Dual.variables([U[out.nodes, S]])[0]
+    f = physics.fractional_flow(S_a, params.viscosity_ratio)
+    R[nf * out.nodes + S] += f.v * np.maximum(Q, 0.0)
+    if J is None:
+        return
+    J.data[out.dst] -= (f.v * (Q > 0.0))[out.owner] * J.data[out.src]
+    J.data[out.diag] += f.d[:, 0] * np.maximum(Q, 0.0)
 
 
 def _variables(U_elem: np.ndarray, geom: fem.Geometry, quad: fem.Quadrature, dual: bool = True) -> list:
@@ -524,7 +119,7 @@ def compiled_forms(params, n_fields: int, data: StepData) -> tuple:
     constants; traced once per (params, n_fields, dt), compiled once per structure.
     """
     layout = tuple((f.name, np.ndim(getattr(data, f.name))) for f in fields(StepData)
-                   if f.name not in _NOT_ELEMENT_DATA and getattr(data, f.name) is not None)
+                   if f.name not in NOT_ELEMENT_DATA and getattr(data, f.name) is not None)
 
     def build(tr):
         step = StepData(dt=data.dt, **{name: tr.data(name, per_point=nd == 2) for name, nd in layout})
@@ -554,7 +149,7 @@ def element_residuals(disc: Discretization, params, U: np.ndarray, data: StepDat
         # contraction in one pass over the elements, without the GIL
         kern, consts = compiled_forms(params, nf, data)
         step = {f.name: getattr(data, f.name)[sl] for f in fields(StepData)
-                if f.name not in _NOT_ELEMENT_DATA and getattr(data, f.name) is not None}
+                if f.name not in NOT_ELEMENT_DATA and getattr(data, f.name) is not None}
         kern(consts, U, disc.triangles[sl], disc.geom.grads[sl], disc.geom.areas[sl], {"phi0": disc.phi0[sl], **step},
              Fe, Ke if need_jacobian else None)
         return Fe, Ke

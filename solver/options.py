@@ -13,7 +13,7 @@ from .plausible import did_you_mean, implausible, slip_message
 from .tomlio import read_toml, write_flat_toml
 
 _LINEAR_SOLVERS = ("auto", "superlu", "pypardiso")
-TRANSPORTS = ("galerkin", "upwind", "supg")  # the transport discretizations solver.model implements
+TRANSPORTS = ("galerkin", "upwind", "supg")  # the transport discretizations of solver.forms
 STEP_CONTROLS = ("state_change", "iterations")  # the step-size controllers solver.simulate._next_dt implements
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
@@ -96,13 +96,13 @@ class RunOptions:
     write_xdmf : also write the snapshots as XDMF for ParaView.
     transport : discretization of the convective transport of S: "galerkin" (the plain P1 Galerkin
         form, the paper's Sec. 3.1) or "upwind" (phase mobilities at the saturation shifted upstream by
-        half the element size, ``solver.model.upwind_saturation``: first-order streamline upwinding) or
+        half the element size, ``solver.forms.upwind_saturation``: first-order streamline upwinding) or
         "supg" (the Galerkin form plus the streamline-upwind/Petrov–Galerkin term of Brooks and Hughes
-        (1982), ``solver.model.supg_flux``: it adds diffusion only along the flow and only where the strong
+        (1982), ``solver.forms.supg_flux``: it adds diffusion only along the flow and only where the strong
         residual of the saturation equation is not zero; that residual leaves out the ∇k, ∇φ parts of ∇·w_1, so
         the term is consistent to O(h)).
     pressure_stabilization : factor s >= 0 on the pressure stabilization of the equal-order P1 / P1 pair
-        (``solver.model.pressure_stabilization_tau``): the total mass balance gains
+        (``solver.discretization.pressure_stabilization_tau``): the total mass balance gains
         τ_e ∫ ∇q·∇(p − p_n)/Δt with τ_e = s b (1 − φ0) h_e² / (4 (λ + 2μ)) (mm²/kPa), the term of
         Aguilar et al. (2008) and Rodrigo et al. (2016) that removes the spurious pressure oscillations of the
         undrained limit (low permeability k, small Δt: k Δt / η ≪ h² / (λ + 2μ), where the pores close at the

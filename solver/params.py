@@ -209,13 +209,6 @@ class Parameters:
         """β, kPa·s: explicit ``beta`` or 65.7 √C (Sec. 3.6 calibration)."""
         return float(self.beta) if self.beta is not None else 65.7 * math.sqrt(self.cement)
 
-    @classmethod
-    def preset(cls, name: str, **changes) -> "Parameters":
-        """The named model ``name`` ("paper", "experiment": :mod:`solver.presets`) with ``changes`` on top."""
-        from .presets import preset_parameters
-
-        return preset_parameters(name, **changes)
-
     # ------------------------------------------------------------- derived
     @property
     def lame_lambda(self) -> float:

@@ -1,7 +1,7 @@
 """Named models ("presets"): the paper's model as written, and the model of the reference experiment.
 
 A preset is a set of parameter changes from the defaults of :class:`solver.Parameters` (units mm, s, kPa);
-``preset_parameters(name, **changes)`` (or ``Parameters.preset(name, **changes)``) gives its validated
+``preset_parameters(name, **changes)`` (also ``from solver import preset_parameters``) gives its validated
 parameters, ``dchfrac run --preset NAME`` runs it, ``dchfrac params`` lists the presets, and a campaign spec's
 ``[base]`` takes ``preset = "NAME"``.
 
@@ -18,6 +18,8 @@ parameters, ``dchfrac run --preset NAME`` runs it, ``dchfrac params`` lists the 
 from __future__ import annotations
 
 import math
+
+from .params import Parameters
 
 #: the reference experiment's pump rate, mm³/s (100 mL/min; Sec. 3.5)
 EXPERIMENT_FLOW_RATE = 100.0 * 1000.0 / 60.0
@@ -68,8 +70,6 @@ def preset_description(name: str) -> str:
     return PRESETS[name][0]
 
 
-def preset_parameters(name: str, **changes):
+def preset_parameters(name: str, **changes) -> Parameters:
     """Validated :class:`solver.Parameters` of preset ``name`` with ``changes`` on top (units mm, s, kPa)."""
-    from .params import Parameters
-
     return Parameters(**{**preset_changes(name), **changes})

@@ -1,10 +1,7 @@
-"""Time loop of the coupled model: staggered Newton / active-set damage, adaptive steps, outputs.
+"""Time loop of the coupled model: set-up, adaptive steps, outputs.
 
-Per time step (Sec. 3.1 of the paper):
-  (a) monolithic Newton on the poromechanics block (u, p, S, μ [, G]) with d frozen;
-  (b) the damage variational inequality d_n <= d <= 1 (primal-dual active set);
-  repeat (a)-(b) until max |Δd| between stagger iterations < ``stagger_tol``.
-Newton stops on a small update and a closed global balance (``Simulation.balanced``).
+Each time step is solved by :class:`solver.stagger.Simulation` (staggered Newton / active-set damage, Sec. 3.1 of
+the paper); what an accepted step records (time-series row, snapshots) is :mod:`solver.records`.
 After an accepted step the next dt follows the step's change of S and d
 (``_next_dt``).  A step whose Newton or stagger iterations fail is retried with a
 smaller dt (every rejection logged); past ``dt_min`` the run ends with status
@@ -12,41 +9,22 @@ smaller dt (every rejection logged); past ``dt_min`` the run ends with status
 """
 from __future__ import annotations
 
-import json
-import math
 import time
 import traceback
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from . import damage, fem, linsolve, metrics, physics, profiling
-from .anderson import Anderson
-from .model import (MU, P, S, UX, UY, build_discretization, element_fields, line_stored_rate, outlet_water_outflow,
-                    porosity_state, residual_and_jacobian, step_data, storage_fraction)
+from . import linsolve, profiling
+from .model import element_fields, porosity_state, storage_fraction
 from .options import RunOptions, check_environment, check_run_inputs
 from .output import RunWriter
 from .profiling import phase
+from .records import accumulate_balances, step_row, stored_volume, take_snapshot, water_fraction
+from .stagger import Simulation, StepFailure
 
-# floors of the per-field update scales used by the Newton test (mm, kPa, -, kPa, 1/mm)
-_FLOORS = np.array([1e-2, 1e-2, 1.0, 1.0, 1e-2, 0.1, 0.1])
-# fields the step predictor extrapolates (the others start from the last state): displacement and pressure
-# evolve smoothly; S, μ and G carry the moving diffuse interface, where an extrapolated start overshoots
-# [0, 1] and Newton on the double well diverges more often
-_PREDICTED_FIELDS = [UX, UY, P]
-
-
-class StepFailure(Exception):
-    """A time step could not be solved at the current dt; ``node``: the node where the Newton iterate went
-    furthest (out of the saturation bounds, or the largest scaled update), or None."""
-
-    def __init__(self, message: str, node: int | None = None):
-        super().__init__(message)
-        self.node = node
-
-
+__all__ = ["simulate", "SimulationResult", "Simulation", "StepFailure", "run_path", "physical_limit", "warmup"]
 
 
 @dataclass
@@ -63,204 +41,6 @@ class SimulationResult:
     factorizations: int = 0
     profile: dict | None = None  # wall seconds by phase and part of the run (solver.profiling.Profile.to_dict)
     path: dict | None = None  # the linear solver, its precision and the kernels that ran (run_path)
-
-
-class Simulation:
-    """The discretized model on one mesh, and its Newton / damage / stagger solvers."""
-
-    def __init__(self, params, options: RunOptions, mesh, phi0: np.ndarray):
-        self.params, self.options, self.mesh = params, options, mesh
-        self.disc = build_discretization(mesh, params, phi0, transport=options.transport,
-                                         pressure_stabilization=options.pressure_stabilization)
-        self.dmg = damage.damage_operators(self.disc.points, self.disc.triangles)
-        self.edges = metrics.mesh_edges(self.disc.triangles)
-        self.solver_kind = linsolve.resolve(options.linear_solver, self.disc.asm.ndof)
-        self.precision = linsolve.resolve_precision(options.linear_precision, self.solver_kind)
-        nf = self.disc.n_fields
-        U = np.zeros((self.disc.n_nodes, nf))
-        self.U = U
-        self.d = np.zeros(self.disc.n_nodes)
-        self.t = 0.0
-        self.floors = _FLOORS[:nf]
-        self.lu, self.lu_dt = None, None  # factorized Jacobian kept for reuse
-        self.previous = None  # (U, d, dt) of the step before the last accepted one, for the predictor
-        self.fact0 = linsolve.STATS["factorizations"]  # counter at the start of this run
-
-    # ------------------------------------------------------------ poromechanics
-    def newton(self, U0: np.ndarray, d: np.ndarray, data, rtol: float | None = None) -> tuple[np.ndarray, int]:
-        """Solve the poromechanics block with d frozen to the relative tolerance ``rtol`` (default
-        ``options.newton_rtol`` and the balance test ``balanced``); raises StepFailure.
-
-        Newton with Jacobian reuse: a factorized Jacobian is kept across
-        iterations, stagger iterations and time steps while the updates
-        contract by at least ``options.jacobian_reuse`` per iteration (the
-        factorization is the floor of this solver's cost); otherwise, and
-        always when ``jacobian_reuse`` is 0, a fresh exact Jacobian is
-        assembled and factorized, which gives Newton's quadratic convergence.
-        """
-        disc, nf, o = self.disc, self.disc.n_fields, self.options
-        x = U0.ravel().copy()
-        x[disc.dirichlet.dofs] = disc.dirichlet_values
-        reuse = o.jacobian_reuse > 0
-        if self.lu is not None and not (0.5 <= self.lu_dt / data.dt <= 2.0):
-            self.lu = None  # the time terms scale with 1/dt: too different to reuse
-        prev = None
-        fresh = False
-        x_back = None  # state before an update made with a reused Jacobian (rolled back if it diverged)
-        accel = Anderson(o.anderson_depth) if o.anderson_depth else None
-        for it in range(1, o.newton_max_its + 1):
-            need_j = self.lu is None or not reuse
-            with phase("assembly"), np.errstate(all="ignore"):  # a diverging trial iterate is handled below
-                R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data, need_jacobian=need_j)
-                disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
-                if need_j:
-                    disc.dirichlet.apply_matrix(J)
-            if not np.all(np.isfinite(R)):
-                if x_back is None:
-                    raise StepFailure("non-finite residual")
-                x, x_back, self.lu, prev = x_back, None, None, None  # stale Jacobian diverged: back off, refresh
-                continue
-            if need_j:
-                self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind, self.precision,
-                                                                 condense=disc.projection_dofs), data.dt, True
-                if accel:
-                    accel.reset()
-            dx = self.lu.solve(-R)
-            if not np.all(np.isfinite(dx)):
-                raise StepFailure("non-finite Newton update")
-            x_back = None if fresh else x.copy()
-            x = self._advance(x, dx, accel)
-            X = x.reshape(-1, nf)
-            scale = np.maximum(np.abs(X).max(axis=0), self.floors)
-            upd = float((np.abs(dx.reshape(-1, nf)).max(axis=0) / scale).max())
-            ratio = upd / prev if prev else 0.0
-            if upd > 1e3 or not (-1.0 < X[:, S].min() and X[:, S].max() < 2.0):
-                if x_back is not None:  # the stale Jacobian's fault: undo and refresh
-                    x, x_back, self.lu, prev = x_back, None, None, None
-                    continue
-                self.lu = None
-                raise StepFailure(f"Newton diverged (relative update {upd:.2e}, S in [{X[:, S].min():.3g}, {X[:, S].max():.3g}])",
-                                  node=int(np.argmax(np.abs(X[:, S] - 0.5))))
-            # with a reused Jacobian convergence is linear: the error left is about upd * ratio / (1 - ratio)
-            # a loose solve (rtol given: the first stagger iteration's) only starts the next, so no balance test
-            if upd <= (rtol or o.newton_rtol) * (1.0 if fresh or ratio < 0.5 else 0.1) and (rtol or self.balanced(X, data)):
-                return X.copy(), it
-            if reuse and not fresh and ratio > 1.0 and x_back is not None:
-                x, self.lu, prev = x_back, None, None  # diverging with a stale Jacobian: undo, refresh
-                continue
-            if reuse and not fresh and ratio > o.jacobian_reuse:
-                self.lu = None  # contraction too slow: refresh the Jacobian next iteration
-            fresh = False if reuse else fresh
-            prev = upd
-        self.lu = None
-        raise StepFailure(f"Newton did not converge in {o.newton_max_its} iterations (last relative update {upd:.2e})",
-                          node=int(np.argmax((np.abs(dx.reshape(-1, nf)) / scale).max(axis=1))))
-
-    def balanced(self, X: np.ndarray, data) -> bool:
-        """Whether the iterate X (nodes x fields) conserves mass over the step: the global balances of the total
-        fluid (the p rows, Eq. summary_equations_2) and of the invading fluid (the S rows) have defects
-        |Σ R| (mm²/s, over the rows without a Dirichlet condition: Σ_a N_a = 1, so the sum is the step's
-        balance with the boundary fluxes as reactions) within ``newton_mass_tol`` of the injection rate
-        w_i × inner length.  The global material-balance test of reservoir simulators (MRST's ``tolerance_mb``
-        beside the update test): a small update with a reused Jacobian bounds the error in the fields, not
-        in the conserved totals; this one makes the volume balance of ``timeseries.csv`` hold to the
-        tolerance whatever the step sequence and the Jacobian's age.  Without injection (w_i = 0) there is no
-        scale for the balance (``mass_error`` is relative to the injected volume) and the update test decides."""
-        disc, nf = self.disc, self.disc.n_fields
-        rate = self.params.w_i * disc.inner_length
-        if rate <= 0.0:
-            return True
-        with phase("assembly"), np.errstate(all="ignore"):
-            R, _ = residual_and_jacobian(disc, self.params, X, data, need_jacobian=False)
-            disc.dirichlet.apply_residual(R, X.ravel(), disc.dirichlet_values)  # Dirichlet rows: x − value = 0
-        R = R.reshape(-1, nf)
-        defect = max(abs(float(R[:, P].sum())), abs(float(R[:, S].sum())))
-        return defect <= self.options.newton_mass_tol * rate
-
-    def _advance(self, x: np.ndarray, dx: np.ndarray, accel: Anderson | None) -> np.ndarray:
-        """The next Newton iterate: x + dx, or with ``accel`` the Anderson-accelerated one (residuals scaled by
-        each field's scale, as the Newton test)."""
-        if accel is None:
-            return x + dx
-        nf = self.disc.n_fields
-        w = np.tile(1.0 / np.maximum(np.abs(x.reshape(-1, nf)).max(axis=0), self.floors), self.disc.n_nodes)
-        return accel.next_iterate(x, dx, w)
-
-    def active_energy(self, U: np.ndarray) -> np.ndarray:
-        """Nodal (lumped-projected) active strain energy ψ_A (kPa) of displacement U."""
-        tri = self.disc.triangles
-        g = fem.field_gradients(self.disc.geom.grads, U[tri][:, :, :2])
-        exx, eyy, exy = g[:, UX, 0], g[:, UY, 1], 0.5 * (g[:, UX, 1] + g[:, UY, 0])
-        _, _, psi = physics.spectral_split(exx, eyy, exy, self.params.lame_lambda, self.params.lame_mu)
-        return fem.nodal_average(psi, tri, self.disc.geom.areas, self.disc.n_nodes)
-
-    # ------------------------------------------------------------ one step
-    def predict(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Start of the stagger iterations of a step of size dt (s): the states (U, d) extrapolated linearly
-        from the last two accepted steps (the state itself on the first step), U in ``_PREDICTED_FIELDS``
-        only, d clipped to [d_n, 1].
-
-        A start only: Newton converges to the same tolerance and the stagger stops on the same test
-        max |Δd| < ``stagger_tol`` (its first iteration measured from d_n), so the accepted state meets
-        the same equations; a closer start saves Newton iterations in every stagger iteration.
-        """
-        if self.previous is None:
-            return self.U, self.d.copy()
-        U_prev, d_prev, dt_prev = self.previous
-        a = dt / dt_prev
-        U = self.U.copy()
-        f = _PREDICTED_FIELDS
-        U[:, f] += a * (self.U[:, f] - U_prev[:, f])
-        return U, np.clip(self.d + a * (self.d - d_prev), self.d, 1.0)
-
-    def state_change(self, U: np.ndarray, d: np.ndarray) -> float:
-        """Largest nodal change of the saturation S or the damage d (both dimensionless, in [0, 1]) from the
-        last accepted state to (U, d): the measure of the state-change step controller (``_next_dt``).
-        The inlet nodes, where S = 1 is imposed (Sec. 3.4), do not count: their jump on the first step is
-        the boundary condition, not the solution's change."""
-        dS = np.abs(U[:, S] - self.U[:, S])
-        dS[self.disc.inner_nodes] = 0.0
-        return float(max(dS.max(), np.max(np.abs(d - self.d))))
-
-    def commit(self, U: np.ndarray, d: np.ndarray, dt: float) -> None:
-        """Accept the step of size dt (s) that ends at (U, d)."""
-        self.previous = (self.U, self.d, dt)
-        self.U, self.d, self.t = U, d, self.t + dt
-
-    def step(self, dt: float):
-        """Advance by dt; returns (U, d, info) without committing. Raises StepFailure.
-
-        With ``first_stagger_rtol`` the first stagger iteration solves Newton to that looser tolerance
-        and cannot end the stagger: its damage only starts the second iteration, which (like every
-        later one) solves to ``newton_rtol``; the accepted state meets the same two tests as always
-        (the last stagger iteration's Newton at ``newton_rtol``, and max |Δd| < ``stagger_tol``).
-        """
-        o = self.options
-        d_n = self.d
-        U, d_k = self.predict(dt)
-        newton_total = 0
-        loose = o.first_stagger_rtol if o.stagger_max_its >= 2 else None
-        for s in range(1, o.stagger_max_its + 1):
-            with phase("stagger"):
-                data = step_data(self.disc, self.params, self.U, d_k, dt)
-            U, its = self.newton(U, d_k, data, rtol=loose if s == 1 else None)
-            newton_total += its
-            with phase("stagger"):
-                psi = self.active_energy(U)
-            with phase("damage"):
-                res = damage.solve(d_k, d_n, psi, self.params, dt, self.dmg, max_its=o.damage_max_its)
-            if not res.converged:
-                raise StepFailure(f"damage active-set did not converge (KKT residual {res.kkt_residual:.2e})")
-            # the first iteration's change is measured from d_n, not from the predicted start: a good
-            # prediction must not end the stagger before one damage solve has been checked by a second
-            change = float(np.max(np.abs(res.d - (d_n if s == 1 else d_k))))
-            d_k = res.d
-            if change < o.stagger_tol and not (s == 1 and loose):
-                with phase("stagger"):
-                    data = step_data(self.disc, self.params, self.U, d_k, dt)
-                return U, d_k, {"newton_its": newton_total, "stagger_its": s, "damage_kkt": res.kkt_residual, "data": data,
-                                "step_change": self.state_change(U, d_k)}
-        raise StepFailure(f"stagger did not converge in {o.stagger_max_its} iterations (last max |Δd| {change:.2e})")
 
 
 def _validate_mesh(mesh):
@@ -406,12 +186,12 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
     dt = o.dt0
     cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0, "w_src": 0.0, "line": 0.0}
     store0 = storage_fraction(sim.disc, sim.params, sim.U, porosity_state(sim.disc, sim.params, sim.U)[2])
-    V0 = _stored_volume(sim, store0)
-    cum["W0"] = _stored_volume(sim, _water_fraction(sim, sim.U, store0))
+    V0 = stored_volume(sim, store0)
+    cum["W0"] = stored_volume(sim, water_fraction(sim, sim.U, store0))
     warned_layer = False
     prof = profiling.active()
     with phase("output"):
-        _snapshot(sim, snaps, writer)  # the initial state, t = 0
+        take_snapshot(sim, snaps, writer)  # the initial state, t = 0
     while sim.t < o.t_end - 1e-12:
         if o.max_wall_time is not None and time.perf_counter() - t_wall > o.max_wall_time:
             return "failed", f"max_wall_time {o.max_wall_time} s exceeded at t = {sim.t:.4g} s"
@@ -433,11 +213,11 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
             continue
         with phase("metrics"):
             _, ev, phi_q = porosity_state(sim.disc, sim.params, U)  # the new state's porosity, read twice below
-            _accumulate_balances(sim, U, info["data"], dt_try, cum, ev, phi_q)
+            accumulate_balances(sim, U, info["data"], dt_try, cum, ev, phi_q)
             sim.commit(U, d, dt_try)
             store = storage_fraction(sim.disc, sim.params, U, phi_q)
-            row = _row(sim, dt_try, info, cum, V0, _stored_volume(sim, store),
-                       _stored_volume(sim, _water_fraction(sim, U, store)))
+            row = step_row(sim, dt_try, info, cum, V0, stored_volume(sim, store),
+                       stored_volume(sim, water_fraction(sim, U, store)))
         rows.append(row)
         _count_step(prof, info)
         if row["outer_layer_area"] > 0 and not warned_layer:
@@ -450,7 +230,7 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
         with phase("output"):
             if pending and abs(sim.t - pending[0]) < 1e-9:
                 pending.pop(0)
-                _snapshot(sim, snaps, writer)
+                take_snapshot(sim, snaps, writer)
             if writer and len(rows) % 25 == 0:
                 writer.write_timeseries(pd.DataFrame(rows))
         if o.stop_front_radius is not None and np.isfinite(row["front_radius_max"]) and row["front_radius_max"] >= o.stop_front_radius:
@@ -458,7 +238,7 @@ def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, pr
         dt = _next_dt(o, dt_try, info)
     if not snaps or snaps[-1][0] != sim.t:
         with phase("output"):
-            _snapshot(sim, snaps, writer)
+            take_snapshot(sim, snaps, writer)
     return "ok", None
 
 
@@ -520,103 +300,6 @@ def _count_step(prof, info: dict) -> None:
     prof.count("accepted_steps")
     prof.count("newton_iterations", info["newton_its"])
     prof.count("stagger_iterations", info["stagger_its"])
-
-
-def _accumulate_balances(sim, U, data, dt: float, cum: dict, ev: np.ndarray, phi_q: np.ndarray) -> None:
-    """Add the step's injected, outflow, source and water volumes (mm²) to ``cum``.
-
-    From the unconstrained residual at the converged state U: its Dirichlet rows are the reactions.  ``ev``,
-    ``phi_q``: U's volumetric strain and porosity (:func:`solver.model.porosity_state`).
-    """
-    disc, p = sim.disc, sim.params
-    R, _ = residual_and_jacobian(disc, p, U, data, need_jacobian=False)
-    nf = disc.n_fields
-    Rp, Rs = R[P::nf], R[S::nf]
-    cum["inj"] += dt * p.w_i * disc.inner_length
-    cum["out"] += -dt * Rp[disc.outer_nodes].sum()
-    if disc.inner_weights is not None:  # the injection line's storage (solver.model.line_stored_rate)
-        cum["line"] += dt * float(line_stored_rate(disc, p, U, data).v.sum())
-    cum["src"] += dt * _source(sim, data, ev, phi_q)
-    cum["w_src"] += dt * _source(sim, data, ev, phi_q * fem.at_quadrature(U[:, S], disc.triangles, fem.STRANG3))
-    cum["w_in"] += dt * Rs[disc.inner_nodes].sum()
-    if disc.outlet is None:  # S = 0 imposed on r_o: the water outflow is its reaction (0 with no S condition)
-        cum["w_out"] += -dt * Rs[disc.outer_nodes].sum()
-    else:  # the outlet's boundary term (solver.model.outlet_water_outflow), part of the S rows
-        cum["w_out"] += dt * outlet_water_outflow(disc, p, U, R).sum()
-
-
-def _stored_volume(sim, phi_q: np.ndarray) -> float:
-    """∫ φ dx (mm² per unit cell height) from φ at the Strang points (equal weights); φ is the storage fraction
-    (pores and the elastic cell's gap, :func:`solver.model.storage_fraction`)."""
-    return float(np.sum(sim.disc.geom.areas * phi_q.mean(axis=1)))
-
-
-def _water_fraction(sim, U: np.ndarray, phi_q: np.ndarray) -> np.ndarray:
-    """φ S at the Strang points (M, 3), the invading fluid's volume fraction as the S rows' storage term sees it."""
-    return phi_q * fem.at_quadrature(U[:, S], sim.disc.triangles, fem.STRANG3)
-
-
-def _source(sim, data, ev: np.ndarray, phi_q: np.ndarray) -> float:
-    """c_v ∫ φ ε̇_v dx: the second-order volume source of the total mass balance (mm²/s), from the step's
-    frozen data and the new state's ε_v and φ; with φ S in place of φ (:func:`_water_fraction`), that of the
-    invading balance."""
-    dev = (ev - data.ev_n) / data.dt
-    return float(sim.params.volumetric_coupling * np.sum(sim.disc.geom.areas * phi_q.mean(axis=1) * dev))
-
-
-def _row(sim, dt, info, cum, V0, V, W) -> dict:
-    """The time series' row of the committed state: V its stored volume, W its stored invading volume (mm²,
-    :func:`_stored_volume`)."""
-    disc, p, U, d = sim.disc, sim.params, sim.U, sim.d
-    ef = element_fields(disc, p, U, d, fluxes=False)
-    Sn = U[:, S]
-    fm, fx, fb = metrics.front_measures(disc.points, Sn, sim.edges, disc.inner_nodes)
-    err = abs(cum["inj"] - (V - V0 + cum["src"] + cum["out"] + cum["line"])) / max(cum["inj"], 1e-300)
-    area = disc.geom.areas
-    d_el = d[disc.triangles].mean(axis=1)
-    inv = float(np.sum(area * ef["phi"] * Sn[disc.triangles].mean(axis=1)))
-    return {
-        "t": sim.t, "dt": dt,
-        "p_inj": float(np.mean(U[disc.inner_nodes, P])),
-        "injected_volume": cum["inj"],
-        "invading_volume": inv,
-        "water_inflow_volume": cum["w_in"],
-        "water_outflow_volume": cum["w_out"],
-        "outflow_volume": cum["out"],
-        "line_stored_volume": cum["line"],
-        "stored_volume": V,
-        "source_volume": cum["src"],
-        "mass_error": err,
-        "water_stored_volume": W,
-        "water_source_volume": cum["w_src"],
-        "water_mass_error": abs(cum["w_in"] - cum["w_out"] - (W - cum["W0"] + cum["w_src"])) / max(cum["inj"], 1e-300),
-        "mean_damage": float(np.sum(area * d_el) / area.sum()),
-        "max_damage": float(d.max()),
-        "max_hoop_stress": float(ef["hoop_stress"].max()),
-        "front_radius_mean": fm,
-        "front_radius_max": fx,
-        "front_radius_branches": fb,
-        "open_tip_radius": metrics.open_tip_radius(disc.points, disc.triangles, ef["phi"], disc.inner_nodes),
-        "outer_layer_area": metrics.outer_layer_area(disc.points, disc.triangles, area, Sn, sim.edges, disc.inner_nodes, disc.outer_nodes),
-        "newton_its": info["newton_its"],
-        "stagger_its": info["stagger_its"],
-        "damage_kkt": info["damage_kkt"],
-        "step_change": info["step_change"],
-        "factorizations": linsolve.STATS["factorizations"] - sim.fact0,
-    }
-
-
-def _snapshot(sim, snaps, writer):
-    disc = sim.disc
-    ef = element_fields(disc, sim.params, sim.U, sim.d)
-    fields = {
-        "S": sim.U[:, S].copy(), "mu": sim.U[:, MU].copy(), "p": sim.U[:, P].copy(), "d": sim.d.copy(),
-        "u": sim.U[:, :2].copy(),
-        "phi": ef["phi"], "eps_v": ef["eps_v"], "hoop_stress": ef["hoop_stress"], "k": ef["k"], "w1_mag": ef["w1_mag"],
-    }
-    snaps.append((sim.t, fields))
-    if writer:
-        writer.write_snapshot(len(snaps) - 1, sim.t, fields)
 
 
 def warmup() -> dict:

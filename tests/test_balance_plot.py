@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 
-from solver import Parameters, RunOptions, simulate
+from solver import RunOptions, preset_parameters, simulate
 from sweep.studies.balance import phase_balance, plot_phase_balance
 
 
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    res = simulate(Parameters.preset("experiment", line_compliance=1.0), RunOptions(h=4.0, t_end=0.05,
+    res = simulate(preset_parameters("experiment", line_compliance=1.0), RunOptions(h=4.0, t_end=0.05,
                    snapshot_times=[], write_xdmf=False, newton_rtol=1e-10), out_dir=out)
     assert res.status == "ok", res.reason
     return out, res.timeseries

@@ -10,14 +10,14 @@ from solver.presets import measured_injection_velocity, preset_names, preset_par
 
 
 def test_paper_preset_is_the_defaults():
-    assert Parameters.preset("paper") == Parameters()
+    assert preset_parameters("paper") == Parameters()
 
 
 def test_experiment_rate_is_the_pump_rate_over_the_inlet_surface():
     # 100 mL/min = 1666.7 mm³/s through the lateral surface 2π · 5 mm · 1.96 mm = 61.58 mm²
     assert measured_injection_velocity() == pytest.approx(100e3 / 60 / (2 * math.pi * 5.0 * 1.96), rel=1e-15)
     assert round(measured_injection_velocity(), 2) == 27.07
-    p = Parameters.preset("experiment")
+    p = preset_parameters("experiment")
     assert p.w_i == measured_injection_velocity()
     assert (p.outer_saturation_bc, p.mu_outer_bc) == ("outflow", "zero_flux")
     assert preset_parameters("experiment", kbar=0.01).kbar == 0.01  # changes go on top
@@ -27,7 +27,7 @@ def test_experiment_rate_is_the_pump_rate_over_the_inlet_surface():
 
 def test_unknown_preset_names_the_allowed_ones():
     with pytest.raises(ValueError, match=r"preset 'lab' is not defined; allowed: \['paper', 'experiment'\]"):
-        Parameters.preset("lab")
+        preset_parameters("lab")
     assert preset_names() == ["paper", "experiment"]
 
 

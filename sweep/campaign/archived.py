@@ -27,7 +27,7 @@ def read_committed_table(campaign_dir):
         df = pd.read_csv(d / "table.csv")
     else:
         return None
-    from sweep.campaign.load import typed_frame
+    from sweep.campaign.columns import typed_frame
 
     return typed_frame(d, df) if len(df) else None
 

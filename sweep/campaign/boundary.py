@@ -56,8 +56,8 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field, fields
-from typing import Any, Mapping, Sequence
+from dataclasses import dataclass, fields
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -65,14 +65,14 @@ from scipy.spatial import cKDTree
 
 from sweep.regimes.regime_model import AxisScale, RegimeModel, boundary_band, boundary_uncertainty, fit_regime_model
 from sweep.campaign import replicate_sampler
+from sweep.campaign.boundary_picks import (COORD_DIGITS, MIN_SPACING, BoundaryState, axis_column, coord_key, picks,
+                                           point_coords, tol_coords)
 from sweep.campaign.sampler import Point, resolve_point
 from sweep.campaign.spec_model import CampaignSpec, SpecError, expand_block, round_sig
 
 __all__ = ["BoundarySettings", "BoundarySampler", "BoundaryState"]
 
-_COORD_DIGITS = 6        # significant digits of the chosen axis values (clean run keys)
 _N_CANDIDATES = 1024     # candidate points per round and per axis dimension (seeded)
-_MIN_SPACING = 0.5       # tolerance units between a new point and any sampled point
 
 
 @dataclass(frozen=True)
@@ -131,9 +131,7 @@ _CHECKS: dict[str, tuple] = {
 
 def parse_settings(settings: Mapping[str, Any]) -> BoundarySettings:
     """Validate the ``[sampler]`` table (without ``kind``); SpecError names ``sampler.<key>``."""
-    from sweep.campaign.replicate_sampler import split_settings
-
-    settings, _ = split_settings(settings)   # the replicate allocation's keys (sweep.campaign.replicate_sampler)
+    settings, _ = replicate_sampler.split_settings(settings)   # the replicate allocation's keys (sweep.campaign.replicate_sampler)
     allowed = [f.name for f in fields(BoundarySettings)]
     for k in settings:
         if k not in allowed:
@@ -160,40 +158,6 @@ class _Config:
     targets: tuple[str, ...]
     batch: int
     initial: tuple[tuple[float, ...], ...]
-
-
-@dataclass
-class BoundaryState:
-    """Where a boundary campaign stands (``sweep.campaign.boundary.BoundarySampler.state``)."""
-
-    rounds: list[list[tuple[float, ...]]]
-    labels: dict[tuple, str | None]
-    budget: int
-    stopped: bool = False
-    reason: str = ""
-    uncertainty: float = math.inf
-    pairs: dict[str, float] = field(default_factory=dict)
-    model: RegimeModel | None = None
-    pending: list[tuple[float, ...]] = field(default_factory=list)
-
-    @property
-    def runs_used(self) -> int:
-        return sum(len(r) for r in self.rounds)
-
-    def to_dict(self, axes: Sequence[AxisScale]) -> dict:
-        """JSON-able summary: round, runs used of the budget, uncertainty (tolerance units), why it
-        stopped, and every point in the order chosen with its round and label."""
-        names = [a.name for a in axes]
-        order = [{"order": i, "round": r, **dict(zip(names, c)), "label": self.labels.get(_key(c))}
-                 for i, (r, c) in enumerate((r, c) for r, rr in enumerate(self.rounds) for c in rr)]
-        return {"sampler": "boundary", "round": len(self.rounds), "runs_used": self.runs_used,
-                "budget": self.budget, "uncertainty": None if not math.isfinite(self.uncertainty) else self.uncertainty,
-                "uncertainty_by_pair": self.pairs, "stopped": self.stopped, "reason": self.reason,
-                "pending": len(self.pending), "points": order}
-
-
-def _key(coords) -> tuple:
-    return tuple(round_sig(float(v), 10) for v in coords)
 
 
 class BoundarySampler:
@@ -236,13 +200,13 @@ class BoundarySampler:
     def _initial_coords(s: BoundarySettings, axes, block) -> tuple:
         if s.initial == "grid":
             combos = expand_block(block)
-            return tuple(tuple(round_sig(float(c[(a.target, a.name)]), _COORD_DIGITS) for a in block.axes) for c in combos)
+            return tuple(tuple(round_sig(float(c[(a.target, a.name)]), COORD_DIGITS) for a in block.axes) for c in combos)
         # Latin hypercube drawn here, not by scipy.stats.qmc.LatinHypercube: the replay regenerates this design
         # from the seed to match the committed campaigns' runs, and scipy's draws other points for the same seed
         rng = np.random.default_rng([s.seed, 0])
         n, d = s.n_initial, len(axes)
         U = np.stack([(rng.permutation(n) + rng.uniform(size=n)) / n for _ in range(d)], axis=1) * 2.0 - 1.0
-        return tuple(_coords(axes, u) for u in U)
+        return tuple(point_coords(axes, u) for u in U)
 
     # -- the sampler interface ---------------------------------------------------------------
     def initial(self, spec: CampaignSpec) -> list[Point]:
@@ -257,8 +221,8 @@ class BoundarySampler:
         cfg = self._config(spec)
         st = self._replay(cfg, table)
         n0 = st.runs_used - len(st.rounds[-1])
-        last = {_key(c): i for i, c in enumerate(st.rounds[-1])}
-        return [self._point(spec, cfg, c, n0 + last[_key(c)]) for c in st.pending]
+        last = {coord_key(c): i for i, c in enumerate(st.rounds[-1])}
+        return [self._point(spec, cfg, c, n0 + last[coord_key(c)]) for c in st.pending]
 
     def state(self, spec: CampaignSpec, table) -> dict:
         """The campaign's standing as a JSON-able dict (see :meth:`BoundaryState.to_dict`)."""
@@ -293,7 +257,7 @@ class BoundarySampler:
     def _replay(self, cfg: _Config, table) -> BoundaryState:
         st = BoundaryState([list(cfg.initial)], _observations(table, cfg), cfg.settings.budget)
         while True:
-            st.pending = [c for c in st.rounds[-1] if _key(c) not in st.labels]
+            st.pending = [c for c in st.rounds[-1] if coord_key(c) not in st.labels]
             if st.pending:
                 return st
             dec = self._decide(cfg, st)
@@ -305,7 +269,7 @@ class BoundarySampler:
 
     def _decide(self, cfg: _Config, st: BoundaryState) -> dict:
         """Stop (with the reason) or the next batch, from the rounds so far (memoized)."""
-        sig = tuple((_key(c), st.labels.get(_key(c))) for r in st.rounds for c in r)
+        sig = tuple((coord_key(c), st.labels.get(coord_key(c))) for r in st.rounds for c in r)
         if sig in self._memo:
             return self._memo[sig]
         s = cfg.settings
@@ -326,7 +290,7 @@ class BoundarySampler:
             out["batch"] = _next_batch(cfg, model, pts, min(cfg.batch, s.budget - used), len(st.rounds),
                                        fill=s.fill_batch)
             if not out["batch"]:
-                out["stop"] = (f"resolution reached: no candidate farther than {_MIN_SPACING} tolerance from the "
+                out["stop"] = (f"resolution reached: no candidate farther than {MIN_SPACING} tolerance from the "
                                f"{used} sampled points (largest boundary half-width {unc['max']:.3g} tolerance)")
         self._memo[sig] = out
         return out
@@ -355,54 +319,39 @@ def _axis_scale(spec: CampaignSpec, a, tolerance) -> AxisScale:
     return AxisScale(a.name, lo, hi, a.scale == "log", tol)
 
 
-def _coords(axes, u) -> tuple[float, ...]:
-    return tuple(round_sig(float(a.from_u(np.clip(ui, -1.0, 1.0))), _COORD_DIGITS) for a, ui in zip(axes, u))
-
-
-def _column(table, name: str):
-    for c in (name, f"swept_{name}", f"param_{name}", f"opt_{name}"):
-        if c in table.columns:
-            return table[c]
-    raise SpecError(f"the campaign table has no column for axis {name!r}")
-
-
 def _observations(table, cfg: _Config) -> dict[tuple, str | None]:
     """{coordinates: label (None for a failed or unlabelled run)} of every run in the table."""
     out: dict[tuple, str | None] = {}
     if table is None or len(table) == 0:
         return out
-    cols = [_column(table, a.name).to_numpy() for a in cfg.axes]
+    cols = [axis_column(table, a.name).to_numpy() for a in cfg.axes]
     lab = cfg.settings.label
     labels = table[lab].to_numpy() if lab in table.columns else np.full(len(table), None)
     ok = table["status"].to_numpy() == "ok" if "status" in table.columns else np.ones(len(table), bool)
     for i in range(len(table)):
         v = labels[i]
         good = ok[i] and v is not None and not (isinstance(v, float) and math.isnan(v))
-        out[_key([c[i] for c in cols])] = str(v) if good else None
+        out[coord_key([c[i] for c in cols])] = str(v) if good else None
     return out
 
 
 def _labelled(st: BoundaryState):
-    pts = [c for r in st.rounds for c in r if st.labels.get(_key(c)) is not None]
-    return np.array(pts, float).reshape(len(pts), -1), [st.labels[_key(c)] for c in pts]
-
-
-def _tol_coords(axes, U) -> np.ndarray:
-    return U * np.array([a.tol_per_u for a in axes])
+    pts = [c for r in st.rounds for c in r if st.labels.get(coord_key(c)) is not None]
+    return np.array(pts, float).reshape(len(pts), -1), [st.labels[coord_key(c)] for c in pts]
 
 
 def _next_batch(cfg: _Config, model: RegimeModel | None, sampled, n: int, round_no: int, *,
                 fill: bool = False) -> list:
     """Up to n new points: the straddle score's best, each excluding the candidates within its band
-    (or, without a model, maximin space filling); none within _MIN_SPACING of a sampled point. With ``fill``,
-    a pass that ends short of n is redone with every exclusion radius halved (down to _MIN_SPACING), so
+    (or, without a model, maximin space filling); none within MIN_SPACING of a sampled point. With ``fill``,
+    a pass that ends short of n is redone with every exclusion radius halved (down to MIN_SPACING), so
     that the batch is full whenever enough candidates are left."""
     axes = cfg.axes
     d = len(axes)
     rng = np.random.default_rng([cfg.settings.seed, round_no])
     U = rng.uniform(-1.0, 1.0, size=(_N_CANDIDATES * d, d))
-    T = _tol_coords(axes, U)
-    S = _tol_coords(axes, np.stack([a.to_u(np.array(sampled)[:, j]) for j, a in enumerate(axes)], axis=1))
+    T = tol_coords(axes, U)
+    S = tol_coords(axes, np.stack([a.to_u(np.array(sampled)[:, j]) for j, a in enumerate(axes)], axis=1))
     dmin = np.min(np.linalg.norm(T[:, None, :] - S[None, :, :], axis=2), axis=1)
     band = boundary_band(model) if model is not None else {"U": np.empty((0, d))}
     score = half = None
@@ -410,35 +359,12 @@ def _next_batch(cfg: _Config, model: RegimeModel | None, sampled, n: int, round_
         # straddle, measured geometrically: the band's half-width at the nearest point of an estimated
         # boundary minus the distance to it (sd(g) away from the boundary also carries the slope's
         # scale, unidentified for separable labels, and a pair's zero line may lie where neither wins)
-        dist, j = cKDTree(_tol_coords(axes, band["U"])).query(T)
+        dist, j = cKDTree(tol_coords(axes, band["U"])).query(T)
         half = band["half"][j]
         score = half - dist
     shrink = 1.0
     while True:
-        out = _picks(U, T, dmin, score, half, n, shrink)
-        if not fill or len(out) >= n or score is None or shrink * max(float(half.max()), 1.0) <= _MIN_SPACING:
-            return [_coords(axes, U[i]) for i in out]
+        out = picks(U, T, dmin, score, half, n, shrink)
+        if not fill or len(out) >= n or score is None or shrink * max(float(half.max()), 1.0) <= MIN_SPACING:
+            return [point_coords(axes, U[i]) for i in out]
         shrink *= 0.5
-
-
-def _picks(U, T, dmin, score, half, n: int, shrink: float) -> list[int]:
-    """Indices of up to n candidates, best first (straddle ``score``, or maximin distance ``dmin`` without a
-    model); each pick excludes the candidates within its radius: ``shrink`` x its band half-width (at least
-    one tolerance, and at least _MIN_SPACING after shrinking), or _MIN_SPACING without a model."""
-    dmin = dmin.copy()
-    alive = dmin >= _MIN_SPACING
-    out: list[int] = []
-    for _ in range(n):
-        if not alive.any():
-            break
-        if score is None:
-            i = int(np.argmax(np.where(alive, dmin, -np.inf)))
-            radius = _MIN_SPACING
-        else:
-            i = int(np.argmax(np.where(alive, score, -np.inf)))
-            radius = max(shrink * max(float(half[i]), 1.0), _MIN_SPACING)
-        out.append(i)
-        di = np.linalg.norm(T - T[i], axis=1)
-        dmin = np.minimum(dmin, di)
-        alive &= di >= radius
-    return out

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import fields
+from pathlib import Path
 from typing import Any, Mapping
 
 __all__ = ["TABLE_COLUMNS", "column_info", "column_dictionary", "timeseries_dictionary", "typed_table",
-           "to_csv_frame", "arrow_schema", "LIST_DTYPES"]
+           "typed_frame", "to_csv_frame", "arrow_schema", "LIST_DTYPES"]
 
 LIST_DTYPES = ("list<float>", "list<string>")
 
@@ -264,3 +266,33 @@ def arrow_schema(df, dictionary):
     fields_ = [pa.field(str(c), kinds[info.get(c, {}).get("dtype", "string")], metadata=meta(c)) for c in df.columns]
     rows = [{k: (bool(v) if k == "swept" else str(v)) for k, v in r.items()} for r in dictionary.to_dict("records")]
     return pa.schema(fields_, metadata={"dchfrac.columns": json.dumps(rows), "dchfrac.units": "mm, s, kPa"})
+
+
+def typed_frame(d: Path, df):
+    """A campaign table read from folder ``d``, typed by its column dictionary; ``attrs``: campaign_dir, units."""
+    dictionary = _dictionary(d, df)
+    df = typed_table(_relative_run_dirs(df), dictionary)
+    df.attrs["campaign_dir"] = str(d)
+    df.attrs["units"] = {n: u for n, u in zip(dictionary["name"], dictionary["unit"]) if n in df.columns}
+    return df
+
+
+def _dictionary(d: Path, df):
+    """The column dictionary written beside the table, else the one made from the declarations."""
+    import pandas as pd
+
+    f = d / "columns.csv"
+    if f.is_file():
+        written = pd.read_csv(f, keep_default_na=False)
+        if set(df.columns) <= set(written["name"]):
+            return written
+    return column_dictionary(df)
+
+
+def _relative_run_dirs(df):
+    """Absolute run folders (tables written before run_dir became relative) -> ``runs/<key>``."""
+    if "run_dir" not in df.columns:
+        return df
+    df = df.copy()
+    df["run_dir"] = [f"runs/{Path(v).name}" if isinstance(v, str) and os.path.isabs(v) else v for v in df["run_dir"]]
+    return df

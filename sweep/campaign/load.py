@@ -13,7 +13,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["load_campaign", "load_timeseries", "campaign_dir"]
+from sweep.campaign.columns import typed_frame
+
+__all__ = ["load_campaign", "load_points", "load_timeseries", "campaign_dir"]
 
 
 def campaign_dir(source, root="results") -> Path:
@@ -40,16 +42,12 @@ def load_campaign(source, root="results", *, points: bool = False):
     Columns take their dictionary dtypes: Float64, Int64, boolean (NA for failed runs), string, and
     Python lists for list columns (``crack_tip_angles_deg``, ``snapshot_times``, ``blocks``).
     ``run_dir`` is relative to the campaign folder, which is ``df.attrs["campaign_dir"]``.
-    points : the per-point table of a campaign with replicates instead (``sweep.campaign.replicates.load_points``).
+    points : the per-point table of a campaign with replicates instead (:func:`load_points`).
     """
     import pandas as pd
 
     if points:
-        from sweep.campaign.replicates import load_points
-
         return load_points(source, root)
-    from sweep.campaign.columns import typed_table
-
     d = campaign_dir(source, root)
     if (d / "table.parquet").is_file():
         df = pd.read_parquet(d / "table.parquet")
@@ -68,37 +66,22 @@ def load_campaign(source, root="results", *, points: bool = False):
     return typed_frame(d, df)
 
 
-def typed_frame(d: Path, df):
-    """A campaign table read from folder ``d``, typed by its column dictionary; ``attrs``: campaign_dir, units."""
-    from sweep.campaign.columns import typed_table
-
-    dictionary = _dictionary(d, df)
-    df = typed_table(_relative_run_dirs(df), dictionary)
-    df.attrs["campaign_dir"] = str(d)
-    df.attrs["units"] = {n: u for n, u in zip(dictionary["name"], dictionary["unit"]) if n in df.columns}
-    return df
-
-
-def _dictionary(d: Path, df):
-    """The column dictionary written beside the table, else the one made from the declarations."""
+def load_points(source, root="results"):
+    """The per-point table of a campaign with replicates (``points.parquet``, else ``points.csv``; built from the
+    run table when neither is written). ``df.attrs["campaign_dir"]`` is the campaign folder."""
     import pandas as pd
 
-    from sweep.campaign.columns import column_dictionary
+    from sweep.campaign.replicates import point_table
 
-    f = d / "columns.csv"
-    if f.is_file():
-        written = pd.read_csv(f, keep_default_na=False)
-        if set(df.columns) <= set(written["name"]):
-            return written
-    return column_dictionary(df)
-
-
-def _relative_run_dirs(df):
-    """Absolute run folders (tables written before run_dir became relative) -> ``runs/<key>``."""
-    if "run_dir" not in df.columns:
-        return df
-    df = df.copy()
-    df["run_dir"] = [f"runs/{Path(v).name}" if isinstance(v, str) and os.path.isabs(v) else v for v in df["run_dir"]]
+    d = campaign_dir(source, root)
+    if (d / "points.parquet").is_file():
+        df = pd.read_parquet(d / "points.parquet")
+    elif (d / "points.csv").is_file():
+        df = pd.read_csv(d / "points.csv")
+    else:
+        table = load_campaign(source, root)
+        df = point_table(table, [n for n in _swept_names(d, table) if n not in ("seed", "mesh_seed")])
+    df.attrs["campaign_dir"] = str(d)
     return df
 
 

@@ -28,6 +28,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from sweep.campaign.boundary_picks import picks, point_coords, tol_coords
 from sweep.regimes.regime_model import AxisScale
 
 __all__ = ["ReplicateSettings", "decide_round", "point_counts"]
@@ -129,15 +130,13 @@ def _replicates(axes, counts, band, s: ReplicateSettings, n: int) -> list[tuple]
 def _new_points(axes, counts, band, n: int, seed: int, round_no: int) -> list[tuple]:
     """Up to n new coords: straddle score against the band (maximin without a band), spaced as the boundary
     sampler's picks."""
-    from sweep.campaign.boundary import _MIN_SPACING, _coords, _picks, _tol_coords
-
     if n <= 0:
         return []
     rng = np.random.default_rng([seed, round_no, 51])
     U = rng.uniform(-1.0, 1.0, size=(_N_CANDIDATES, 2))
-    T = _tol_coords(axes, U)
+    T = tol_coords(axes, U)
     sampled = np.array(list(counts), float)
-    S = _tol_coords(axes, np.stack([a.to_u(sampled[:, j]) for j, a in enumerate(axes)], axis=1))
+    S = tol_coords(axes, np.stack([a.to_u(sampled[:, j]) for j, a in enumerate(axes)], axis=1))
     dmin = np.min(np.linalg.norm(T[:, None, :] - S[None, :, :], axis=2), axis=1)
     score = half = None
     if band is not None:
@@ -147,5 +146,5 @@ def _new_points(axes, counts, band, n: int, seed: int, round_no: int) -> list[tu
         dist = np.abs(np.log10(y) - (math.log10(band.A) + band.B * x / math.log(10.0)))
         tol = axes[1].tolerance
         score, half = (hw - dist) / tol, hw / tol
-    picks = _picks(U, T, dmin, score, half, n, 1.0)
-    return [_coords(axes, U[i]) for i in picks]
+    chosen = picks(U, T, dmin, score, half, n, 1.0)
+    return [point_coords(axes, U[i]) for i in chosen]

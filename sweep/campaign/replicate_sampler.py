@@ -30,8 +30,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from sweep.campaign.boundary_picks import BoundaryState, axis_column, coord_key
 from sweep.campaign.replicate_allocation import ReplicateSettings, decide_round
-from sweep.campaign.spec_model import SpecError, round_sig
+from sweep.campaign.spec_model import SpecError
 
 __all__ = ["REPLICATE_SAMPLER_KEYS", "split_settings", "initial", "refine", "state", "replay"]
 
@@ -74,25 +75,19 @@ def _setup(sampler, spec):
     return cfg, rs, positive
 
 
-def _key(coords) -> tuple:
-    return tuple(round_sig(float(v), 10) for v in coords)
-
-
 def _observed(table, cfg, positive, base_seed: int) -> dict:
     """{(coords key, replicate): label (bool) or None for a failed run} of the table's runs."""
-    from sweep.campaign.boundary import _column
-
     out: dict = {}
     if table is None or len(table) == 0:
         return out
-    cols = [_column(table, a.name).to_numpy() for a in cfg.axes]
-    seeds = _column(table, "seed").to_numpy()
+    cols = [axis_column(table, a.name).to_numpy() for a in cfg.axes]
+    seeds = axis_column(table, "seed").to_numpy()
     lab = table[cfg.settings.label].to_numpy() if cfg.settings.label in table.columns else np.full(len(table), None)
     ok = table["status"].to_numpy() == "ok" if "status" in table.columns else np.ones(len(table), bool)
     for i in range(len(table)):
         v = lab[i]
         good = ok[i] and not _missing(v)
-        out[(_key([c[i] for c in cols]), int(seeds[i]) - base_seed)] = positive(v) if good else None
+        out[(coord_key([c[i] for c in cols]), int(seeds[i]) - base_seed)] = positive(v) if good else None
     return out
 
 
@@ -109,11 +104,11 @@ def _replay(sampler, spec, table) -> dict:
     seen = _observed(table, cfg, positive, base)
     rounds = [[(c, 0) for c in cfg.initial]]
     while True:
-        pending = [(c, r) for c, r in rounds[-1] if (_key(c), r) not in seen]
+        pending = [(c, r) for c, r in rounds[-1] if (coord_key(c), r) not in seen]
         if pending:
             return {"cfg": cfg, "rounds": rounds, "pending": pending, "stop": "", "decision": None}
-        runs = [(c, r, seen[(_key(c), r)]) for rr in rounds for c, r in rr]
-        sig = ("replicates", tuple((_key(c), r, v) for c, r, v in runs))   # memoized: each round is decided once
+        runs = [(c, r, seen[(coord_key(c), r)]) for rr in rounds for c, r in rr]
+        sig = ("replicates", tuple((coord_key(c), r, v) for c, r, v in runs))   # memoized: each round is decided once
         if sig not in sampler._memo:
             sampler._memo[sig] = decide_round(cfg.axes, runs, rs, batch=cfg.batch, budget=cfg.settings.budget,
                                               seed=cfg.settings.seed, round_no=len(rounds))
@@ -171,8 +166,6 @@ def replay(sampler, spec, table):
     """A ``BoundaryState`` for the boundary figure: the rounds' points (a point once per replicate), each point's
     majority label, and the boundary sampler's classifier fitted to every labelled run (replicates as repeated
     rows)."""
-    from sweep.campaign.boundary import BoundaryState, _column
-
     st = _replay(sampler, spec, table)
     cfg = st["cfg"]
     out = BoundaryState([[c for c, _ in rr] for rr in st["rounds"]], {}, cfg.settings.budget,
@@ -182,11 +175,11 @@ def replay(sampler, spec, table):
     ok = (table["status"] == "ok").to_numpy() if "status" in table.columns else np.ones(len(table), bool)
     lab = table[cfg.settings.label].to_numpy()
     keep = ok & np.array([not _missing(v) for v in lab])
-    X = np.stack([_column(table, a.name).to_numpy(float) for a in cfg.axes], axis=1)[keep]
+    X = np.stack([axis_column(table, a.name).to_numpy(float) for a in cfg.axes], axis=1)[keep]
     y = [str(v) for v in lab[keep]]
     votes: dict = {}
     for x, v in zip(X, y):
-        votes.setdefault(_key(x), []).append(v)
+        votes.setdefault(coord_key(x), []).append(v)
     out.labels = {k: max(set(v), key=v.count) for k, v in votes.items()}
     if len(set(y)) >= 2:
         out.model = sampler._fit(cfg, X, y)

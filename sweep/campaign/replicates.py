@@ -12,8 +12,8 @@ Spec::
 Each replicate is an ordinary run (its own key, record and folder), so resume, isolation and the loaders work
 as for any run, and replicate 0 is the run the point has without replicates (a campaign can gain replicates
 without rerunning it).  The table keeps one row per run; ``points.csv`` / ``points.parquet`` beside it hold one
-row per point (:func:`point_table`), with their units and meanings in ``points_columns.csv``; ``load_points``
-(or ``load_campaign(..., points=True)``) reads them.
+row per point (:func:`point_table`), with their units and meanings in ``points_columns.csv``;
+``sweep.campaign.load.load_points`` (or ``load_campaign(..., points=True)``) reads them.
 
 Units: those of the table (mm, s, kPa); probabilities dimensionless.
 """
@@ -29,7 +29,7 @@ import numpy as np
 from sweep.campaign.spec_model import SpecError
 
 __all__ = ["REPLICATE_KEYS", "check_replicates", "replicate_count", "expand_replicates", "point_table",
-           "write_points", "load_points", "CONTINUOUS_MEASURES"]
+           "write_points", "CONTINUOUS_MEASURES"]
 
 # replicate key -> (namespace, field it varies)
 REPLICATE_KEYS: dict[str, tuple[str, str]] = {"porosity_seed": ("params", "seed"),
@@ -231,24 +231,3 @@ def write_points(spec, table, store) -> list[Path]:
     pts.to_parquet(tmp, index=False)
     os.replace(tmp, pq)
     return [csv, pq]
-
-
-def load_points(source, root="results"):
-    """The per-point table of a campaign with replicates (``points.parquet``, else ``points.csv``; built from the
-    run table when neither is written). ``df.attrs["campaign_dir"]`` is the campaign folder."""
-    import pandas as pd
-
-    from sweep.campaign.load import campaign_dir, load_campaign
-
-    d = campaign_dir(source, root)
-    if (d / "points.parquet").is_file():
-        df = pd.read_parquet(d / "points.parquet")
-    elif (d / "points.csv").is_file():
-        df = pd.read_csv(d / "points.csv")
-    else:
-        from sweep.campaign.load import _swept_names
-
-        table = load_campaign(source, root)
-        df = point_table(table, [n for n in _swept_names(d, table) if n not in ("seed", "mesh_seed")])
-    df.attrs["campaign_dir"] = str(d)
-    return df

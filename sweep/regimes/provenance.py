@@ -15,7 +15,7 @@ import functools
 import subprocess
 from pathlib import Path
 
-from solver.codehash import SOLVER_DIR, code_hash, git_code_hash, source_hash
+from solver.codehash import SOLVER_DIR, code_hash, git_code_hash, hash_command, source_hash
 
 __all__ = ["CLASSIFIER_FILES", "classifier_code_hash", "git_hashes"]
 
@@ -52,22 +52,9 @@ def git_hashes(rev: str, repo=".") -> dict:
 
 
 def main(argv=None) -> int:
-    import argparse
-    import sys
-
-    ap = argparse.ArgumentParser(prog="python -m sweep.regimes.provenance", description=__doc__.split("\n")[0])
-    ap.add_argument("--git", metavar="REV", help="hash the sources at this git revision instead of this copy")
-    ap.add_argument("--repo", default=".", metavar="DIR", help="git checkout for --git (default: .)")
-    a = ap.parse_args(argv)
-    try:
-        hashes = git_hashes(a.git, a.repo) if a.git else {"code_hash": code_hash(),
-                                                          "classifier_hash": classifier_code_hash()}
-    except subprocess.CalledProcessError as e:
-        print(f"error: --git {a.git}: {e.stderr.decode(errors='replace').strip()}", file=sys.stderr)
-        return 2
-    for k, v in hashes.items():
-        print(f"{k} {v}")
-    return 0
+    return hash_command(argv, prog="python -m sweep.regimes.provenance", description=__doc__.split("\n")[0],
+                        current=lambda: {"code_hash": code_hash(), "classifier_hash": classifier_code_hash()},
+                        at_revision=git_hashes)
 
 
 if __name__ == "__main__":
