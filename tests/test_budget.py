@@ -2,6 +2,11 @@
 work, one line naming h, the estimate and the memory available), and the wall time on the path that will run."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 from solver import Parameters, RunOptions, budget, mesh
@@ -43,6 +48,26 @@ def test_run_that_cannot_fit_is_refused_in_one_line_before_any_work(tmp_path, mo
         from solver import simulate
 
         simulate(Parameters(), RunOptions(h=0.0001))
+
+
+#: libraries a refusal does not need (each takes a fraction of a second to a second or more to import)
+HEAVY = ("numba", "pypardiso", "scipy.sparse", "scipy.sparse.linalg", "scipy.spatial", "scipy.ndimage", "pandas",
+         "matplotlib")
+
+
+def test_the_refusal_comes_before_the_heavy_libraries_load(tmp_path):
+    """``dchfrac run --h 0.0001`` in a fresh interpreter: refused (exit 2, one line naming h, the estimate and the
+    memory available) with none of ``HEAVY`` imported, so that the answer is a fraction of a second of CPU."""
+    code = ("import sys\nfrom sweep.cli import main\nrc = main(sys.argv[1:])\n"
+            f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules) or 'none')\nsys.exit(rc)")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    r = subprocess.run([sys.executable, "-c", code, "run", "--out", str(tmp_path / "run"), "--h", "0.0001"],
+                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+    assert r.returncode == 2, r.stderr
+    err = r.stderr.strip()
+    assert err.count("\n") == 0 and "h=0.0001 cannot fit" in err and "nodes" in err and "available" in err, err
+    assert r.stdout.split() == ["none"], f"imported before the refusal: {r.stdout}"
+    assert not (tmp_path / "run").exists()
 
 
 def test_memory_estimate_grows_with_the_unknowns_and_refuses_against_the_available_memory(monkeypatch):
