@@ -113,3 +113,29 @@ def test_reference_rates_are_those_of_the_committed_bench_json():
                 assert it["backends"][ls]["newton_iteration_s"] == pytest.approx(t, rel=1e-3)
     assert bench["coupled_run_h2_wall_s_per_sim_s"] == pytest.approx(ref["reference_run_h2_wall_s_per_sim_s"], rel=1e-3)
     assert bench["per_run_overhead_s"] == pytest.approx(ref["per_run_overhead_s"], rel=1e-2)
+
+
+def test_campaign_dry_run_shows_each_mesh_size_budget_and_flags_the_runs_that_cannot_fit(tmp_path, monkeypatch, capsys):
+    """``campaign run --dry-run``: per distinct mesh, one run's nodes and peak memory against the memory available
+    (solver.budget), the runs' wall time on the calibrated path, the refused mesh (cannot fit) and the one that
+    cannot fit ``--jobs`` runs side by side; nothing is run or measured beyond the (faked) calibration."""
+    from solver.progress import format_duration
+    from sweep.campaign.cli import main as campaign_main
+
+    factor = 3.0
+    monkeypatch.setattr(budget, "calibration", lambda ls, kern: {"factor": factor})
+    monkeypatch.setattr(mesh, "annulus_mesh", _no_mesh)
+    mem4 = budget.memory_bytes(budget.N_FIELDS * budget.mesh_counts(4.0)[0], *budget._path())
+    monkeypatch.setattr(budget, "available_memory_bytes", lambda: 1.5 * mem4)  # one h = 4 run fits, two do not
+    spec = tmp_path / "c.toml"
+    spec.write_text('name = "c"\n[base]\nw_i = 10.0\n[options]\nt_end = 0.5\n[axes]\nh = [4.0, 0.01]\n'
+                    "cement = [1.0, 2.0]\n")
+    assert campaign_main(["run", str(spec), "--dry-run", "--jobs", "2", "--results", str(tmp_path / "res")]) == 0
+    out = capsys.readouterr().out
+    assert not (tmp_path / "res" / "c" / "runs").exists()
+    for h in (4.0, 0.01):
+        est = budget.estimate_run(Parameters(), RunOptions(h=h, t_end=0.5), calibrate=False)
+        wall = 2 * budget.wall_time_s(est.unknowns, 0.5, est.linear_solver, factor)
+        assert f"h = {h:g} mm: 2 run(s), each {est.nodes:,} nodes" in out and f"{format_duration(wall)} of wall" in out
+    assert "REFUSED: the 2 run(s) at h = 0.01 mm cannot fit" in out and "REFUSED: the 2 run(s) at h = 4 mm" not in out
+    assert "WARNING: 2 runs at h = 4 mm side by side" in out
