@@ -167,13 +167,13 @@ def _path() -> tuple[str, str]:
 def estimate_run(params, options, calibrate: bool = True) -> Estimate:
     """The :class:`Estimate` of a run of ``params`` (solver.Parameters) with ``options`` (solver.RunOptions) on the
     annulus, on the path that will run; ``calibrate=False`` leaves the wall time out (no measurement)."""
-    from . import linsolve
+    from .paths import resolve
 
     nodes, elements = mesh_counts(options.h, options.h_inner, options.inner_grading_length, options.h_outer,
                                   params.r_inner, params.r_outer)
     n = N_FIELDS * nodes
     _, kern = _path()
-    ls = linsolve.resolve(options.linear_solver, n)
+    ls = resolve(options.linear_solver, n)
     wall = wall_time_s(n, options.t_end, ls, calibration(ls, kern)["factor"]) if calibrate else None
     return Estimate(nodes, elements, n, memory_bytes(n, ls, kern), wall, available_memory_bytes(), ls, kern)
 

@@ -22,7 +22,6 @@ in the CSR data array; afterwards assembling a new Jacobian is one
 """
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import lru_cache
@@ -32,6 +31,7 @@ import scipy.sparse as sp
 
 from . import kernels
 from .ad import Dual
+from .paths import assembly_threads  # noqa: F401  (DCHFRAC_ASSEMBLY_THREADS)
 
 
 # --------------------------------------------------------------------------
@@ -367,22 +367,6 @@ def thread_chunks(n_elements: int, threads: int) -> tuple:
     chunking: every element is computed on its own."""
     k = threads * max(1, round(n_elements / (threads * THREAD_CHUNK_ELEMENTS)))
     return element_chunks(n_elements, -(-n_elements // k))
-
-
-def assembly_threads() -> int:
-    """Threads for element assembly: ``DCHFRAC_ASSEMBLY_THREADS`` if set, else 1.
-
-    numpy releases the GIL inside its array loops, so chunks assembled on two threads overlap
-    their arithmetic.  Campaigns run one solver per core and keep this at 1.
-    """
-    v = os.environ.get("DCHFRAC_ASSEMBLY_THREADS", "1")
-    try:
-        n = int(v)
-    except ValueError:
-        raise ValueError(f"DCHFRAC_ASSEMBLY_THREADS must be a positive integer, got {v!r}") from None
-    if n < 1:
-        raise ValueError(f"DCHFRAC_ASSEMBLY_THREADS must be a positive integer, got {n}")
-    return n
 
 
 @lru_cache(maxsize=None)

@@ -64,21 +64,15 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+# the backend choice lives in solver.paths (no scipy there); these names are re-exported
+from .paths import PARDISO_MIN_SIZE, available_backends, resolve, resolve_precision  # noqa: F401
 from .profiling import phase
 
 STATS = {"factorizations": 0}
 
-PRECISIONS = ("double", "single")
 #: the largest relative residual ||A x - b|| / ||b|| accepted from a solve with single-precision factors: the
 #: forcing term of the inexact Newton iteration, 300x below the contraction the Jacobian reuse accepts (0.3).
 SINGLE_FORCING = 1e-3
-
-
-def available_backends() -> list[str]:
-    """Installed backends (found without importing them: importing pypardiso loads MKL)."""
-    from importlib.util import find_spec
-
-    return ["superlu"] + (["pypardiso"] if find_spec("pypardiso") is not None else [])
 
 
 def _locate_mkl_rt() -> None:
@@ -101,57 +95,6 @@ def _locate_mkl_rt() -> None:
         if hits:
             os.environ["PYPARDISO_MKL_RT"] = hits[0]
             return
-
-
-#: below this many unknowns "auto" keeps SuperLU even when pypardiso is installed (there the
-#: difference is a few milliseconds; measured: h = 8 mm, 1,300 unknowns, both about 5 ms)
-PARDISO_MIN_SIZE = 2_000
-
-
-#: the environment variable that forces the backend "auto" picks (the fallback path: ``superlu``)
-ENV_VAR = "DCHFRAC_LINEAR_SOLVER"
-ENV_CHOICES = ("auto", "superlu", "pypardiso")
-
-
-def env_choice() -> str:
-    """``DCHFRAC_LINEAR_SOLVER`` (default ``auto``): what ``linear_solver = "auto"`` picks; ValueError naming
-    the variable when its value is not one of ``ENV_CHOICES`` or names a backend that is not installed."""
-    v = os.environ.get(ENV_VAR, "auto").strip().lower() or "auto"
-    if v not in ENV_CHOICES:
-        raise ValueError(f"{ENV_VAR}={v!r} is not allowed: one of {ENV_CHOICES}")
-    if v == "pypardiso" and "pypardiso" not in available_backends():
-        raise ValueError(f"{ENV_VAR}='pypardiso' but pypardiso is not installed (MKL wheels: x86_64 Linux and "
-                         "Windows)")
-    return v
-
-
-def resolve(kind: str, n: int | None = None) -> str:
-    """The backend that factorizes a matrix of ``n`` unknowns under the run option ``linear_solver = kind``:
-    ``"auto"`` is pypardiso when installed (and ``n`` >= ``PARDISO_MIN_SIZE``), else SuperLU, unless
-    ``DCHFRAC_LINEAR_SOLVER`` forces one."""
-    if kind == "auto":
-        forced = env_choice()
-        if forced != "auto":
-            return forced
-        if n is not None and n < PARDISO_MIN_SIZE:
-            return "superlu"
-        return "pypardiso" if "pypardiso" in available_backends() else "superlu"
-    if kind not in ("superlu", "pypardiso"):
-        raise ValueError(f"linear_solver={kind!r} is not one of ('auto', 'superlu', 'pypardiso')")
-    if kind == "pypardiso" and "pypardiso" not in available_backends():
-        raise ValueError("linear_solver='pypardiso' but pypardiso is not installed (MKL wheels: x86_64 Linux and Windows)")
-    return kind
-
-
-def resolve_precision(precision: str | None, kind: str) -> str:
-    """The factors' precision for the resolved backend ``kind``: ``precision`` when given, else (None) "single"
-    with PARDISO and "double" with SuperLU (whose single-precision factorization is slower than its double
-    one on the coupled Jacobian; results/archive/bench_rounds.md, sixth round)."""
-    if precision is None:
-        return "single" if kind == "pypardiso" else "double"
-    if precision not in PRECISIONS:
-        raise ValueError(f"linear_precision={precision!r} is not one of {PRECISIONS} or None")
-    return precision
 
 
 class _Factors:

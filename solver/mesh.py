@@ -68,7 +68,6 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import Delaunay
 
 
 class _FrozenDict(dict):
@@ -440,6 +439,8 @@ def _perturb(pts, free, local, h, seed):
 
 def _triangulate(p, inner, ri):
     """Delaunay triangles of p without those in the hole (centroid inside r_inner, or all nodes on it), ccw."""
+    from scipy.spatial import Delaunay  # here, not at the top: solver.budget reads this module's sizes only
+
     tri = Delaunay(p).simplices.astype(np.int64)
     c = p[tri].mean(axis=1)
     keep = (np.hypot(c[:, 0], c[:, 1]) > ri) & ~inner[tri].all(axis=1)

@@ -8,7 +8,7 @@ from numbers import Integral, Real
 
 import numpy as np
 
-from .linsolve import PRECISIONS
+from .paths import PRECISIONS
 from .plausible import did_you_mean, implausible, slip_message
 from .tomlio import read_toml, write_flat_toml
 
@@ -395,13 +395,13 @@ def check_environment() -> list[str]:
     backend, numba installed when asked for) and ``DCHFRAC_ASSEMBLY_THREADS`` (a positive integer) raise
     ValueError naming the variable, its value and what is allowed.  Returns warnings: a kernel cache
     (``DCHFRAC_CACHE``) that cannot be written, so that every run compiles its kernels again (about 20 s)."""
-    from . import fem, kernels
+    from . import kernels
     from .jitcache import cache_dir
     from .output import check_writable_dir
-    from .paths import check_environment as check_path_variables
+    from .paths import assembly_threads, check_environment as check_path_variables
 
     check_path_variables()  # DCHFRAC_KERNELS, DCHFRAC_LINEAR_SOLVER
-    fem.assembly_threads()
+    assembly_threads()
     if kernels.backend() != "numba":
         return []
     try:

@@ -11,8 +11,19 @@
 The public loaders::
 
     from sweep import load_campaign, load_timeseries, load_run
+
+They load on first use (``_LAZY``), so that the ``dchfrac`` command line does not import pandas before it needs it.
 """
-from .campaign.load import load_campaign, load_timeseries
-from .campaign.run_folder import load_run
+from importlib import import_module
+
+#: public name -> the submodule that defines it
+_LAZY = {"load_campaign": "campaign.load", "load_timeseries": "campaign.load", "load_run": "campaign.run_folder"}
+
+
+def __getattr__(name):
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(import_module(f".{_LAZY[name]}", __name__), name)
+
 
 __all__ = ["load_campaign", "load_timeseries", "load_run"]

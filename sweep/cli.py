@@ -127,13 +127,13 @@ def _check_run_out(out: str, force: bool) -> None:
 
 
 def cmd_run(args) -> int:
-    from solver import simulate
-
-    try:  # bad input: one clear line before any work
+    try:  # bad input: one clear line before any work (and before the solver's libraries load)
         params, options, warnings = _run_inputs(args)
     except ValueError as exc:
         print(f"dchfrac run: {exc}", file=sys.stderr)
         return 2
+    from solver import simulate
+
     for w in warnings:
         LOG.warning("dchfrac run: warning: %s", w)
     if LOG.isEnabledFor(logging.INFO):
@@ -492,9 +492,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=cmd_report)
     from .campaign.cli import add_campaign_commands
     from .discrepancy.cli import add_discrepancy_commands
-    from .studies.closure import add_closure_command
-    from .studies.cracks import add_cracks_command
-    from .studies.protocols import add_judge_command
+    from .studies.commands import add_closure_command, add_cracks_command, add_judge_command
 
     add_campaign_commands(sub)
     add_judge_command(sub)

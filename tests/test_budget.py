@@ -2,6 +2,11 @@
 work, one line naming h, the estimate and the memory available), and the wall time on the path that will run."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 from solver import Parameters, RunOptions, budget, mesh
@@ -43,6 +48,26 @@ def test_run_that_cannot_fit_is_refused_in_one_line_before_any_work(tmp_path, mo
         from solver import simulate
 
         simulate(Parameters(), RunOptions(h=0.0001))
+
+
+#: libraries a refusal does not need (each takes a fraction of a second to a second or more to import)
+HEAVY = ("numba", "pypardiso", "scipy.sparse", "scipy.sparse.linalg", "scipy.spatial", "scipy.ndimage", "pandas",
+         "matplotlib")
+
+
+def test_the_refusal_comes_before_the_heavy_libraries_load(tmp_path):
+    """``dchfrac run --h 0.0001`` in a fresh interpreter: refused (exit 2, one line naming h, the estimate and the
+    memory available) with none of ``HEAVY`` imported, so that the answer is a fraction of a second of CPU."""
+    code = ("import sys\nfrom sweep.cli import main\nrc = main(sys.argv[1:])\n"
+            f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules) or 'none')\nsys.exit(rc)")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    r = subprocess.run([sys.executable, "-c", code, "run", "--out", str(tmp_path / "run"), "--h", "0.0001"],
+                       capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
+    assert r.returncode == 2, r.stderr
+    err = r.stderr.strip()
+    assert err.count("\n") == 0 and "h=0.0001 cannot fit" in err and "nodes" in err and "available" in err, err
+    assert r.stdout.split() == ["none"], f"imported before the refusal: {r.stdout}"
+    assert not (tmp_path / "run").exists()
 
 
 def test_memory_estimate_grows_with_the_unknowns_and_refuses_against_the_available_memory(monkeypatch):
@@ -88,3 +113,29 @@ def test_reference_rates_are_those_of_the_committed_bench_json():
                 assert it["backends"][ls]["newton_iteration_s"] == pytest.approx(t, rel=1e-3)
     assert bench["coupled_run_h2_wall_s_per_sim_s"] == pytest.approx(ref["reference_run_h2_wall_s_per_sim_s"], rel=1e-3)
     assert bench["per_run_overhead_s"] == pytest.approx(ref["per_run_overhead_s"], rel=1e-2)
+
+
+def test_campaign_dry_run_shows_each_mesh_size_budget_and_flags_the_runs_that_cannot_fit(tmp_path, monkeypatch, capsys):
+    """``campaign run --dry-run``: per distinct mesh, one run's nodes and peak memory against the memory available
+    (solver.budget), the runs' wall time on the calibrated path, the refused mesh (cannot fit) and the one that
+    cannot fit ``--jobs`` runs side by side; nothing is run or measured beyond the (faked) calibration."""
+    from solver.progress import format_duration
+    from sweep.campaign.cli import main as campaign_main
+
+    factor = 3.0
+    monkeypatch.setattr(budget, "calibration", lambda ls, kern: {"factor": factor})
+    monkeypatch.setattr(mesh, "annulus_mesh", _no_mesh)
+    mem4 = budget.memory_bytes(budget.N_FIELDS * budget.mesh_counts(4.0)[0], *budget._path())
+    monkeypatch.setattr(budget, "available_memory_bytes", lambda: 1.5 * mem4)  # one h = 4 run fits, two do not
+    spec = tmp_path / "c.toml"
+    spec.write_text('name = "c"\n[base]\nw_i = 10.0\n[options]\nt_end = 0.5\n[axes]\nh = [4.0, 0.01]\n'
+                    "cement = [1.0, 2.0]\n")
+    assert campaign_main(["run", str(spec), "--dry-run", "--jobs", "2", "--results", str(tmp_path / "res")]) == 0
+    out = capsys.readouterr().out
+    assert not (tmp_path / "res" / "c" / "runs").exists()
+    for h in (4.0, 0.01):
+        est = budget.estimate_run(Parameters(), RunOptions(h=h, t_end=0.5), calibrate=False)
+        wall = 2 * budget.wall_time_s(est.unknowns, 0.5, est.linear_solver, factor)
+        assert f"h = {h:g} mm: 2 run(s), each {est.nodes:,} nodes" in out and f"{format_duration(wall)} of wall" in out
+    assert "REFUSED: the 2 run(s) at h = 0.01 mm cannot fit" in out and "REFUSED: the 2 run(s) at h = 4 mm" not in out
+    assert "WARNING: 2 runs at h = 4 mm side by side" in out

@@ -240,9 +240,29 @@ def _print_estimate(spec, est, jobs: int, results) -> None:
               f"{est['shared_run_factor_source']})")
     print(f"estimated cost of the {est['runs_to_do']} run(s) to do: {_fmt_s(est['cpu_s'])} CPU, about "
           f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s)")
+    _print_budget(est.get("budget", []), jobs)
     if any(d["source"] == "default" for d in est["by_mesh_size"].values()):
         print(f"  (no {results}/bench/bench.json: default {DEFAULT_WALL_S_PER_SIM_S_H2:g} wall s per "
               f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")
+
+
+def _print_budget(groups, jobs: int) -> None:
+    """The dry run's lines of solver.budget: per distinct mesh, one run's nodes and peak memory against the memory
+    available, the runs' wall time alone (calibrated on this machine, on the path that will run), and the runs
+    that would be refused (cannot fit) or cannot fit ``jobs`` at a time."""
+    if not groups:
+        return
+    print("per run (solver.budget: the path that will run, wall time calibrated on this machine):")
+    for g in groups:
+        est = g["estimate"]
+        wall = "" if g["wall_s"] is None else f"; {_fmt_s(g['wall_s'])} of wall time alone for the {g['runs']} run(s)"
+        print(f"  h = {g['h']:g} mm: {g['runs']} run(s), each {est.line()}{wall}")
+        if g["refused"]:
+            print(f"  REFUSED: the {g['runs']} run(s) at h = {g['h']:g} mm cannot fit in memory (solver.simulate "
+                  "refuses them; allowed: a coarser h)")
+        elif g["side_by_side"]:
+            print(f"  WARNING: {jobs} runs at h = {g['h']:g} mm side by side need about "
+                  f"{jobs * est.memory_bytes / 1e9:.3g} GB, more than is available (allowed: fewer --jobs)")
 
 
 @_guarded
@@ -259,7 +279,7 @@ def cmd_run(args) -> int:
                              + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
     jobs = args.jobs or int(spec.run.get("jobs", 1))
     est = estimate_cost(spec, args.results, jobs=max(1, jobs), retry_failed=args.retry_failed,
-                        rerun_stale=args.rerun_stale, rerun_archived=args.rerun_archived)
+                        rerun_stale=args.rerun_stale, rerun_archived=args.rerun_archived, budget=args.dry_run)
     if args.dry_run:
         _print_estimate(spec, est, jobs, args.results)
         for w in _input_warnings(spec):

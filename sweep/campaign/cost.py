@@ -1,6 +1,7 @@
 """The dry run's cost estimate of a campaign's runs to do (wall seconds), from ``dchfrac bench`` figures.
 
     estimate_cost("campaigns/examples/demo.toml", jobs=2)     # {"cpu_s": ..., "wall_s": ..., "by_mesh_size": ...}
+    run_budgets(todo_points, jobs=2)     # solver.budget's memory and wall time per run, per distinct mesh
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from typing import Any, Mapping
 from sweep.campaign.paths import DEFAULT_ROOT, results_root
 from sweep.campaign.plan import _todo, as_spec, plan_campaign
 
-__all__ = ["estimate_cost", "wall_per_sim_second", "per_run_overhead", "shared_run_factor", "estimated_sim_time",
+__all__ = ["estimate_cost", "run_budgets", "wall_per_sim_second", "per_run_overhead", "shared_run_factor", "estimated_sim_time",
            "DEFAULT_WALL_S_PER_SIM_S_H2", "COST_MESH_EXPONENT", "DEFAULT_PER_RUN_OVERHEAD_S",
            "DEFAULT_SHARED_RUN_FACTOR"]
 
@@ -96,15 +97,52 @@ def estimated_sim_time(params: Mapping[str, Any], options: Mapping[str, Any]) ->
     return min(t_end, phi * (r_stop**2 - r_i**2) / (2.0 * r_i * w_i))
 
 
+#: the run options and parameters that set a run's mesh and linear solver, hence its memory (solver.budget)
+_MESH_KEYS = (("options", "h"), ("options", "h_inner"), ("options", "inner_grading_length"), ("options", "h_outer"),
+              ("params", "r_inner"), ("params", "r_outer"), ("options", "linear_solver"))
+
+
+def run_budgets(points, jobs: int = 1, calibrate: bool = True) -> list[dict]:
+    """:mod:`solver.budget`'s estimate of the runs ``points`` (campaign points with ``params`` and ``options``),
+    one entry per distinct mesh (``_MESH_KEYS``), in order of h: {"h" (mm), "runs", "estimate" (the
+    :class:`solver.budget.Estimate` of one run: nodes, peak memory, memory available, path), "wall_s" (s: the runs' wall times alone, each to
+    its :func:`estimated_sim_time`, on the path that will run, calibrated on this machine; None without
+    ``calibrate``), "refused" (the runs cannot fit: solver.simulate refuses them), "side_by_side" (``jobs`` runs
+    at once cannot fit)}."""
+    from solver import Parameters, RunOptions
+    from solver.budget import calibration, estimate_run, wall_time_s
+
+    groups: dict[tuple, dict] = {}
+    for p in points:
+        key = tuple(repr(getattr(p, part).get(name)) for part, name in _MESH_KEYS)
+        g = groups.get(key)
+        if g is None:
+            params, options = Parameters.from_dict(p.params), RunOptions.from_dict(p.options)
+            est = estimate_run(params, options, calibrate=False)
+            factor = calibration(est.linear_solver, est.kernels)["factor"] if calibrate else None
+            g = groups[key] = {"h": options.h, "runs": 0, "estimate": est, "factor": factor,
+                               "wall_s": 0.0 if calibrate else None, "refused": not est.fits(),
+                               "side_by_side": est.available_bytes is not None
+                               and jobs * est.memory_bytes > est.available_bytes}
+        g["runs"] += 1
+        if calibrate:
+            est = g["estimate"]
+            g["wall_s"] += wall_time_s(est.unknowns, estimated_sim_time(p.params, p.options), est.linear_solver,
+                                       g["factor"])
+    return sorted(groups.values(), key=lambda g: -g["h"])
+
+
 def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | None = None,
-                  retry_failed: bool = False, rerun_stale: bool = False, rerun_archived: bool = False) -> dict:
+                  retry_failed: bool = False, rerun_stale: bool = False, rerun_archived: bool = False,
+                  budget: bool = False) -> dict:
     """Grid size and estimated wall time (s) of the runs to do (pending, damaged, stale unless
     ``rerun_stale``, failed with ``retry_failed``, archived with ``rerun_archived``) of a campaign on ``jobs`` workers.
 
     Per run: :func:`per_run_overhead` plus :func:`wall_per_sim_second` (bench figures or the documented
     default) times :func:`shared_run_factor` (a run beside others is slower than alone) times
     :func:`estimated_sim_time`; the sum divided by ``jobs`` (perfect packing: a lower bound of the wall time
-    when runs differ much in cost). Failed runs count only with ``retry_failed``.
+    when runs differ much in cost). Failed runs count only with ``retry_failed``.  With ``budget``, also
+    ``"budget"``: :func:`run_budgets` of the runs to do (memory, refusals, calibrated wall time).
     """
     spec = as_spec(spec)
     root = results_root(spec, root)
@@ -147,4 +185,5 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
         "per_run_overhead_source": overhead_src,
         "shared_run_factor": shared,
         "shared_run_factor_source": shared_src,
+        **({"budget": run_budgets([p for p, _ in todo], jobs)} if budget else {}),
     }

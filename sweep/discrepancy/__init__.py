@@ -6,14 +6,23 @@
          dchfrac discrepancy run --measured DIR --model SPEC --out DIR
 
 How a run goes through the code (stages in workflow.py, pieces in their modules): results/discrepancy/DESIGN_NOTES.md.
+The names load on first use (``_LAZY``): the ``dchfrac`` parser adds the discrepancy commands without importing the
+workflow.
 """
-from .cli import add_discrepancy_commands
-from .data import OBSERVABLES, MeasuredData, load_measured, write_measured
-from .forward import ForwardModel, SolverForward
-from .spec import DiscrepancySpec, load_spec, spec_from_dict
-from .toy import ToyForward
-from .twin import make_twin
-from .workflow import VERDICTS, run_workflow
+from importlib import import_module
+
+#: public name -> the submodule that defines it
+_LAZY = {"add_discrepancy_commands": "cli", "OBSERVABLES": "data", "MeasuredData": "data", "load_measured": "data",
+         "write_measured": "data", "ForwardModel": "forward", "SolverForward": "forward", "DiscrepancySpec": "spec",
+         "load_spec": "spec", "spec_from_dict": "spec", "ToyForward": "toy", "make_twin": "twin",
+         "VERDICTS": "workflow", "run_workflow": "workflow"}
+
+
+def __getattr__(name):
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(import_module(f".{_LAZY[name]}", __name__), name)
+
 
 __all__ = ["add_discrepancy_commands", "OBSERVABLES", "MeasuredData", "load_measured", "write_measured",
            "ForwardModel", "SolverForward", "DiscrepancySpec", "load_spec", "spec_from_dict", "ToyForward",

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -71,15 +72,19 @@ class MeasuredData:
     def condition_params(self, cid: str) -> dict:
         """Parameter overrides of condition ``cid`` (NaN cells dropped; integer parameters such as ``seed``
         as int, whatever dtype their column took; other numbers as float)."""
+        return dict(self._condition_params[cid])
+
+    @cached_property
+    def _condition_params(self) -> dict:
+        """{condition id: its parameter overrides}, read once (every forward prediction asks for them)."""
         from solver.params import integer_fields
 
         ints = integer_fields()
         out = {}
-        for k in self.conditions.columns:
-            v = _py(self.conditions.at[cid, k])
-            if isinstance(v, float) and math.isnan(v):
-                continue
-            out[k] = int(v) if k in ints else v
+        for cid, row in zip(self.conditions.index, self.conditions.itertuples(index=False, name=None)):
+            vals = {k: _py(v) for k, v in zip(self.conditions.columns, row)}
+            out[cid] = {k: int(v) if k in ints else v for k, v in vals.items()
+                        if not (isinstance(v, float) and math.isnan(v))}
         return out
 
     def subset(self, ids) -> "MeasuredData":
@@ -125,9 +130,9 @@ def _read_csv(path: Path) -> pd.DataFrame:
         _err(path, None, None, f"cannot be read as CSV ({exc})")
 
 
-def _num(path, df, i, col, *, allow_empty=False):
-    s = str(df.at[i, col]).strip()
-    line = i + 2
+def _num(path, line, col, cell, *, allow_empty=False):
+    """The number in ``cell`` (the text of column ``col`` on line ``line`` of the CSV file ``path``)."""
+    s = str(cell).strip()
     if s == "":
         if allow_empty:
             return float("nan")
@@ -141,11 +146,11 @@ def _num(path, df, i, col, *, allow_empty=False):
     return v
 
 
-def _integer(path, df, i, col) -> int:
+def _integer(path, line, col, cell) -> int:
     """An integer cell (e.g. ``seed``): 3 or 3.0, not 3.5."""
-    v = _num(path, df, i, col)
+    v = _num(path, line, col, cell)
     if not v.is_integer():
-        _err(path, i + 2, col, f"{df.at[i, col]!r} is not an integer (allowed: an integer, e.g. 3)")
+        _err(path, line, col, f"{cell!r} is not an integer (allowed: an integer, e.g. 3)")
     return int(v)
 
 
@@ -209,9 +214,9 @@ def _condition_row(cpath: Path, cdf: pd.DataFrame, i: int) -> dict:
         elif col in text_fields():
             rec[col] = s
         elif col in integer_fields():
-            rec[col] = _integer(cpath, cdf, i, col)
+            rec[col] = _integer(cpath, i + 2, col, cdf.at[i, col])
         else:
-            rec[col] = _num(cpath, cdf, i, col)
+            rec[col] = _num(cpath, i + 2, col, cdf.at[i, col])
     return rec
 
 
@@ -221,34 +226,34 @@ def _read_observations(opath: Path, odf: pd.DataFrame, ids: list) -> tuple[pd.Da
         if col not in odf.columns:
             _err(opath, 1, col, f"missing column (required: {list(OBS_COLUMNS)})")
     recs, regimes = [], {}
-    for i in range(len(odf)):
+    for i, row in enumerate(odf.to_dict("records")):  # plain dicts: a cell of a DataFrame costs microseconds
         line = i + 2
-        cid = str(odf.at[i, "condition"]).strip()
+        cid = str(row["condition"]).strip()
         if cid not in ids:
             _err(opath, line, "condition", f"unknown condition {cid!r} (not an id of conditions.csv)")
-        obs = str(odf.at[i, "observable"]).strip()
+        obs = str(row["observable"]).strip()
         if obs not in OBSERVABLES:
             _err(opath, line, "observable", f"unknown observable {obs!r} (allowed: {list(OBSERVABLES)})")
-        t = _num(opath, odf, i, "time")
+        t = _num(opath, line, "time", row["time"])
         if t < 0:
             _err(opath, line, "time", f"negative time {t} s")
         if obs == "regime":
-            label = str(odf.at[i, "value"]).strip()
+            label = str(row["value"]).strip()
             if label == "" or label.lower() == "nan":
                 _err(opath, line, "value", "empty regime label")
             if cid in regimes:
                 _err(opath, line, "observable", f"second regime observation for condition {cid!r}")
             regimes[cid] = (t, label)
             continue
-        recs.append((cid, obs, t, *_value_and_uncertainty(opath, odf, i, obs)))
+        recs.append((cid, obs, t, *_value_and_uncertainty(opath, row, line, obs)))
     return pd.DataFrame(recs, columns=list(OBS_COLUMNS)), regimes
 
 
-def _value_and_uncertainty(opath: Path, odf: pd.DataFrame, i: int, obs: str) -> tuple[float, float]:
-    """Value and uncertainty (> 0) of a curve observation; a length may not be negative beyond its noise."""
-    line = i + 2
-    v = _num(opath, odf, i, "value")
-    u = _num(opath, odf, i, "uncertainty")
+def _value_and_uncertainty(opath: Path, row: dict, line: int, obs: str) -> tuple[float, float]:
+    """Value and uncertainty (> 0) of a curve observation (``row``: line ``line`` of observations.csv); a length
+    may not be negative beyond its noise."""
+    v = _num(opath, line, "value", row["value"])
+    u = _num(opath, line, "uncertainty", row["uncertainty"])
     if u < 0:
         _err(opath, line, "uncertainty", f"negative uncertainty {u}")
     if u == 0:

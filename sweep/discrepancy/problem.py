@@ -102,6 +102,7 @@ class Problem:
         uniq = {k: i for i, k in enumerate(dict.fromkeys(keys))}
         self.series = np.array([uniq[k] for k in keys], int)
         self.series_names = [f"{a}/{b}" for a, b in uniq]
+        self._series_rows = {k: np.flatnonzero(self.series == i) for k, i in uniq.items()}  # curve rows, in order
         self.layout = CurveLayout(self.series, self.obs, self.t)
         self.times = data.observation_times()
         y = c.value.to_numpy(float)
@@ -143,19 +144,16 @@ class Problem:
 
     def model_vector(self, pred: dict, mask: np.ndarray) -> np.ndarray:
         """Predicted values aligned with the curve rows selected by ``mask``."""
-        m = np.full(int(mask.sum()), np.nan)
-        rows = np.flatnonzero(mask)
-        pos = {r: i for i, r in enumerate(rows)}
+        full = np.full(self.cond.size, np.nan)
         for cid in np.unique(self.cond[mask]):
             for obs in CURVES:
-                sel = np.flatnonzero((self.cond == cid) & (self.obs == obs) & mask)
-                if sel.size == 0:
+                rows = self._series_rows.get((cid, obs))
+                if rows is None or not mask[rows].any():
                     continue
                 v = np.asarray(pred[cid][obs], float)
-                allrows = np.flatnonzero((self.cond == cid) & (self.obs == obs))
-                vv = dict(zip(allrows, v))
-                m[[pos[r] for r in sel]] = [vv[r] for r in sel]
-        return m
+                n = min(rows.size, v.size)  # the prediction at the series' observation times, in row order
+                full[rows[:n]] = v[:n]
+        return full[mask]
 
     def standardize(self, diff: np.ndarray, mask: np.ndarray, nan_value: float) -> np.ndarray:
         """Standardized residuals of ``diff`` (data − model) on ``mask``'s rows: :meth:`NoiseModel.standardize`."""

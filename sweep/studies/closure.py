@@ -26,8 +26,7 @@ import pandas as pd
 from solver.output import atomic_write_text
 from sweep.regimes.classify import list_snapshots
 
-__all__ = ["RADII", "WALL", "series_row", "ring_profiles", "run_summary", "campaign_summaries", "to_markdown",
-           "add_closure_command"]
+__all__ = ["RADII", "WALL", "series_row", "ring_profiles", "run_summary", "campaign_summaries", "to_markdown"]
 
 RADII = (6.0, 10.0, 20.0, 30.0, 40.0, 45.0)   # mm, ring centres (half-width 1 mm)
 WALL = ((3.0, 0.5), (1.0, 0.5), (0.2, 0.1))   # mm inside r_o: ring centres near the wall and their half-widths
@@ -133,14 +132,3 @@ def cmd_closure(a) -> int:
     if a.md:
         atomic_write_text(a.md, to_markdown(runs))
     return 0
-
-
-def add_closure_command(subparsers):
-    """``dchfrac closure CAMPAIGN_DIR --out F.json [--md F.md]``."""
-    c = subparsers.add_parser("closure", help="the closing probes' per-run quantities (crack, p_inj, outflow, rings)",
-                              description=__doc__.split("\n\n")[0])
-    c.add_argument("campaign_dir", type=Path, help="the campaign's store folder (with runs/)")
-    c.add_argument("--out", type=Path, required=True, help="JSON, one entry per ok run")
-    c.add_argument("--md", type=Path, help="Markdown tables")
-    c.set_defaults(func=cmd_closure)
-    return c

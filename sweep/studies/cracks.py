@@ -36,7 +36,7 @@ from sweep.regimes.classify import classify_fields, list_snapshots, longest_open
 from sweep.studies.threshold_sensitivity import ThresholdGrid, separatrix_grid, to_markdown
 
 __all__ = ["PHI_OPEN", "L_MIN", "snapshot_row", "run_history", "summary", "summary_markdown",
-           "longest_from_snapshots", "longest_from_steps", "longest_crack_separatrix", "add_cracks_command"]
+           "longest_from_snapshots", "longest_from_steps", "longest_crack_separatrix"]
 
 PHI_OPEN = (0.95, 0.99, 0.995)
 L_MIN = 4.0  # mm, the boundary campaigns' threshold
@@ -201,22 +201,3 @@ def cmd_separatrix(a) -> int:
     if a.md:
         atomic_write_text(a.md, md)
     return 0
-
-
-def add_cracks_command(subparsers):
-    """``dchfrac cracks history|separatrix ...`` (see the module docstring)."""
-    c = subparsers.add_parser("cracks", help="the crack over a run's life: per-snapshot history, longest-crack separatrix")
-    sub = c.add_subparsers(dest="cracks_command", required=True)
-    h = sub.add_parser("history", help="the classifier's crack at every snapshot of a campaign's runs (CSV)")
-    h.add_argument("campaign_dir", type=Path, help="the campaign's store folder (with runs/)")
-    h.add_argument("--out", type=Path, required=True, help="CSV, one row per snapshot (rows of pruned runs kept)")
-    h.add_argument("--summary", type=Path, help="also write the per-run summary (Markdown)")
-    h.set_defaults(func=cmd_history)
-    s = sub.add_parser("separatrix", help="the Ca*-C separatrix with each run labelled by its longest crack")
-    s.add_argument("folder", type=Path, help="a boundary campaign's results folder (runs/, crack_history.csv)")
-    s.add_argument("--table", type=Path, help="the campaign's table.csv (default FOLDER/table.csv)")
-    s.add_argument("--l-min", type=float, nargs="+", required=True, help="crack lengths L_min (mm)")
-    s.add_argument("--out", type=Path, required=True)
-    s.add_argument("--md", type=Path)
-    s.set_defaults(func=cmd_separatrix)
-    return c

@@ -24,8 +24,9 @@ import pandas as pd
 
 from sweep.campaign.load import load_campaign
 from sweep.studies import label_agreement as la
+from sweep.studies.commands import PROTOCOL_NAMES
 
-__all__ = ["PROTOCOLS", "judge_draws", "judge_pockets", "judge_pockets_tip", "crack_map", "add_judge_command"]
+__all__ = ["PROTOCOLS", "judge_draws", "judge_pockets", "judge_pockets_tip", "crack_map"]
 
 DRAWS_L, DRAWS_SCAN = 4.0, (2.0, 3.0, 4.0, 5.0, 6.0)  # mm: the draws campaign's [classify] min_crack_length, scan
 POCKETS_L, POCKETS_SCAN = 4.0, (2.0, 3.0, 4.0, 5.0, 6.0)  # mm
@@ -138,7 +139,8 @@ def _run_pockets_tip(a) -> dict:
     return judge_pockets_tip(ok_runs(a.campaign_dir))
 
 
-PROTOCOLS = {"draws": _run_draws, "pockets": _run_pockets, "pockets_tip": _run_pockets_tip}
+#: what each protocol of ``dchfrac judge`` (sweep.studies.commands.PROTOCOL_NAMES) runs
+PROTOCOLS = dict(zip(PROTOCOL_NAMES, (_run_draws, _run_pockets, _run_pockets_tip)))
 
 
 def cmd_judge(a) -> int:
@@ -154,17 +156,3 @@ def cmd_judge(a) -> int:
             return 2
     la.report(PROTOCOLS[a.protocol](a), a.out)
     return 0
-
-
-def add_judge_command(subparsers):
-    """``dchfrac judge PROTOCOL CAMPAIGN_DIR [SECOND_DIR]``: a boundary line's declared judging protocol."""
-    j = subparsers.add_parser("judge", help="judge a boundary line by its declared protocol (summary.json, figures)",
-                              description=__doc__.split("\n\n")[0])
-    j.add_argument("protocol", choices=sorted(PROTOCOLS))
-    j.add_argument("campaign_dir", type=Path, help="the campaign folder (results/<name>/ or the store's)")
-    j.add_argument("second_dir", type=Path, nargs="?", help="pockets only: the mesh stage's campaign folder")
-    j.add_argument("--out", type=Path, help="summary JSON (also printed)")
-    j.add_argument("--figure", type=Path, help="PNG: the labels per realization and the share fracturing")
-    j.add_argument("--crack-map", type=Path, help="pockets: PNG of the crack length over the Ca*-C plane per mesh")
-    j.set_defaults(func=cmd_judge)
-    return j
