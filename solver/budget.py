@@ -192,7 +192,7 @@ def check_fits(params, options) -> Estimate:
 def _measure_iteration(h: float = 2.0) -> float:
     """Best wall time (s) of one Newton iteration (assembly, factorization, solve) at mesh size h (mm) on the
     active path, after one warm-up iteration (compilation, symbolic analysis)."""
-    from . import linsolve
+    from . import linsolve, paths
     from .mesh import annulus_mesh
     from .model import build_discretization, residual_and_jacobian, step_data
     from .params import Parameters
@@ -203,8 +203,8 @@ def _measure_iteration(h: float = 2.0) -> float:
     disc = build_discretization(mesh, p, initial_porosity(mesh, p))
     U = np.zeros((disc.n_nodes, disc.n_fields))
     data = step_data(disc, p, U, np.zeros(disc.n_nodes), 1e-3)
-    kind = linsolve.resolve("auto", disc.asm.ndof)
-    precision = linsolve.resolve_precision(None, kind)
+    kind = paths.resolve("auto", disc.asm.ndof)
+    precision = paths.resolve_precision(None, kind)
     best = math.inf
     for k in range(3):
         t0 = time.perf_counter()

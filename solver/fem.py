@@ -31,7 +31,7 @@ import scipy.sparse as sp
 
 from . import kernels
 from .ad import Dual
-from .paths import assembly_threads  # noqa: F401  (DCHFRAC_ASSEMBLY_THREADS)
+from .paths import assembly_threads
 
 
 # --------------------------------------------------------------------------

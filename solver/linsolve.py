@@ -64,9 +64,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-# the backend choice lives in solver.paths (no scipy there); these names are re-exported
-from .paths import PARDISO_MIN_SIZE, available_backends, resolve, resolve_precision  # noqa: F401
 from .profiling import phase
+from .paths import resolve, resolve_precision
 
 STATS = {"factorizations": 0}
 

@@ -15,7 +15,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from . import ad, codegen, fem, kernels, physics
+from . import ad, codegen, fem, kernels, paths, physics
 from .ad import Dual
 from .discretization import Discretization, build_discretization
 from .forms import (FIELD_NAMES, GX, GY, MU, NOT_ELEMENT_DATA, P, S, UX, UY, Constitutive, StepData, constitutive,
@@ -200,7 +200,7 @@ def residual_and_jacobian(disc: Discretization, params, U: np.ndarray, data: Ste
         element_residuals(disc, params, U, data, sl, need_jacobian,
                           out=(Fe[sl], Ke[sl] if need_jacobian else None))
 
-    n = fem.assembly_threads()
+    n = paths.assembly_threads()
     fem.map_chunks(work, (disc.chunks or (slice(0, M),)) if n <= 1 else fem.thread_chunks(M, n))
     R = disc.asm.vector(Fe.reshape(M, -1)) + disc.boundary_op @ U.ravel() + disc.inject
     J = None

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from . import linsolve, profiling
+from . import linsolve, paths, profiling
 from .model import element_fields, porosity_state, storage_fraction
 from .options import RunOptions, check_environment, check_run_inputs
 from .output import RunWriter
@@ -107,8 +107,8 @@ def run_path(sim: "Simulation | None", options: RunOptions) -> dict:
     if sim is not None:
         return {"linear_solver": sim.solver_kind, "linear_precision": sim.precision, "kernels": kernels.backend()}
     try:
-        kind = linsolve.resolve(options.linear_solver, 10**6)
-        return {"linear_solver": kind, "linear_precision": linsolve.resolve_precision(options.linear_precision, kind),
+        kind = paths.resolve(options.linear_solver, 10**6)
+        return {"linear_solver": kind, "linear_precision": paths.resolve_precision(options.linear_precision, kind),
                 "kernels": kernels.backend()}
     except ValueError as exc:
         return {"error": str(exc)}

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import damage, fem, linsolve, metrics, physics
+from . import damage, fem, linsolve, metrics, paths, physics
 from .anderson import Anderson
 from .model import P, S, UX, UY, build_discretization, residual_and_jacobian, step_data
 from .options import RunOptions
@@ -44,8 +44,8 @@ class Simulation:
                                          pressure_stabilization=options.pressure_stabilization)
         self.dmg = damage.damage_operators(self.disc.points, self.disc.triangles)
         self.edges = metrics.mesh_edges(self.disc.triangles)
-        self.solver_kind = linsolve.resolve(options.linear_solver, self.disc.asm.ndof)
-        self.precision = linsolve.resolve_precision(options.linear_precision, self.solver_kind)
+        self.solver_kind = paths.resolve(options.linear_solver, self.disc.asm.ndof)
+        self.precision = paths.resolve_precision(options.linear_precision, self.solver_kind)
         nf = self.disc.n_fields
         U = np.zeros((self.disc.n_nodes, nf))
         self.U = U

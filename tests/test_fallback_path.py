@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from solver import kernels, linsolve, paths
+from solver import kernels, paths
 from sweep.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -58,7 +58,7 @@ def test_fallback_solve_agrees_with_the_fast_path_within_the_newton_tolerance(bo
     fast, slow, _ = both
     assert fast["status"] == slow["status"] == "ok"
     assert slow["path"]["linear_solver"] == "superlu" and slow["path"]["kernels"] == "numpy"
-    if linsolve.available_backends()[-1] == "pypardiso":
+    if paths.available_backends()[-1] == "pypardiso":
         assert fast["path"]["linear_solver"] == "pypardiso"
     if kernels.numba_available():
         assert fast["path"]["kernels"] == "numba"

@@ -115,7 +115,7 @@ def test_chunked_and_threaded_assembly_give_identical_matrices(monkeypatch):
 
 
 def test_element_chunks_and_thread_setting_are_validated(monkeypatch):
-    from solver import fem
+    from solver import fem, paths
 
     ch = fem.element_chunks(10, 4)
     assert [(c.start, c.stop) for c in ch] == [(0, 4), (4, 8), (8, 10)]
@@ -123,7 +123,7 @@ def test_element_chunks_and_thread_setting_are_validated(monkeypatch):
         fem.element_chunks(10, 0)
     monkeypatch.setenv("DCHFRAC_ASSEMBLY_THREADS", "two")
     with pytest.raises(ValueError, match="DCHFRAC_ASSEMBLY_THREADS.*'two'"):
-        fem.assembly_threads()
+        paths.assembly_threads()
     monkeypatch.setenv("DCHFRAC_ASSEMBLY_THREADS", "0")
     with pytest.raises(ValueError, match="positive integer"):
-        fem.assembly_threads()
+        paths.assembly_threads()

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from solver import Parameters, linsolve
+from solver import Parameters, linsolve, paths
 from solver.mesh import annulus_mesh
 from solver.model import build_discretization, project_gradient, residual_and_jacobian, step_data
 from solver.porosity import random_porosity
@@ -43,9 +43,9 @@ def test_superlu_solves_the_coupled_jacobian_to_round_off():
 
 
 def test_auto_keeps_superlu_for_small_systems_and_rejects_unknown_backends():
-    assert linsolve.resolve("auto", linsolve.PARDISO_MIN_SIZE - 1) == "superlu"
+    assert paths.resolve("auto", paths.PARDISO_MIN_SIZE - 1) == "superlu"
     with pytest.raises(ValueError, match="linear_solver='mumps'"):
-        linsolve.resolve("mumps")
+        paths.resolve("mumps")
 
 
 def test_pardiso_matches_superlu_reuses_its_analysis_and_refactorizes_stale_factors():
@@ -75,14 +75,14 @@ def test_backend_discovery_does_not_import_pypardiso():
     import subprocess
     import sys
 
-    code = ("import sys; from solver import linsolve; b = linsolve.available_backends(); "
+    code = ("import sys; from solver import paths; b = paths.available_backends(); "
             "assert 'pypardiso' not in sys.modules, 'imported'; print(b)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "superlu" in out.stdout
 
 
-@pytest.mark.skipif("pypardiso" not in linsolve.available_backends(), reason="pypardiso not installed")
+@pytest.mark.skipif("pypardiso" not in paths.available_backends(), reason="pypardiso not installed")
 def test_mkl_runtime_is_located_for_pypardiso(monkeypatch):
     """The MKL runtime is handed to pypardiso (PYPARDISO_MKL_RT) so it skips its recursive search."""
     import os
@@ -122,7 +122,7 @@ def test_pardiso_factors_whose_first_solve_needs_refinement_stay_checked(monkeyp
 
 # ---------------------------------------------------------------- single-precision factors (inexact Newton)
 def _kinds():
-    return ["superlu"] + (["pypardiso"] if "pypardiso" in linsolve.available_backends() else [])
+    return ["superlu"] + (["pypardiso"] if "pypardiso" in paths.available_backends() else [])
 
 
 @pytest.mark.parametrize("kind", _kinds())
@@ -163,11 +163,11 @@ def test_single_precision_falls_back_to_double_when_refinement_cannot_reach_the_
 
 
 def test_precision_choice_is_validated_and_defaults_to_single_with_pardiso_only():
-    assert linsolve.resolve_precision(None, "pypardiso") == "single"
-    assert linsolve.resolve_precision(None, "superlu") == "double"
-    assert linsolve.resolve_precision("double", "pypardiso") == "double"
+    assert paths.resolve_precision(None, "pypardiso") == "single"
+    assert paths.resolve_precision(None, "superlu") == "double"
+    assert paths.resolve_precision("double", "pypardiso") == "double"
     with pytest.raises(ValueError, match="linear_precision='half'"):
-        linsolve.resolve_precision("half", "superlu")
+        paths.resolve_precision("half", "superlu")
 
 
 def test_a_run_with_single_precision_factors_is_the_double_run_to_the_newton_tolerance():

@@ -48,7 +48,7 @@ def _best(fn, repeats: int = 3) -> float:
 
 @contextmanager
 def _assembly_threads(n: int):
-    """Set DCHFRAC_ASSEMBLY_THREADS to ``n`` inside the block (solver.fem.assembly_threads)."""
+    """Set DCHFRAC_ASSEMBLY_THREADS to ``n`` inside the block (solver.paths.assembly_threads)."""
     old = os.environ.get("DCHFRAC_ASSEMBLY_THREADS")
     os.environ["DCHFRAC_ASSEMBLY_THREADS"] = str(n)
     try:
@@ -189,9 +189,9 @@ def _child_result(stdout: str) -> dict:
 def _refactorization_h1() -> dict:
     """The h = 1 mm refactorization time (s) of the default backend on this machine, now: the yardstick
     stated beside every absolute figure (machines of the same kind differ by 1.6-2.4x)."""
-    from solver import linsolve
+    from solver import paths
 
-    kind = linsolve.resolve("auto", 10**6)
+    kind = paths.resolve("auto", 10**6)
     it = _newton_iteration(1.0, [kind])
     return {"backend": kind, "refactorization_s": it["backends"][kind]["factorize_s"],
             "solve_s": it["backends"][kind]["solve_s"], "residual_and_jacobian_s": it["residual_and_jacobian_s"]}
@@ -260,12 +260,12 @@ def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None
     process; written as JSON to ``out_path``.  With ``compare`` (run options of a variant) each size is run as
     base, variant, base, variant, side by side in time, and ``comparisons`` holds the variant's wall time over the
     base's (sums of the pairs) and the relative change of p_inj at t_end."""
-    from solver import linsolve
+    from solver import paths
     from solver.paths import active_path, describe
 
     result = {"machine": {"python": platform.python_version(), "cpu_count": os.cpu_count(), "platform": platform.platform(),
                           "load_average_1_5_15": list(os.getloadavg()) if hasattr(os, "getloadavg") else None},
-              "backend": linsolve.resolve("auto", 10**6), "active_path": active_path(), "runs": []}
+              "backend": paths.resolve("auto", 10**6), "active_path": active_path(), "runs": []}
     print(f"bench: {describe()}", flush=True)
     print("bench: h = 1 mm refactorization (yardstick) ...", flush=True)
     result["h1_refactorization"] = _refactorization_h1()
@@ -320,11 +320,10 @@ def _cost_rates(result: dict) -> None:
 
 def run_benchmarks(out_path, quick: bool = False, reference: bool = False) -> dict:
     """Run the benchmarks and write them as JSON to ``out_path``; returns the dict."""
-    from solver import linsolve
-
+    from solver import paths
     from solver.paths import active_path, describe
 
-    backends = linsolve.available_backends()
+    backends = paths.available_backends()
     sizes = [2.0, 1.0] if quick else [2.0, 1.0, 0.5]
     print(f"bench: {describe()}", flush=True)
     result = {"machine": {"python": platform.python_version(), "cpu_count": __import__("os").cpu_count(),
