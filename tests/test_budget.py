@@ -136,6 +136,7 @@ def test_campaign_dry_run_shows_each_mesh_size_budget_and_flags_the_runs_that_ca
     for h in (4.0, 0.01):
         est = budget.estimate_run(Parameters(), RunOptions(h=h, t_end=0.5), calibrate=False)
         wall = 2 * budget.wall_time_s(est.unknowns, 0.5, est.linear_solver, factor)
-        assert f"h = {h:g} mm: 2 run(s), each {est.nodes:,} nodes" in out and f"{format_duration(wall)} of wall" in out
+        assert (f"h = {h:g} mm: 2 run(s), 1 simulated s, {format_duration(wall)} of wall time alone; each "
+                f"{est.nodes:,} nodes") in out
     assert "REFUSED: the 2 run(s) at h = 0.01 mm cannot fit" in out and "REFUSED: the 2 run(s) at h = 4 mm" not in out
     assert "WARNING: 2 runs at h = 4 mm side by side" in out

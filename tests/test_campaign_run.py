@@ -292,19 +292,23 @@ runner = "test_campaign_run:failing_runner"
 """
 
 
-def test_cli_dry_run_run_status_plot_report(tmp_path, capsys):
+def test_cli_dry_run_run_status_plot_report(tmp_path, capsys, monkeypatch):
+    import solver.budget as budget
+    from sweep.campaign.run import _hms
+
     spec = tmp_path / "clitoy.toml"
     spec.write_text(_CLI_SPEC)
     root = tmp_path / "res"
     (root / "bench").mkdir(parents=True)
-    (root / "bench" / "bench.json").write_text(json.dumps({"coupled_run_h2_wall_s_per_sim_s": 10.0,
-                                                           "per_run_overhead_s": 5.0, "shared_run_factor": 2.0}))
+    (root / "bench" / "bench.json").write_text(json.dumps({"shared_run_factor": 2.0}))
+    monkeypatch.setattr(budget, "calibration", lambda ls, kern: {"factor": 3.0})  # a machine 3x the reference's
     assert cli_main(["run", str(spec), "--results", str(root), "--dry-run", "--jobs", "2"]) == 0
     out = capsys.readouterr().out
-    # 6 runs x (1.5 simulated s x 10 wall s per simulated s x 2 beside another + 5 s per run) = 210 s CPU, 105 s
-    # wall on 2 jobs
-    assert "6 runs in the grid" in out and "3m30s CPU" in out and "1m45s wall on 2 job(s)" in out
-    assert "x 2, a run beside 1 other(s) against alone: bench" in out
+    # 6 runs x (one h = 2 mm run's wall time to 1.5 s on this machine x 2 beside another), halved on 2 jobs
+    nodes, _ = budget.mesh_counts(2.0)
+    one = budget.wall_time_s(7 * nodes, 1.5, budget._path()[0], 3.0)
+    assert "6 runs in the grid" in out and f"{_hms(12 * one)} CPU" in out and f"{_hms(6 * one)} wall on 2 job(s)" in out
+    assert "x 2: a run beside 1 other(s) against alone, bench" in out and "this machine 3x" in out
 
     assert cli_main(["run", str(spec), "--results", str(root), "--jobs", "2", "--quiet"]) == 1  # failures
     out = capsys.readouterr().out
@@ -421,17 +425,31 @@ def test_reclassify_and_plots_on_solver_format_run_folders(tmp_path):
     assert all(f.stat().st_size > 5000 for f in figs)
 
 
-def test_dry_run_counts_the_per_run_overhead_of_short_runs(tmp_path):
-    """Without bench figures a run of almost no simulated time still costs the default per-run overhead."""
-    from sweep.campaign.cost import DEFAULT_PER_RUN_OVERHEAD_S, DEFAULT_SHARED_RUN_FACTOR, DEFAULT_WALL_S_PER_SIM_S_H2, estimate_cost
+def test_dry_run_prices_each_run_on_its_own_mesh_path_and_time(tmp_path):
+    """One estimate: each run costs solver.budget's wall time of its own mesh (graded meshes by their graded node
+    count), on the path that will run, to its own simulated time, including the fixed per-run cost; runs beside
+    others cost the shared-run factor more."""
+    from solver import budget
+    from sweep.campaign.cost import DEFAULT_SHARED_RUN_FACTOR, estimate_cost
 
     spec = tmp_path / "clitoy.toml"
     spec.write_text(_CLI_SPEC.replace("t_end = 1.5", "t_end = 0.001"))
-    est = estimate_cost(str(spec), tmp_path / "res", jobs=2)
-    assert est["per_run_overhead_source"] == "default" and est["shared_run_factor_source"] == "default"
-    rate = DEFAULT_WALL_S_PER_SIM_S_H2 * DEFAULT_SHARED_RUN_FACTOR  # two jobs: each run beside another
-    assert est["cpu_s"] == pytest.approx(6 * (0.001 * rate + DEFAULT_PER_RUN_OVERHEAD_S))
-    assert est["wall_s"] == pytest.approx(est["cpu_s"] / 2)
-    one = estimate_cost(str(spec), tmp_path / "res", jobs=1)  # alone: the lone run's rate
-    assert one["shared_run_factor"] == 1.0
-    assert one["cpu_s"] == pytest.approx(6 * (0.001 * DEFAULT_WALL_S_PER_SIM_S_H2 + DEFAULT_PER_RUN_OVERHEAD_S))
+    one = estimate_cost(str(spec), tmp_path / "res", jobs=1, machine_factor=1.0)
+    (g,) = one["by_mesh"]
+    assert g["runs"] == 6 and g["sim_s"] == pytest.approx(0.006)
+    lone = budget.wall_time_s(g["estimate"].unknowns, 0.001, g["estimate"].linear_solver, 1.0)
+    assert lone > budget.REFERENCE["per_run_overhead_s"]          # the fixed cost of a run of almost no time
+    assert one["cpu_s"] == pytest.approx(6 * lone) and one["wall_s"] == pytest.approx(6 * lone)
+    two = estimate_cost(str(spec), tmp_path / "res", jobs=2, machine_factor=1.0)
+    assert two["shared_run_factor_source"] == "default"
+    assert two["cpu_s"] == pytest.approx(6 * lone * DEFAULT_SHARED_RUN_FACTOR)
+    assert two["wall_s"] == pytest.approx(two["cpu_s"] / 2)
+    slow = estimate_cost(str(spec), tmp_path / "res", jobs=1, machine_factor=2.0)
+    assert slow["cpu_s"] == pytest.approx(2 * one["cpu_s"])   # linear in the machine factor
+
+    graded = tmp_path / "graded.toml"
+    graded.write_text(_CLI_SPEC.replace('name = "clitoy"', 'name = "graded"').replace("h = 2.0", "h = 2.0\nh_outer = 0.25"))
+    gr = estimate_cost(str(graded), tmp_path / "res", jobs=1, machine_factor=1.0)
+    (gg,) = gr["by_mesh"]
+    assert gg["estimate"].nodes == budget.mesh_counts(2.0, h_outer=0.25)[0] > 2 * g["estimate"].nodes
+    assert gr["cpu_s"] > one["cpu_s"]

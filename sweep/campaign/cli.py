@@ -224,45 +224,36 @@ def _fmt_s(s: float) -> str:
     return _hms(s)
 
 
-def _print_estimate(spec, est, jobs: int, results) -> None:
-    """The dry run's lines: the runs of the grid by state, the cost of the runs to do by mesh size."""
-    from sweep.campaign.cost import COST_MESH_EXPONENT, DEFAULT_WALL_S_PER_SIM_S_H2
-
+def _print_estimate(spec, est, jobs: int) -> None:
+    """The dry run's lines: the runs of the grid by state; per distinct mesh, one run's nodes and peak memory
+    against the memory available and the runs' wall time (solver.budget: the path that will run, calibrated on
+    this machine); the runs refused or too big for ``jobs`` at a time; the total."""
     print(f"campaign {spec.name}: {est['grid_size']} runs in the grid ({est['done']} done, {est['failed']} failed, "
           f"{est['archived']} archived, {est['pending']} pending, {est['stale']} made by other code to rerun, "
           f"{est['stale_kept']} made by other code kept, {est['damaged']} damaged)")
-    for h, d in sorted(est["by_mesh_size"].items()):
-        print(f"  h = {h:g} mm: {d['runs']} runs, {d['sim_s']:.1f} simulated s x {d['wall_s_per_sim_s']:.3g} "
-              f"wall s per simulated s ({d['source']}) + {d['runs']} x {est['per_run_overhead_s']:.3g} s per run "
-              f"({est['per_run_overhead_source']}) = {_fmt_s(d['wall_s'])} CPU")
-    if jobs > 1:
-        print(f"  (each rate x {est['shared_run_factor']:.3g}, a run beside {jobs - 1} other(s) against alone: "
-              f"{est['shared_run_factor_source']})")
-    print(f"estimated cost of the {est['runs_to_do']} run(s) to do: {_fmt_s(est['cpu_s'])} CPU, about "
-          f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s)")
-    _print_budget(est.get("budget", []), jobs)
-    if any(d["source"] == "default" for d in est["by_mesh_size"].values()):
-        print(f"  (no {results}/bench/bench.json: default {DEFAULT_WALL_S_PER_SIM_S_H2:g} wall s per "
-              f"simulated s at h = 2 mm, scaled as (2/h)^{COST_MESH_EXPONENT:g}; run `dchfrac bench` for real figures)")
-
-
-def _print_budget(groups, jobs: int) -> None:
-    """The dry run's lines of solver.budget: per distinct mesh, one run's nodes and peak memory against the memory
-    available, the runs' wall time alone (calibrated on this machine, on the path that will run), and the runs
-    that would be refused (cannot fit) or cannot fit ``jobs`` at a time."""
-    if not groups:
-        return
-    print("per run (solver.budget: the path that will run, wall time calibrated on this machine):")
-    for g in groups:
-        est = g["estimate"]
-        wall = "" if g["wall_s"] is None else f"; {_fmt_s(g['wall_s'])} of wall time alone for the {g['runs']} run(s)"
-        print(f"  h = {g['h']:g} mm: {g['runs']} run(s), each {est.line()}{wall}")
+    if est["by_mesh"]:
+        print(f"per mesh (solver.budget: the path that will run, this machine {est['by_mesh'][0]['factor']:.3g}x "
+              "the reference machine's fast path):")
+    for g in est["by_mesh"]:
+        e = g["estimate"]
+        print(f"  h = {g['h']:g} mm: {g['runs']} run(s), {g['sim_s']:.3g} simulated s, {_fmt_s(g['wall_s'])} of wall "
+              f"time alone; each {e.nodes:,} nodes ({e.unknowns:,} unknowns), peak memory about "
+              f"{e.memory_bytes / 1e9:.3g} GB of {_avail(e)} available ({e.linear_solver}, {e.kernels} kernels)")
         if g["refused"]:
             print(f"  REFUSED: the {g['runs']} run(s) at h = {g['h']:g} mm cannot fit in memory (solver.simulate "
                   "refuses them; allowed: a coarser h)")
         elif g["side_by_side"]:
             print(f"  WARNING: {jobs} runs at h = {g['h']:g} mm side by side need about "
-                  f"{jobs * est.memory_bytes / 1e9:.3g} GB, more than is available (allowed: fewer --jobs)")
+                  f"{jobs * e.memory_bytes / 1e9:.3g} GB, more than is available (allowed: fewer --jobs)")
+    if jobs > 1:
+        print(f"  (x {est['shared_run_factor']:.3g}: a run beside {jobs - 1} other(s) against alone, "
+              f"{est['shared_run_factor_source']})")
+    print(f"estimated cost of the {est['runs_to_do']} run(s) to do: {_fmt_s(est['cpu_s'])} CPU, about "
+          f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s)")
+
+
+def _avail(e) -> str:
+    return "unknown" if e.available_bytes is None else f"{e.available_bytes / 1e9:.3g} GB"
 
 
 @_guarded
@@ -279,9 +270,9 @@ def cmd_run(args) -> int:
                              + (f" (and {len(warnings) - 1} more warning(s))" if len(warnings) > 1 else ""))
     jobs = args.jobs or int(spec.run.get("jobs", 1))
     est = estimate_cost(spec, args.results, jobs=max(1, jobs), retry_failed=args.retry_failed,
-                        rerun_stale=args.rerun_stale, rerun_archived=args.rerun_archived, budget=args.dry_run)
+                        rerun_stale=args.rerun_stale, rerun_archived=args.rerun_archived)
     if args.dry_run:
-        _print_estimate(spec, est, jobs, args.results)
+        _print_estimate(spec, est, jobs)
         for w in _input_warnings(spec):
             print(f"warning: {w}")
         return 0

@@ -1,7 +1,11 @@
-"""The dry run's cost estimate of a campaign's runs to do (wall seconds), from ``dchfrac bench`` figures.
+"""A campaign's cost before it runs: wall and CPU seconds of its runs to do, memory per mesh, runs refused.
 
-    estimate_cost("campaigns/examples/demo.toml", jobs=2)     # {"cpu_s": ..., "wall_s": ..., "by_mesh_size": ...}
-    run_budgets(todo_points, jobs=2)     # solver.budget's memory and wall time per run, per distinct mesh
+    estimate_cost("campaigns/examples/demo.toml", jobs=2)   # {"cpu_s": ..., "wall_s": ..., "by_mesh": [...], ...}
+
+One estimate, from :mod:`solver.budget`: each distinct mesh (its h, grading and radii) is counted from its size
+function without being built, priced on the path that will run (PARDISO or SuperLU, numba or numpy kernels) and
+scaled by this machine's calibration (one Newton iteration at h = 2 mm, measured once per code hash and path).
+With more than one job a run shares the machine and is slower than alone by :func:`shared_run_factor`.  Units: s.
 """
 from __future__ import annotations
 
@@ -12,32 +16,18 @@ from typing import Any, Mapping
 from sweep.campaign.paths import DEFAULT_ROOT, results_root
 from sweep.campaign.plan import _todo, as_spec, plan_campaign
 
-__all__ = ["estimate_cost", "run_budgets", "wall_per_sim_second", "per_run_overhead", "shared_run_factor", "estimated_sim_time",
-           "DEFAULT_WALL_S_PER_SIM_S_H2", "COST_MESH_EXPONENT", "DEFAULT_PER_RUN_OVERHEAD_S",
-           "DEFAULT_SHARED_RUN_FACTOR"]
+__all__ = ["estimate_cost", "run_budgets", "shared_run_factor", "estimated_sim_time", "DEFAULT_SHARED_RUN_FACTOR"]
 
-# Dry-run cost model: wall seconds per simulated second of one coupled run at mesh size h (mm):
-#   c(h) = c2 * (2 / h) ** COST_MESH_EXPONENT,
-# c2 from <root>/bench/bench.json key "coupled_run_h2_wall_s_per_sim_s" when present (an exact
-# "coupled_run_h{h:g}_wall_s_per_sim_s" key wins), else the placeholder default below. The
-# exponent: elements ~ h^-2, sparse direct solves ~ n^1.25 in 2-D -> 2.5.
-DEFAULT_WALL_S_PER_SIM_S_H2 = 60.0
-COST_MESH_EXPONENT = 2.5
-# Plus a fixed cost per run, s, whatever its simulated time: the run's child process and imports, the
-# mesh and discretization, the first (symbolic) factorization, classification and writing the run
-# folder.  From <root>/bench/bench.json key "per_run_overhead_s" (``dchfrac bench`` measures it) when
-# present, else this default: the committed h = 2 campaigns spent 2.0-2.5 s per run outside the
-# solver's time loop (wall_time_s - solver_wall_time_s of their tables) plus about 1 s of solver set-up.
-DEFAULT_PER_RUN_OVERHEAD_S = 3.0
-# With more than one job each run shares the machine (one core, one BLAS/MKL thread each): the rate above,
-# measured on a lone run, is multiplied by the factor ``dchfrac bench`` measures with one run per core
-# (bench.json key "shared_run_factor"), else by this default (h = 2 reference case, 2-core machine: 20.0 s side
-# by side against 13.1 s alone, results/bench/README.md, ninth round).
+# With more than one job each run shares the machine (one core, one BLAS/MKL thread each): a lone run's wall time
+# is multiplied by the factor ``dchfrac bench`` measures with one run per core (bench.json key
+# "shared_run_factor"), else by this default (h = 2 reference case, 2-core machine: 20.0 s side by side against
+# 13.1 s alone, results/archive/bench_rounds.md, ninth round).
 DEFAULT_SHARED_RUN_FACTOR = 1.5
+
 
 def _load_bench(root, spec=None) -> dict:
     """``<root>/bench/bench.json``, else the one of the spec's project results (a run into another root, such
-    as the README's ``--results runs``, costs what the project's benchmark measured); {} when neither."""
+    as the README's ``--results runs``, shares what the project's benchmark measured); {} when neither."""
     from sweep.campaign.paths import project_root
 
     project = project_root(spec.source) if spec is not None else None
@@ -47,29 +37,6 @@ def _load_bench(root, spec=None) -> dict:
         except (FileNotFoundError, json.JSONDecodeError):
             continue
     return {}
-
-
-def wall_per_sim_second(h: float, bench: Mapping[str, Any] | None = None) -> tuple[float, str]:
-    """Estimated wall seconds per simulated second of one coupled run at mesh size ``h`` (mm),
-    and where the figure comes from ("bench h=..", "bench h=2 scaled", "default")."""
-    bench = bench or {}
-    exact = bench.get(f"coupled_run_h{h:g}_wall_s_per_sim_s")
-    if isinstance(exact, (int, float)) and exact > 0:
-        return float(exact), f"bench h={h:g}"
-    c2 = bench.get("coupled_run_h2_wall_s_per_sim_s")
-    src = "bench h=2 scaled"
-    if not (isinstance(c2, (int, float)) and c2 > 0):
-        c2, src = DEFAULT_WALL_S_PER_SIM_S_H2, "default"
-    return float(c2) * (2.0 / float(h)) ** COST_MESH_EXPONENT, src
-
-
-def per_run_overhead(bench: Mapping[str, Any] | None = None) -> tuple[float, str]:
-    """Fixed wall seconds of one campaign run besides its time loop, and where the figure comes from
-    ("bench" or "default"); see DEFAULT_PER_RUN_OVERHEAD_S."""
-    v = (bench or {}).get("per_run_overhead_s")
-    if isinstance(v, (int, float)) and v >= 0:
-        return float(v), "bench"
-    return DEFAULT_PER_RUN_OVERHEAD_S, "default"
 
 
 def shared_run_factor(jobs: int, bench: Mapping[str, Any] | None = None) -> tuple[float, str]:
@@ -102,13 +69,17 @@ _MESH_KEYS = (("options", "h"), ("options", "h_inner"), ("options", "inner_gradi
               ("params", "r_inner"), ("params", "r_outer"), ("options", "linear_solver"))
 
 
-def run_budgets(points, jobs: int = 1, calibrate: bool = True) -> list[dict]:
+def run_budgets(points, jobs: int = 1, machine_factor: float | None = None) -> list[dict]:
     """:mod:`solver.budget`'s estimate of the runs ``points`` (campaign points with ``params`` and ``options``),
-    one entry per distinct mesh (``_MESH_KEYS``), in order of h: {"h" (mm), "runs", "estimate" (the
-    :class:`solver.budget.Estimate` of one run: nodes, peak memory, memory available, path), "wall_s" (s: the runs' wall times alone, each to
-    its :func:`estimated_sim_time`, on the path that will run, calibrated on this machine; None without
-    ``calibrate``), "refused" (the runs cannot fit: solver.simulate refuses them), "side_by_side" (``jobs`` runs
-    at once cannot fit)}."""
+    one entry per distinct mesh (``_MESH_KEYS``), coarsest first: {"h" (mm), "runs", "sim_s" (simulated s, each
+    run to its :func:`estimated_sim_time`), "estimate" (the :class:`solver.budget.Estimate` of one run: nodes,
+    peak memory, memory available, path), "factor" (this machine and path over the reference machine's fast
+    path), "wall_s" (s: the runs' wall times alone), "refused" (the runs cannot fit: solver.simulate refuses
+    them), "side_by_side" (``jobs`` runs at once cannot fit)}.
+
+    ``machine_factor``: None measures it (:func:`solver.budget.calibration`: one Newton iteration at h = 2 mm on
+    the path that will run, about 2 s once per code hash and path); a number prices the runs on a machine that
+    many times slower than the reference (1.0: the reference machine's figures, no measurement)."""
     from solver import Parameters, RunOptions
     from solver.budget import calibration, estimate_run, wall_time_s
 
@@ -119,53 +90,37 @@ def run_budgets(points, jobs: int = 1, calibrate: bool = True) -> list[dict]:
         if g is None:
             params, options = Parameters.from_dict(p.params), RunOptions.from_dict(p.options)
             est = estimate_run(params, options, calibrate=False)
-            factor = calibration(est.linear_solver, est.kernels)["factor"] if calibrate else None
-            g = groups[key] = {"h": options.h, "runs": 0, "estimate": est, "factor": factor,
-                               "wall_s": 0.0 if calibrate else None, "refused": not est.fits(),
+            factor = (calibration(est.linear_solver, est.kernels)["factor"] if machine_factor is None
+                      else float(machine_factor))
+            g = groups[key] = {"h": options.h, "runs": 0, "sim_s": 0.0, "estimate": est, "factor": factor,
+                               "wall_s": 0.0, "refused": not est.fits(),
                                "side_by_side": est.available_bytes is not None
                                and jobs * est.memory_bytes > est.available_bytes}
+        t = estimated_sim_time(p.params, p.options)
         g["runs"] += 1
-        if calibrate:
-            est = g["estimate"]
-            g["wall_s"] += wall_time_s(est.unknowns, estimated_sim_time(p.params, p.options), est.linear_solver,
-                                       g["factor"])
+        g["sim_s"] += t
+        g["wall_s"] += wall_time_s(g["estimate"].unknowns, t, g["estimate"].linear_solver, g["factor"])
     return sorted(groups.values(), key=lambda g: -g["h"])
 
 
 def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | None = None,
                   retry_failed: bool = False, rerun_stale: bool = False, rerun_archived: bool = False,
-                  budget: bool = False) -> dict:
-    """Grid size and estimated wall time (s) of the runs to do (pending, damaged, stale unless
-    ``rerun_stale``, failed with ``retry_failed``, archived with ``rerun_archived``) of a campaign on ``jobs`` workers.
+                  machine_factor: float | None = None) -> dict:
+    """Grid size and estimated CPU and wall time (s) of the runs to do (pending, damaged, stale with
+    ``rerun_stale``, failed with ``retry_failed``, archived with ``rerun_archived``) of a campaign on ``jobs``
+    workers.
 
-    Per run: :func:`per_run_overhead` plus :func:`wall_per_sim_second` (bench figures or the documented
-    default) times :func:`shared_run_factor` (a run beside others is slower than alone) times
-    :func:`estimated_sim_time`; the sum divided by ``jobs`` (perfect packing: a lower bound of the wall time
-    when runs differ much in cost). Failed runs count only with ``retry_failed``.  With ``budget``, also
-    ``"budget"``: :func:`run_budgets` of the runs to do (memory, refusals, calibrated wall time).
-    """
+    Per run: its wall time alone from :func:`run_budgets` (its mesh, the path that will run, this machine's
+    calibration, or ``machine_factor``) times :func:`shared_run_factor` (a run beside others is slower than
+    alone).  ``cpu_s`` is their sum and ``wall_s`` that over ``jobs`` (perfect packing: a lower bound when runs
+    differ much in cost).  ``by_mesh``: the :func:`run_budgets` groups (memory, refusals)."""
     spec = as_spec(spec)
     root = results_root(spec, root)
     plan = plan_campaign(spec, root, code_hash=code_hash, rerun_stale=rerun_stale)
-    bench = _load_bench(root, spec)
-    overhead, overhead_src = per_run_overhead(bench)
-    shared, shared_src = shared_run_factor(jobs, bench)
-    per_h: dict[float, dict] = {}
-    total = 0.0
+    shared, shared_src = shared_run_factor(jobs, _load_bench(root, spec))
     todo = _todo(plan, retry_failed, rerun_archived)
-    n_todo = len(todo)
-    for p, k in todo:
-        h = float(p.options.get("h", 1.0))
-        c, src = wall_per_sim_second(h, bench)
-        c *= shared
-        t = estimated_sim_time(p.params, p.options)
-        d = per_h.setdefault(h, {"runs": 0, "sim_s": 0.0, "wall_s": 0.0, "wall_s_per_sim_s": c, "source": src,
-                                 "overhead_s": 0.0})
-        d["runs"] += 1
-        d["sim_s"] += t
-        d["overhead_s"] += overhead
-        d["wall_s"] += c * t + overhead
-        total += c * t + overhead
+    groups = run_budgets([p for p, _ in todo], jobs, machine_factor)
+    cpu = shared * sum(g["wall_s"] for g in groups)
     return {
         "name": spec.name,
         "grid_size": len(plan.points),
@@ -175,15 +130,12 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
         "stale": len(plan.stale) if rerun_stale else 0,
         "stale_kept": 0 if rerun_stale else len(plan.stale),
         "archived": len(plan.archived),
-        "runs_to_do": n_todo,
+        "runs_to_do": len(todo),
         "damaged": len(plan.damaged),
-        "by_mesh_size": per_h,
-        "cpu_s": total,
-        "wall_s": total / max(1, jobs),
+        "by_mesh": groups,
+        "cpu_s": cpu,
+        "wall_s": cpu / max(1, jobs),
         "jobs": jobs,
-        "per_run_overhead_s": overhead,
-        "per_run_overhead_source": overhead_src,
         "shared_run_factor": shared,
         "shared_run_factor_source": shared_src,
-        **({"budget": run_budgets([p for p, _ in todo], jobs)} if budget else {}),
     }

@@ -8,11 +8,11 @@ Measured (wall-clock seconds, this machine):
   steps, factorizations per accepted step, wall seconds per simulated second);
 * the reference case at h = 2 mm to 2 s (not with ``--quick``);
 * optionally the paper's reference run (h = 1 mm to 2 s);
-* the dry-run cost rates ``coupled_run_h{h}_wall_s_per_sim_s`` (``sweep.campaign.cost.wall_per_sim_second``), from
-  the longest run made at each h: a campaign run lasts seconds of simulated time, and the short run's rate is
+* the cost rates ``coupled_run_h{h}_wall_s_per_sim_s`` (the h = 2 one is ``solver.budget.REFERENCE``'s iterations
+  per simulated second, over the Newton iteration), from the longest run made at each h: a campaign run lasts seconds of simulated time, and the short run's rate is
   the start-up's, whose small steps cost several times more per simulated second;
 * ``shared_run_factor``: how much longer the h = 2 reference case takes with one run per core, each in a campaign
-  worker's environment (one BLAS, MKL and OpenMP thread), than alone with every core: the dry run's rate for
+  worker's environment (one BLAS, MKL and OpenMP thread), than alone with every core: the dry run's factor for
   more than one job (not with ``--quick``);
 * with ``--profile`` (:func:`run_profile`): the reference run's wall time split by phase (assembly,
   symbolic and numeric factorization, solves, damage solve, stagger, metrics, output, Python) and by
