@@ -44,6 +44,7 @@ class Discretization:
     chunks: tuple = ()  # element slices assembled one at a time (see residual_and_jacobian)
     outlet: "Outlet | None" = None  # the outflow condition's rows (outer_saturation_bc = "outflow"); None: off
     inner_weights: np.ndarray | None = None  # ∫_Γi N_a ds (mm) of the inner nodes, with line_compliance; None: off
+    inner_injection: bool = False  # the inlet feeds the invading balance w_i (inner_saturation_bc = "injection")
     # arrays reused by every assembly (by name; see _element_matrices)
     workspace: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -112,16 +113,18 @@ def _outlet(asm: fem.BlockAssembler, outer_n: np.ndarray, nf: int) -> Outlet:
 
 
 def _dirichlet_conditions(inner_n, outer_n, params, nf: int):
-    """The Dirichlet unknowns (sorted) and their values (Sec. 3.4): S = 1 and μ = μ_i on r_i; p = 0 on r_o, and
-    S = 0, μ = μ_o and u = 0 there as the options choose."""
+    """The Dirichlet unknowns (sorted) and their values (Sec. 3.4): S = 1 and μ = μ_i on r_i (unless the inlet is
+    an ``injection`` one, where S and μ are free); p = 0 on r_o, and S = 0, μ = μ_o and u = 0 there as the options
+    choose."""
     dofs, values = [], []
 
     def fix(nodes, field, value):
         dofs.append(nf * nodes + field)
         values.append(np.full(len(nodes), float(value)))
 
-    fix(inner_n, S, 1.0)
-    fix(inner_n, MU, params.mu_i)
+    if params.inner_saturation_bc == "dirichlet":
+        fix(inner_n, S, 1.0)
+        fix(inner_n, MU, params.mu_i)
     fix(outer_n, P, 0.0)
     if params.outer_saturation_bc == "dirichlet":
         fix(outer_n, S, 0.0)
@@ -163,6 +166,8 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
 
     inject = np.zeros(asm.ndof)
     inject[P::nf] = -fem.edge_load(pts, inner_e, n, params.w_i)
+    if params.inner_saturation_bc == "injection":  # ∫_Γi q w_1·n ds with w_1·n = −w_i: all the pumped fluid is water
+        inject[S::nf] = inject[P::nf]
     dofs, values = _dirichlet_conditions(inner_n, outer_n, params, nf)
     lumped = np.bincount(tri.ravel(), weights=np.repeat(geom.areas / 3, 3), minlength=n)
     slots, inverse = np.unique(slots, return_inverse=True)  # one value per slot: J.data[slots] += vals
@@ -178,6 +183,7 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
         stab_tau=pressure_stabilization_tau(pts, tri, params, phi0, pressure_stabilization),
         outlet=_outlet(asm, outer_n, nf) if params.outer_saturation_bc == "outflow" else None,
         inner_weights=fem.edge_load(pts, inner_e, n, 1.0)[inner_n] if params.line_compliance > 0 else None,
+        inner_injection=params.inner_saturation_bc == "injection",
     )
 
 

@@ -225,12 +225,18 @@ def line_stored_rate(disc: Discretization, params, U: np.ndarray, data: StepData
 
 
 def _add_line_storage(disc: Discretization, params, U: np.ndarray, data: StepData, R: np.ndarray, J) -> None:
-    """Add the line's storage to the inlet's p rows (the pack receives w_i minus it), with its exact derivative."""
+    """Add the line's storage to the inlet's p rows (the pack receives w_i minus it), with its exact derivative;
+    with an ``injection`` inlet to its S rows too (the line keeps pumped water, so the pack receives less)."""
     rows = disc.n_fields * disc.inner_nodes + P
     rate = line_stored_rate(disc, params, U, data)
     R[rows] += rate.v
     if J is not None:
         J.data[disc.asm.diag_slot[rows]] += rate.d[:, 0]
+    if disc.inner_injection:
+        s_rows = disc.n_fields * disc.inner_nodes + S
+        R[s_rows] += rate.v
+        if J is not None:
+            J.data[disc.asm.slots(s_rows, rows)] += rate.d[:, 0]
 
 
 # ---------------------------------------------------------------- element fields

@@ -44,6 +44,7 @@ POROSITY_FIELDS = ("random", "pockets", "constant")
 MU_OUTER_BCS = ("dirichlet", "zero_flux")
 CH_MOBILITIES = ("harmonic", "oil", "degenerate")
 OUTER_SATURATION_BCS = ("dirichlet", "defending_outflow", "outflow")
+INNER_SATURATION_BCS = ("dirichlet", "injection")
 #: the largest seed: it is stored in the campaign tables as a 64-bit integer
 SEED_MAX = 2**63 - 1
 
@@ -152,6 +153,13 @@ class Parameters:
         "node's outflow once the front has reached r_o (solver.physics.outlet_water_flux), nothing but oil flows "
         "in; no Cahn–Hilliard flux crosses r_o (pair with mu_outer_bc = \"zero_flux\" for no μ source)",
         choices=OUTER_SATURATION_BCS)
+    inner_saturation_bc: str = _param("dirichlet", "", f"one of {INNER_SATURATION_BCS}",
+        f"inner condition on the invading phase, one of {INNER_SATURATION_BCS}: \"dirichlet\" S = 1 and μ = μ_i on "
+        "r_i (the paper, Sec. 3.4: μ_i > 0 draws water in by the Cahn–Hilliard flux beyond the pumped w_i and lets "
+        "the defending fluid out through the inlet); \"injection\" the pumped fluid is all water and the only "
+        "inflow: the invading balance receives w_i on r_i (less the line's storage), no Cahn–Hilliard flux "
+        "crosses r_i, S and μ are free there (μ_i unused)",
+        choices=INNER_SATURATION_BCS)
     volumetric_coupling: float = _param(1.0, "-", ">= 0",
         "factor on the second-order terms φ S ε̇_v and φ ε̇_v of Eq. summary_equations_1,2 (1 paper, 0 off)",
         plausible=(0.0, 10.0))
@@ -358,7 +366,7 @@ _SIMPLE_BOUNDS = {f.name: (0.0, f.metadata["allowed"].endswith("> 0")) for f in 
 # fields added after runs were stored: left out of to_dict() at their default (None, or the off value 0 of an
 # effect), so the parameter dicts (and the run keys made from them) of older runs do not change
 _OMIT_AT_DEFAULT = {"porosity_floor": None, "permeability_floor": None, "porosity_ceiling": None,
-                    "cell_compliance": 0.0, "line_compliance": 0.0}
+                    "cell_compliance": 0.0, "line_compliance": 0.0, "inner_saturation_bc": "dirichlet"}
 _CHOICES = tuple((f.name, f.metadata["choices"]) for f in fields(Parameters) if f.metadata["choices"])
 CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
 

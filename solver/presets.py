@@ -11,7 +11,9 @@ parameters, ``dchfrac run --preset NAME`` runs it, ``dchfrac params`` lists the 
   q = 100 mL/min spread over the inlet's lateral surface, w_i = q / (2π r_i h) (:func:`measured_injection_velocity`,
   27.07 mm/s), and r_o is an outlet reservoir at p = 0 (``outer_saturation_bc = "outflow"``) with no
   chemical-potential flux (``mu_outer_bc = "zero_flux"``): both phases leave as they arrive, nothing but oil
-  enters, water leaves only once it has reached r_o.  Why (results/fidelity/README.md, issue #47): the paper's
+  enters, water leaves only once it has reached r_o.  The inlet admits the pumped water and nothing else
+  (``inner_saturation_bc = "injection"``): the paper's S = 1 and μ = μ_i > 0 on r_i draw water in by the
+  Cahn–Hilliard flux beyond the pump's rate (13 % more by 2 s at h = 4 mm) and let oil out into the cavity.  Why (results/fidelity/README.md, issue #47): the paper's
   model keeps its 470 kPa only by losing about half the water through an unresolved outer wall, and its μ_o lies
   above the spinodal, so it pulls water in at r_o.
 """
@@ -41,11 +43,11 @@ def measured_injection_velocity(flow_rate: float = EXPERIMENT_FLOW_RATE, cell_he
 def _presets() -> dict[str, tuple[str, dict]]:
     return {
         "paper": ("the paper's model as written: the defaults (Sec. 3.3-3.5, Table A)", {}),
-        "experiment": ("measured rate w_i = q/(2 pi r_i h), q = 100 mL/min; outlet reservoir at p = 0 on r_o, "
-                       "zero mu flux (issue #47)",
+        "experiment": ("measured rate w_i = q/(2 pi r_i h), q = 100 mL/min, all of it water through r_i; outlet "
+                       "reservoir at p = 0 on r_o, zero mu flux (issue #47)",
                        {"w_i": measured_injection_velocity(), "cell_height": EXPERIMENT_CELL_HEIGHT,
                         "r_inner": EXPERIMENT_INNER_RADIUS, "outer_saturation_bc": "outflow",
-                        "mu_outer_bc": "zero_flux"}),
+                        "mu_outer_bc": "zero_flux", "inner_saturation_bc": "injection"}),
     }
 
 

@@ -31,7 +31,12 @@ def accumulate_balances(sim, U, data, dt: float, cum: dict, ev: np.ndarray, phi_
         cum["line"] += dt * float(line_stored_rate(disc, p, U, data).v.sum())
     cum["src"] += dt * _source(sim, data, ev, phi_q)
     cum["w_src"] += dt * _source(sim, data, ev, phi_q * fem.at_quadrature(U[:, S], disc.triangles, fem.STRANG3))
-    cum["w_in"] += dt * Rs[disc.inner_nodes].sum()
+    if disc.inner_injection:  # the inlet's load on the S rows: the pumped water less the line's storage
+        cum["w_in"] += -dt * float(disc.inject[S::nf][disc.inner_nodes].sum())
+        if disc.inner_weights is not None:
+            cum["w_in"] -= dt * float(line_stored_rate(disc, p, U, data).v.sum())
+    else:  # S = 1 imposed on r_i: the water inflow is its reaction (advection and the Cahn–Hilliard flux)
+        cum["w_in"] += dt * Rs[disc.inner_nodes].sum()
     if disc.outlet is None:  # S = 0 imposed on r_o: the water outflow is its reaction (0 with no S condition)
         cum["w_out"] += -dt * Rs[disc.outer_nodes].sum()
     else:  # the outlet's boundary term (solver.model.outlet_water_outflow), part of the S rows
