@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from solver import Parameters, RunOptions, physics, simulate
-from test_outlet import BL, DT, H, PHI, ROWS, _f_prime, _strip, _welge_outflow
+from solver import Parameters, RunOptions, simulate
+from test_outlet import BL, DT, H, PHI, ROWS, _f_prime, _strip, _welge_outflow, taylor_state
 
 
 def _strip_run(**changes):
@@ -81,14 +81,7 @@ def test_injection_inlet_jacobian_with_the_line_storage_is_exact():
     mesh = annulus_mesh(h=4.0)
     disc = build_discretization(mesh, p, random_porosity(mesh, seed=3))
     rng = np.random.default_rng(2)
-    r = np.hypot(*disc.points.T)
-    U = np.zeros((disc.n_nodes, disc.n_fields))
-    U[:, 0:2] = 0.02 * rng.standard_normal((disc.n_nodes, 2))
-    U[:, 2] = 100 * (53 - r) / 48 + rng.standard_normal(disc.n_nodes)
-    U[:, 3] = 0.5 + 0.1 * rng.standard_normal(disc.n_nodes)
-    U[:, 4] = 0.01 * rng.standard_normal(disc.n_nodes)
-    if disc.n_fields == 7:
-        U[:, 5:] = 0.1 * rng.standard_normal((disc.n_nodes, 2))
+    U = taylor_state(disc, rng)
     data = step_data(disc, p, 0.9 * U, np.zeros(disc.n_nodes), 1e-3)
     R, J = residual_and_jacobian(disc, p, U, data)
     nf = disc.n_fields

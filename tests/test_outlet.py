@@ -91,6 +91,20 @@ def test_outlet_on_the_annulus_keeps_water_in_before_breakthrough():
     assert ts["mass_error"].max() < 1e-9 and ts["water_mass_error"].max() < 1e-9
 
 
+def taylor_state(disc, rng):
+    """A state for a Taylor test on the annulus: p falling from about 100 kPa at r_i to 0 at r_o, S ≈ 0.5 (both
+    fluids mobile), small random displacements, μ and gradient fields (nodes x fields)."""
+    r = np.hypot(*disc.points.T)
+    U = np.zeros((disc.n_nodes, disc.n_fields))
+    U[:, 0:2] = 0.02 * rng.standard_normal((disc.n_nodes, 2))
+    U[:, 2] = 100 * (53 - r) / 48 + rng.standard_normal(disc.n_nodes)
+    U[:, 3] = 0.5 + 0.1 * rng.standard_normal(disc.n_nodes)
+    U[:, 4] = 0.01 * rng.standard_normal(disc.n_nodes)
+    if disc.n_fields == 7:
+        U[:, 5:] = 0.1 * rng.standard_normal((disc.n_nodes, 2))
+    return U
+
+
 def test_outlet_jacobian_is_exact():
     """Taylor test of the residual with the outlet term: |R(U + εV) − R(U) − ε J V| falls as ε², with water at
     r_o (S ≈ 0.5 there, so f(S) and f'(S) are both active) and outflow at most outer nodes."""
@@ -102,14 +116,7 @@ def test_outlet_jacobian_is_exact():
     mesh = annulus_mesh(h=4.0)
     disc = build_discretization(mesh, p, random_porosity(mesh, seed=3))
     rng = np.random.default_rng(1)
-    r = np.hypot(*disc.points.T)
-    U = np.zeros((disc.n_nodes, disc.n_fields))
-    U[:, 0:2] = 0.02 * rng.standard_normal((disc.n_nodes, 2))
-    U[:, 2] = 100 * (53 - r) / 48 + rng.standard_normal(disc.n_nodes)
-    U[:, 3] = 0.5 + 0.1 * rng.standard_normal(disc.n_nodes)
-    U[:, 4] = 0.01 * rng.standard_normal(disc.n_nodes)
-    if disc.n_fields == 7:
-        U[:, 5:] = 0.1 * rng.standard_normal((disc.n_nodes, 2))
+    U = taylor_state(disc, rng)
     data = step_data(disc, p, 0.9 * U, np.zeros(disc.n_nodes), 1e-3)
     R, J = residual_and_jacobian(disc, p, U, data)
     nf = disc.n_fields
