@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import damage, fem, linsolve, metrics, paths, physics
+from . import damage, fem, krylov, linsolve, metrics, paths, physics
 from .anderson import Anderson
 from .model import P, S, UX, UY, build_discretization, residual_and_jacobian, step_data
 from .options import RunOptions
@@ -78,8 +78,9 @@ class Simulation:
         fresh = False
         x_back = None  # state before an update made with a reused Jacobian (rolled back if it diverged)
         accel = Anderson(o.anderson_depth) if o.anderson_depth else None
+        nk = o.newton_krylov is not None  # Newton–Krylov: the exact Jacobian every iteration, GMRES on kept factors
         for it in range(1, o.newton_max_its + 1):
-            need_j = self.lu is None or not reuse
+            need_j = self.lu is None or not reuse or nk
             with phase("assembly"), np.errstate(all="ignore"):  # a diverging trial iterate is handled below
                 R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data, need_jacobian=need_j)
                 disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
@@ -90,16 +91,19 @@ class Simulation:
                     raise StepFailure("non-finite residual")
                 x, x_back, self.lu, prev = x_back, None, None, None  # stale Jacobian diverged: back off, refresh
                 continue
-            if need_j:
+            dx = self._krylov_update(J, R) if nk and self.lu is not None else None
+            if dx is None and need_j:
                 self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind, self.precision,
                                                                  condense=disc.projection_dofs), data.dt, True
                 if accel:
                     accel.reset()
-            dx = self.lu.solve(-R)
+            if dx is None:
+                dx = self.lu.solve(-R)
             if not np.all(np.isfinite(dx)):
                 raise StepFailure("non-finite Newton update")
+            fresh = fresh or nk  # a Newton–Krylov update is an (inexact) Newton step with the exact Jacobian
             x_back = None if fresh else x.copy()
-            x = self._advance(x, dx, accel)
+            x = x + dx if nk else self._advance(x, dx, accel)
             X = x.reshape(-1, nf)
             scale = np.maximum(np.abs(X).max(axis=0), self.floors)
             upd = float((np.abs(dx.reshape(-1, nf)).max(axis=0) / scale).max())
@@ -120,11 +124,19 @@ class Simulation:
                 continue
             if reuse and not fresh and ratio > o.jacobian_reuse:
                 self.lu = None  # contraction too slow: refresh the Jacobian next iteration
-            fresh = False if reuse else fresh
+            fresh = False if reuse and not nk else fresh
             prev = upd
         self.lu = None
         raise StepFailure(f"Newton did not converge in {o.newton_max_its} iterations (last relative update {upd:.2e})",
                           node=int(np.argmax((np.abs(dx.reshape(-1, nf)) / scale).max(axis=1))))
+
+    def _krylov_update(self, J, R: np.ndarray) -> np.ndarray | None:
+        """The Newton update J dx = −R by GMRES preconditioned by the kept factors (``options.newton_krylov``
+        iterations at most, to the forcing ``linsolve.SINGLE_FORCING``), or None when it does not get there."""
+        with phase("solve"):
+            dx, its = krylov.gmres(lambda v: J @ v, self.lu.solve, -R, linsolve.SINGLE_FORCING, self.options.newton_krylov)
+        linsolve.STATS["krylov_iterations"] = linsolve.STATS.get("krylov_iterations", 0) + its
+        return dx
 
     def balanced(self, X: np.ndarray, data) -> bool:
         """Whether the iterate X (nodes x fields) conserves mass over the step: the global balances of the total
