@@ -1,6 +1,6 @@
 """The counts of one reference run (factorizations, Newton and GMRES iterations, calls of each phase) with one
-thread, with its seconds (under whatever load: no timing claim), for the iteration cost of a solver variant independent of the load.  Prints
-one JSON line (appended to iteration_counts.jsonl).
+thread: the iteration cost of a solver variant, independent of the machine's load (its seconds are recorded too,
+under whatever load: no timing claim).  Prints one JSON line (appended to iteration_counts.jsonl).
 
     MKL_NUM_THREADS=1 OMP_NUM_THREADS=1 DCHFRAC_ASSEMBLY_THREADS=1 \
         python results/bench/iteration_counts.py H T_END '{"jacobian_reuse": 0.5}' >> results/bench/iteration_counts.jsonl
