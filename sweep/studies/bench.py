@@ -280,11 +280,13 @@ def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None
         print(f"bench: profiled reference run h = {h:g} mm to {t_end:g} s ...", flush=True)
         if compare is None:
             result["runs"].append(profiled_run(h, t_end, options, model))
+            _write_json(out_path, result)  # each finished run is kept, should a later (longer) one not finish
             continue
         pair = [profiled_run(h, t_end, {**(options or {}), **(compare if k % 2 else {})}, model) for k in range(4)]
         result["runs"] += pair
         result.setdefault("comparisons", []).append(_comparison(h, compare, pair[0::2], pair[1::2]))
         print(json.dumps(result["comparisons"][-1]), flush=True)
+        _write_json(out_path, result)
     if hasattr(os, "getloadavg"):
         result["machine"]["load_average_after"] = list(os.getloadavg())
     _write_json(out_path, result)
