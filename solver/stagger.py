@@ -67,6 +67,9 @@ class Simulation:
         factorization is the floor of this solver's cost); otherwise, and
         always when ``jacobian_reuse`` is 0, a fresh exact Jacobian is
         assembled and factorized, which gives Newton's quadratic convergence.
+        With ``options.newton_krylov`` every iteration assembles the exact Jacobian and solves for its update by
+        GMRES preconditioned by the kept factors (:meth:`_krylov_update`), refactorizing only when GMRES does
+        not reach the forcing: inexact Newton, without the chord iteration's rollback and Anderson's acceleration.
         """
         disc, nf, o = self.disc, self.disc.n_fields, self.options
         x = U0.ravel().copy()
