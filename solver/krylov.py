@@ -14,8 +14,8 @@ __all__ = ["gmres"]
 
 
 def gmres(matvec, precond, b: np.ndarray, rtol: float, maxiter: int) -> tuple[np.ndarray | None, int]:
-    """x with ‖b − A x‖ ≤ ``rtol`` ‖b‖ from a zero start, or None when ``maxiter`` iterations do not reach it;
-    returns (x, iterations).  ``matvec(v)`` = A v, ``precond(v)`` ≈ A⁻¹ v (the kept factors)."""
+    """x with ‖b − A x‖ ≤ ``rtol`` ‖b‖ from a zero start, or None when ``maxiter`` iterations do not reach
+    it; returns (x, iterations).  ``matvec(v)`` = A v, ``precond(v)`` ≈ A⁻¹ v (the kept factors)."""
     nb = float(np.linalg.norm(b))
     if nb == 0.0:
         return np.zeros_like(b), 0

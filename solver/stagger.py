@@ -141,7 +141,8 @@ class Simulation:
         """The Newton update J dx = −R by GMRES preconditioned by the kept factors (``options.newton_krylov``
         iterations at most, to the forcing ``linsolve.SINGLE_FORCING``), or None when it does not get there."""
         with phase("solve"):
-            dx, its = krylov.gmres(lambda v: J @ v, self.lu.solve, -R, linsolve.SINGLE_FORCING, self.options.newton_krylov)
+            dx, its = krylov.gmres(lambda v: J @ v, self.lu.solve, -R, linsolve.SINGLE_FORCING,
+                                   self.options.newton_krylov)
         linsolve.STATS["krylov_iterations"] = linsolve.STATS.get("krylov_iterations", 0) + its
         return dx
 

@@ -16,7 +16,8 @@ def table(path: str) -> None:
     d = json.load(open(path))
     y = d["h1_refactorization"]["refactorization_s"]
     print(f"{path}: h = 1 refactorization {y:.3f} s ({y / QUIET_H1_REFACTORIZATION:.1f}x the quiet 0.28 s); "
-          f"load average before {d['machine'].get('load_average_1_5_15')}, after {d['machine'].get('load_average_after')}\n")
+          f"load average before {d['machine'].get('load_average_1_5_15')}, "
+          f"after {d['machine'].get('load_average_after')}\n")
     runs = d["runs"]
     print("| phase | " + " | ".join(f"h = {r['h_mm']:g}{' ' + str(r['options']) if r['options'] else ''} s (%)"
                                       for r in runs) + " |")
