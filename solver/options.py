@@ -18,7 +18,7 @@ STEP_CONTROLS = ("state_change", "iterations")  # the step-size controllers solv
 # options added after runs were stored: left out of to_dict() at their default (None), so the
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
 _OMIT_WHEN_NONE = ("h_inner", "inner_grading_length", "h_outer", "frames", "xdmf_format", "pressure_stabilization", "first_stagger_rtol",
-                   "linear_precision")
+                   "linear_precision", "newton_krylov")
 # written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
 DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
 
@@ -127,6 +127,13 @@ class RunOptions:
         amplify.  So it is off by default (None: every stagger iteration at ``newton_rtol``, the first allowed
         to end the stagger); for runs that are not differentiated, 1e-3 (``results/archive/bench_rounds.md``).  Used when
         ``stagger_max_its`` >= 2.  Omitted from :meth:`to_dict` when None, as h_inner.
+    newton_krylov : Newton–Krylov iterations (1..100: the most GMRES iterations per Newton iteration): every
+        Newton iteration assembles the exact Jacobian and solves for its update by GMRES to the forcing
+        ``solver.linsolve.SINGLE_FORCING`` (1e-3), preconditioned by the kept factorization (``solver.krylov``);
+        the Jacobian is factorized again only when GMRES does not reach the forcing in that many iterations.  The
+        iteration is then inexact Newton with the exact Jacobian (Dembo, Eisenstat and Steihaug 1982), not the
+        chord iteration of ``jacobian_reuse`` (nor Anderson's acceleration of it); the Newton test is the same.
+        None (default): the chord iteration.  Omitted from :meth:`to_dict` when None, as h_inner.
     """
 
     h: float = 1.0
@@ -162,6 +169,7 @@ class RunOptions:
     pressure_stabilization: float | None = None
     anderson_depth: int = 3
     first_stagger_rtol: float | None = None
+    newton_krylov: int | None = None
 
     def __post_init__(self):
         _check(self)
@@ -244,6 +252,7 @@ _NUMBERS = (
     ("pressure_stabilization", float, 0.0, 100.0, False, True, None),
     ("anderson_depth", int, 0, 20, False, True, None),     # None: 0 (the plain iteration), set after the loop
     ("first_stagger_rtol", float, 0.0, 0.1, True, True, None),
+    ("newton_krylov", int, 1, 100, False, True, None),
 )
 
 
@@ -255,7 +264,7 @@ OPTION_UNITS = {
     "newton_rtol": "-", "newton_mass_tol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
     "linear_solver": "", "linear_precision": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
     "xdmf_format": "", "transport": "", "pressure_stabilization": "-", "anderson_depth": "",
-    "first_stagger_rtol": "-",
+    "first_stagger_rtol": "-", "newton_krylov": "",
 }
 
 

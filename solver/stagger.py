@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import damage, fem, linsolve, metrics, paths, physics
+from . import damage, fem, krylov, linsolve, metrics, paths, physics
 from .anderson import Anderson
 from .model import P, S, UX, UY, build_discretization, residual_and_jacobian, step_data
 from .options import RunOptions
@@ -67,6 +67,9 @@ class Simulation:
         factorization is the floor of this solver's cost); otherwise, and
         always when ``jacobian_reuse`` is 0, a fresh exact Jacobian is
         assembled and factorized, which gives Newton's quadratic convergence.
+        With ``options.newton_krylov`` every iteration assembles the exact Jacobian and solves for its update by
+        GMRES preconditioned by the kept factors (:meth:`_krylov_update`), refactorizing only when GMRES does
+        not reach the forcing: inexact Newton, without the chord iteration's rollback and Anderson's acceleration.
         """
         disc, nf, o = self.disc, self.disc.n_fields, self.options
         x = U0.ravel().copy()
@@ -78,28 +81,36 @@ class Simulation:
         fresh = False
         x_back = None  # state before an update made with a reused Jacobian (rolled back if it diverged)
         accel = Anderson(o.anderson_depth) if o.anderson_depth else None
+        nk = o.newton_krylov is not None  # Newton–Krylov: the exact Jacobian every iteration, GMRES on kept factors
+        seen = {}  # the residual the balance test assembled at the iterate it tested (reused by the next iteration)
         for it in range(1, o.newton_max_its + 1):
-            need_j = self.lu is None or not reuse
-            with phase("assembly"), np.errstate(all="ignore"):  # a diverging trial iterate is handled below
-                R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data, need_jacobian=need_j)
-                disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
-                if need_j:
-                    disc.dirichlet.apply_matrix(J)
+            need_j = self.lu is None or not reuse or nk
+            if not need_j and seen.get("x") is x:
+                R = seen.pop("R")
+            else:
+                with phase("assembly"), np.errstate(all="ignore"):  # a diverging trial iterate is handled below
+                    R, J = residual_and_jacobian(disc, self.params, x.reshape(-1, nf), data, need_jacobian=need_j)
+                    disc.dirichlet.apply_residual(R, x, disc.dirichlet_values)
+                    if need_j:
+                        disc.dirichlet.apply_matrix(J)
             if not np.all(np.isfinite(R)):
                 if x_back is None:
                     raise StepFailure("non-finite residual")
                 x, x_back, self.lu, prev = x_back, None, None, None  # stale Jacobian diverged: back off, refresh
                 continue
-            if need_j:
+            dx = self._krylov_update(J, R) if nk and self.lu is not None else None
+            if dx is None and need_j:
                 self.lu, self.lu_dt, fresh = linsolve.factorize(J, self.solver_kind, self.precision,
                                                                  condense=disc.projection_dofs), data.dt, True
                 if accel:
                     accel.reset()
-            dx = self.lu.solve(-R)
+            if dx is None:
+                dx = self.lu.solve(-R)
             if not np.all(np.isfinite(dx)):
                 raise StepFailure("non-finite Newton update")
+            fresh = fresh or nk  # a Newton–Krylov update is an (inexact) Newton step with the exact Jacobian
             x_back = None if fresh else x.copy()
-            x = self._advance(x, dx, accel)
+            x = x + dx if nk else self._advance(x, dx, accel)
             X = x.reshape(-1, nf)
             scale = np.maximum(np.abs(X).max(axis=0), self.floors)
             upd = float((np.abs(dx.reshape(-1, nf)).max(axis=0) / scale).max())
@@ -113,20 +124,29 @@ class Simulation:
                                   node=int(np.argmax(np.abs(X[:, S] - 0.5))))
             # with a reused Jacobian convergence is linear: the error left is about upd * ratio / (1 - ratio)
             # a loose solve (rtol given: the first stagger iteration's) only starts the next, so no balance test
-            if upd <= (rtol or o.newton_rtol) * (1.0 if fresh or ratio < 0.5 else 0.1) and (rtol or self.balanced(X, data)):
+            if upd <= (rtol or o.newton_rtol) * (1.0 if fresh or ratio < 0.5 else 0.1) and (rtol or self.balanced(X, data, seen)):
                 return X.copy(), it
             if reuse and not fresh and ratio > 1.0 and x_back is not None:
                 x, self.lu, prev = x_back, None, None  # diverging with a stale Jacobian: undo, refresh
                 continue
             if reuse and not fresh and ratio > o.jacobian_reuse:
                 self.lu = None  # contraction too slow: refresh the Jacobian next iteration
-            fresh = False if reuse else fresh
+            fresh = False if reuse and not nk else fresh
             prev = upd
         self.lu = None
         raise StepFailure(f"Newton did not converge in {o.newton_max_its} iterations (last relative update {upd:.2e})",
                           node=int(np.argmax((np.abs(dx.reshape(-1, nf)) / scale).max(axis=1))))
 
-    def balanced(self, X: np.ndarray, data) -> bool:
+    def _krylov_update(self, J, R: np.ndarray) -> np.ndarray | None:
+        """The Newton update J dx = −R by GMRES preconditioned by the kept factors (``options.newton_krylov``
+        iterations at most, to the forcing ``linsolve.SINGLE_FORCING``), or None when it does not get there."""
+        with phase("solve"):
+            dx, its = krylov.gmres(lambda v: J @ v, self.lu.solve, -R, linsolve.SINGLE_FORCING,
+                                   self.options.newton_krylov)
+        linsolve.STATS["krylov_iterations"] = linsolve.STATS.get("krylov_iterations", 0) + its
+        return dx
+
+    def balanced(self, X: np.ndarray, data, keep: dict | None = None) -> bool:
         """Whether the iterate X (nodes x fields) conserves mass over the step: the global balances of the total
         fluid (the p rows, Eq. summary_equations_2) and of the invading fluid (the S rows) have defects
         |Σ R| (mm²/s, over the rows without a Dirichlet condition: Σ_a N_a = 1, so the sum is the step's
@@ -135,7 +155,9 @@ class Simulation:
         beside the update test): a small update with a reused Jacobian bounds the error in the fields, not
         in the conserved totals; this one makes the volume balance of ``timeseries.csv`` hold to the
         tolerance whatever the step sequence and the Jacobian's age.  Without injection (w_i = 0) there is no
-        scale for the balance (``mass_error`` is relative to the injected volume) and the update test decides."""
+        scale for the balance (``mass_error`` is relative to the injected volume) and the update test decides.
+        ``keep``: a dict that receives the residual it assembled ("R", Dirichlet rows applied) at the flat iterate
+        ("x", the array X views), for the next Newton iteration at the same iterate."""
         disc, nf = self.disc, self.disc.n_fields
         rate = self.params.w_i * disc.inner_length
         if rate <= 0.0:
@@ -143,6 +165,8 @@ class Simulation:
         with phase("assembly"), np.errstate(all="ignore"):
             R, _ = residual_and_jacobian(disc, self.params, X, data, need_jacobian=False)
             disc.dirichlet.apply_residual(R, X.ravel(), disc.dirichlet_values)  # Dirichlet rows: x − value = 0
+        if keep is not None:
+            keep.update(x=X.base if X.base is not None else X, R=R)
         R = R.reshape(-1, nf)
         defect = max(abs(float(R[:, P].sum())), abs(float(R[:, S].sum())))
         return defect <= self.options.newton_mass_tol * rate

@@ -174,6 +174,19 @@ def _bench_options(pairs: list[str]) -> dict:
     return out
 
 
+def _bench_model(preset: str | None, pairs: list[str]) -> dict | None:
+    """The model of ``dchfrac bench --profile --preset NAME --set KEY=VALUE``, validated as Parameters before any
+    run: {"preset": name, "changes": {key: value}}, or None (the reference case)."""
+    from solver import Parameters
+    from solver.presets import preset_changes
+
+    if preset is None and not pairs:
+        return None
+    changes = _split_sets(pairs, "--set")
+    Parameters.from_dict({**(preset_changes(preset) if preset else {}), **changes})  # names and ranges checked
+    return {"preset": preset, "changes": changes}
+
+
 def cmd_bench(args) -> int:
     from .studies.bench import run_benchmarks, run_profile
 
@@ -194,13 +207,15 @@ def cmd_bench(args) -> int:
         try:
             options = _bench_options(args.option or [])
             compare = _bench_options(args.compare) if args.compare else None
+            model = _bench_model(args.preset, args.set or [])
         except ValueError as e:
             print(f"dchfrac bench: {e}", file=sys.stderr)
             return 2
-        run_profile(out, sizes, t_end, options=options, compare=compare)
+        run_profile(out, sizes, t_end, options=options, compare=compare, model=model)
         return 0
-    if args.h or args.t_end is not None or args.option or args.compare:
-        print("dchfrac bench: --h, --t-end, --option and --compare apply only with --profile", file=sys.stderr)
+    if args.h or args.t_end is not None or args.option or args.compare or args.preset or args.set:
+        print("dchfrac bench: --h, --t-end, --option, --compare, --preset and --set apply only with --profile",
+              file=sys.stderr)
         return 2
     run_benchmarks(out, quick=args.quick, reference=args.reference)
     return 0
@@ -481,6 +496,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--compare", action="append", metavar="KEY=VALUE",
                    help="with --profile: a variant's run option (repeatable); each size runs base, variant, base, "
                         "variant side by side in time and reports the wall-time ratio and the change of p_inj")
+    b.add_argument("--preset", help="with --profile: the named model the profiled runs start from (default: the "
+                                    "reference case)")
+    b.add_argument("--set", action="append", metavar="NAME=VALUE",
+                   help="with --profile: a model parameter of the profiled runs (repeatable), e.g. porosity_floor=0.1")
     b.set_defaults(func=cmd_bench)
     w = sub.add_parser("warmup", help="compile the numba kernels ahead of the first run (about a minute of CPU, once)")
     w.set_defaults(func=cmd_warmup)

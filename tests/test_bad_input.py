@@ -441,7 +441,24 @@ def test_bench_profile_passes_its_run_options(tmp_path, monkeypatch):
     from sweep.cli import main
 
     seen = {}
-    monkeypatch.setattr(sweep.studies.bench, "run_profile", lambda out, sizes, t_end, options=None, compare=None: seen.update(options=options))
+    monkeypatch.setattr(sweep.studies.bench, "run_profile",
+                        lambda out, sizes, t_end, options=None, compare=None, model=None: seen.update(options=options,
+                                                                                                      model=model))
     assert main(["bench", "--profile", "--out", str(tmp_path / "p.json"), "--option", "anderson_depth=3",
                  "--option", "first_stagger_rtol=1e-3"]) == 0
-    assert seen["options"] == {"anderson_depth": 3, "first_stagger_rtol": 1e-3}
+    assert seen["options"] == {"anderson_depth": 3, "first_stagger_rtol": 1e-3} and seen["model"] is None
+    assert main(["bench", "--profile", "--out", str(tmp_path / "p.json"), "--preset", "experiment",
+                 "--set", "porosity_floor=0.1"]) == 0
+    assert seen["model"] == {"preset": "experiment", "changes": {"porosity_floor": 0.1}}
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--preset", "nope"], "preset 'nope' is not defined"), (["--set", "foo=1"], "unknown parameter(s) ['foo']"),
+    (["--set", "porosity_floor=-1"], "porosity_floor=-1"),
+])
+def test_bench_profile_refuses_a_bad_model_before_any_run(tmp_path, capsys, monkeypatch, args, fragment):
+    import sweep.studies.bench
+    from sweep.cli import main
+
+    monkeypatch.setattr(sweep.studies.bench, "run_profile", lambda *a, **k: pytest.fail("a run started"))
+    _refused(capsys, main(["bench", "--profile", "--out", str(tmp_path / "p.json"), *args]), fragment)

@@ -1,6 +1,10 @@
 """The cost rates that ``dchfrac bench`` writes (``sweep.studies.bench._cost_rates``): from the longest run made at
 each mesh size, never from a failed run; ``solver.budget.REFERENCE`` copies the h = 2 rate (tests/test_budget.py) and the
 dry run reads the shared-run factor back (``sweep.campaign.cost.shared_run_factor``)."""
+import json
+
+import pytest
+
 from sweep.studies.bench import _cost_rates
 from sweep.campaign.cost import shared_run_factor
 
@@ -53,3 +57,21 @@ def test_side_by_side_comparison_sums_the_pairs_and_reports_the_change_of_p_inj(
     assert c["p_inj_end_rel_change"] == abs(400.0004 - 400.0) / 400.0
     failed = _comparison(2.0, {}, [_profiled(10.0, 400.0)], [_profiled(9.0, None, status="failed")])
     assert failed["status"] == "failed" and failed["wall_ratio"] is None and failed["p_inj_end_rel_change"] is None
+
+
+def test_a_profile_keeps_each_finished_run_when_a_later_one_does_not_finish(tmp_path, monkeypatch):
+    """``dchfrac bench --profile --h 2 --h 0.5``: the h = 2 run is in the JSON even if the h = 0.5 run is stopped."""
+    from sweep.studies import bench
+
+    monkeypatch.setattr(bench, "_refactorization_h1", lambda: {"refactorization_s": 0.3})
+
+    def run(h, t_end, options=None, model=None):
+        if h < 1:
+            raise KeyboardInterrupt
+        return {"h_mm": h, "wall_s": 1.0, "profile": {"total": {"seconds": 1.0}}}
+
+    monkeypatch.setattr(bench, "profiled_run", run)
+    out = tmp_path / "p.json"
+    with pytest.raises(KeyboardInterrupt):
+        bench.run_profile(out, sizes=(2.0, 0.5))
+    assert [r["h_mm"] for r in json.loads(out.read_text())["runs"]] == [2.0]

@@ -197,17 +197,23 @@ def _refactorization_h1() -> dict:
             "solve_s": it["backends"][kind]["solve_s"], "residual_and_jacobian_s": it["residual_and_jacobian_s"]}
 
 
-def profiled_run(h: float, t_end: float = 2.0, options: dict | None = None) -> dict:
+def profiled_run(h: float, t_end: float = 2.0, options: dict | None = None, model: dict | None = None) -> dict:
     """The reference case at mesh size h (mm) to t_end (s) with its wall time split by phase and part of the
     run (``SimulationResult.profile``, :mod:`solver.profiling`), plus the run's own figures.  ``options``: other
-    RunOptions of the run (e.g. ``{"anderson_depth": 3}``)."""
+    RunOptions of the run (e.g. ``{"anderson_depth": 3}``); ``model``: the parameters as ``{"preset": name or
+    None, "changes": {...}}`` (default: ``Parameters()``, the reference case)."""
     from solver import Parameters, RunOptions, simulate
+    from solver.presets import preset_changes
 
+    model = model or {}
+    params = Parameters.from_dict({**(preset_changes(model["preset"]) if model.get("preset") else {}),
+                                   **model.get("changes", {})})
     threads = os.cpu_count() or 1
     with _assembly_threads(threads):
-        res = simulate(Parameters(), RunOptions(**{**(options or {}), "h": h, "t_end": t_end, "snapshot_times": []}))
+        res = simulate(params, RunOptions(**{**(options or {}), "h": h, "t_end": t_end, "snapshot_times": []}))
     n = len(res.timeseries)
-    return {"h_mm": h, "t_end_s": t_end, "options": dict(options or {}), "assembly_threads": threads,
+    return {"h_mm": h, "t_end_s": t_end, "options": dict(options or {}), "model": dict(model),
+            "assembly_threads": threads,
             "kernels": _kernels(), "status": res.status,
             "newton_iterations": int(res.timeseries["newton_its"].sum()) if n else 0,
             "wall_s": res.wall_time, "accepted_steps": n, "rejected_steps": len(res.rejected_steps),
@@ -254,9 +260,10 @@ def _kernels() -> str:
 
 
 def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None = None,
-                compare: dict | None = None) -> dict:
+                compare: dict | None = None, model: dict | None = None) -> dict:
     """``dchfrac bench --profile``: profiled reference runs at each mesh size of ``sizes`` (mm) to ``t_end`` (s),
-    with the run options ``options`` (default none), and the h = 1 refactorization time measured in the same
+    with the run options ``options`` (default none) and the model ``model`` (:func:`profiled_run`; default the
+    reference case), and the h = 1 refactorization time measured in the same
     process; written as JSON to ``out_path``.  With ``compare`` (run options of a variant) each size is run as
     base, variant, base, variant, side by side in time, and ``comparisons`` holds the variant's wall time over the
     base's (sums of the pairs) and the relative change of p_inj at t_end."""
@@ -272,12 +279,14 @@ def run_profile(out_path, sizes=(2.0,), t_end: float = 2.0, options: dict | None
     for h in sizes:
         print(f"bench: profiled reference run h = {h:g} mm to {t_end:g} s ...", flush=True)
         if compare is None:
-            result["runs"].append(profiled_run(h, t_end, options))
+            result["runs"].append(profiled_run(h, t_end, options, model))
+            _write_json(out_path, result)  # each finished run is kept, should a later (longer) one not finish
             continue
-        pair = [profiled_run(h, t_end, {**(options or {}), **(compare if k % 2 else {})}) for k in range(4)]
+        pair = [profiled_run(h, t_end, {**(options or {}), **(compare if k % 2 else {})}, model) for k in range(4)]
         result["runs"] += pair
         result.setdefault("comparisons", []).append(_comparison(h, compare, pair[0::2], pair[1::2]))
         print(json.dumps(result["comparisons"][-1]), flush=True)
+        _write_json(out_path, result)
     if hasattr(os, "getloadavg"):
         result["machine"]["load_average_after"] = list(os.getloadavg())
     _write_json(out_path, result)
