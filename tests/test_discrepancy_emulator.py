@@ -676,3 +676,34 @@ def test_the_named_model_after_an_emulated_linear_profile_is_a_real_fit_under_it
     span = np.ptp(np.array([p.x_bounds for p in params[:2]]), axis=1)
     assert np.all(np.abs(final.x[:2] - exact.x) <= 1e-3 * span)
     assert np.array_equal(prob.residual_batch(params, [final.x], train)[0], final.r)
+
+
+def test_an_emulated_refit_reaches_an_optimum_outside_the_baselines_box(tmp_path):
+    """The toy with the outer compliance hidden (c = 0.05 mm/kPa: the early pressure over 1 + 2c) and k̄
+    calibrated: the baseline, without the effect, raises k̄ by 1 + 2c to mimic it, far outside its own Wald
+    box from the truth (the premise).  The candidate's refit starts also from the spec's initial k̄; its
+    emulator's design box holds every start (EmulatedRefits._box), so the emulated optimum is the real joint
+    optimum (the known answer: the same refit on real runs) within its stated error."""
+    from sweep.discrepancy.emulated import EmulatedRefits
+    from sweep.discrepancy.emulator import wald_box
+    from sweep.discrepancy.problem import Problem
+
+    data = load_measured(make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0), CONDS, TIMES,
+                                   {"outer_compliance": 0.05, "kbar": 0.0015}, seed=1,
+                                   observables=("p_inj", "front_radius_mean")))
+    spec = _spec({"emulator": "gp", "emulate_refits": True}, calibrate=("kbar",))
+    prob = Problem(data, spec, ToyForward({}, h=8.0))
+    train = ["a", "b", "c"]
+    base = prob.fit(tuple(spec.calibrate), [np.array([spec.calibrate[0].to_x(0.0015)])], train)
+    cp = spec.candidate_param("compliant_boundary")
+    params = tuple(spec.calibrate) + (cp,)
+    starts = [np.append(base.x, cp.initial), np.array([spec.calibrate[0].to_x(0.0015), cp.initial])]
+    real = prob.fit(params, starts, train)
+    lo, hi = wald_box(prob, base, train)
+    assert not lo[0] <= real.x[0] <= hi[0]                       # the premise: the optimum is outside
+    refits = EmulatedRefits(prob, train)
+    refits.fit(params, starts, base, "refits")
+    rec, em = refits.records[0], refits.emulators[("kbar", "effect:compliant_boundary")]
+    assert all(np.all(em.lo <= s) and np.all(s <= em.hi) for s in starts)
+    x_em = np.array([p.to_x(rec["emulated"][p.name]) for p in params])
+    assert np.all(np.abs(x_em - real.x) <= np.array(rec["emulated_error_x"]))
