@@ -484,24 +484,27 @@ def _profile_minimum(problem: Problem, fit: Fit, j: int, ids, pr: dict, fine_for
     xj = float(res.x) if res.fun <= pf.dchi2(best) else best
     with pf.holding(xj):
         held = pf.modelled_refit(xj)
-    return settled_fit(problem, fit.params, j, xj, held.x, ids, cm, em)
+    return settled_fit(problem, fit.params, j, xj, held.x, ids, cm, em, refit=False)
 
 
-def settled_fit(problem: Problem, params: tuple, j: int, xj: float, x_free, ids, cm, em=None) -> Fit:
+def settled_fit(problem: Problem, params: tuple, j: int, xj: float, x_free, ids, cm, em=None,
+                refit: bool = True) -> Fit:
     """The model at strength ``xj`` (fit coordinates, parameter ``j`` of ``params``) under the modelled
     correction c(xj) for real runs (:meth:`StrengthCorrection.real_at`, left in use), as a Fit of real runs: the others from
     ``x_free`` (an emulated refit's when ``em`` is given, then polished with ``[profile] emulator_polish``
     real least-squares evaluations at the held strength, so that the named model's residuals, held-out gap
     and residual test are those of a real conditional optimum, not of the emulator's), its residuals and
-    Jacobian from real runs.  The polished point joins ``em``'s design."""
+    Jacobian from real runs.  Without ``em`` the others are refitted from ``x_free`` by real least squares (from
+    the fit's values that is the profile's own reference refit, its runs cached); ``refit = False``: ``x_free``
+    is that real refit already.  The polished point joins ``em``'s design."""
     problem.noise.shift_correction(cm.real_at(xj))
     p = params[j]
     x_free = np.asarray(x_free, float)
-    if em is not None and x_free.size:
+    if x_free.size and (refit or em is not None):
         problem.fixed = {p.name: p.from_x(xj)}
         try:
             x_free = np.asarray(problem.fit(params[:j] + params[j + 1:], [x_free], ids,
-                                            max_nfev=problem.spec.profile.emulator_polish).x, float)
+                                            max_nfev=problem.spec.profile.emulator_polish if em else None).x, float)
         finally:
             problem.fixed = {}
     x = np.insert(x_free, j, xj)
