@@ -137,6 +137,45 @@ def test_a_correction_held_at_one_strength_biases_it_and_the_linear_model_does_n
     assert pr["upper"] == pytest.approx(exact["upper"], abs=0.2 * sd)
 
 
+
+def test_a_correction_carried_by_fewer_realizations_is_exact_when_their_deviations_do_not_move():
+    """correction_from with a reference: fine realizations f_k(x) = g(x) + o_k (each its own deviation o_k,
+    the same at every x) give mean_k(f_k(x2)) − coarse exactly from all k at x1 and any m of them at x2; a
+    point where a realization failed (NaN) is left out of that point's change."""
+    from sweep.discrepancy.noise import correction_from
+
+    rng = np.random.default_rng(0)
+    o = rng.normal(size=(6, 5))
+    g1, g2, coarse = rng.normal(size=5), rng.normal(size=5), rng.normal(size=5)
+    full = correction_from(coarse, g2 + o)
+    for m in (1, 2, 6):
+        assert np.allclose(correction_from(coarse, (g2 + o)[:m], ref=g1 + o), full, atol=1e-12)
+    two = (g2 + o)[:2].copy()
+    two[0, 3] = np.nan
+    assert np.allclose(correction_from(coarse, two, ref=g1 + o), full, atol=1e-12)
+
+
+def test_the_linear_correction_from_fewer_realizations_at_its_other_anchors():
+    """``[profile] correction_slope_realizations = 1``: the anchors after the first run one fine realization
+    each instead of all three; on the toy whose realization deviations do not depend on the parameters
+    (MeshToy without jitter) the line is the one from all realizations at every anchor (the known answer, to
+    rounding), for 2 realizations x 2 anchors x 4 conditions fewer fine runs.  With jitter (deviations that
+    change with the parameters, sd 1 kPa) it is an estimate: it differs, by less than three jitter sd."""
+    data = _data(MeshToy(2.0, 0, shape="wander"))
+    out = {}
+    for jitter in (0.0, 1.0):
+        for m in (0, 1):
+            fines = [MeshToy(2.0, 1 + i, shape="wander", jitter=jitter) for i in range(3)]
+            prob, params = _problem(data, MeshToy(4.0, 0, spread=0.0), {"correction": "linear",
+                                                                      "correction_slope_realizations": m})
+            add_discretization_error(prob, fines, {"E": 331.0, "effect:damage_viscosity": 40.0})
+            pf = _Profile(prob, _fit(prob, params), 1, TRAIN, 3.841, fines)
+            out[jitter, m] = (pf.cm.at(pf.cm.xs[-1]), sum(f.n_runs for f in fines))
+    (a0, n0), (a1, n1) = out[0.0, 0], out[0.0, 1]
+    assert np.allclose(a0, a1, atol=1e-9 * np.abs(a0).max()) and n0 - n1 == 2 * 2 * 4
+    (j0, _), (j1, _) = out[1.0, 0], out[1.0, 1]
+    assert not np.allclose(j0, j1) and np.abs(j1 - j0).max() < 3.0
+
 def test_independent_estimates_are_parsed_compared_and_reported(tmp_path):
     from sweep.discrepancy.report import _independent_lines, independent_comparison
 

@@ -589,3 +589,121 @@ def test_an_emulated_refit_never_ends_above_the_model_it_nests(tmp_path, monkeyp
     monkeypatch.setattr(emulated, "emulated_fit", lambda em, starts: (good, {"chi2_real": float(good.r @ good.r)}))
     f2 = refits.fit(params, [np.append(base.x, 30.0), np.append(base.x, 40.0)], base, "refits")
     assert f2 is good and "fallback" not in refits.records[-1]
+
+
+
+class _GrowingSdEmulator:
+    """An emulator stand-in with a known predictive distribution: mean a·x of one free parameter x (the
+    held strength is the second parameter), covariance s(x)·I with s(x) = 0.01 + (x − 1)² growing away from
+    its design at x = 1, whitened with a unit noise covariance.  The data are a·x* + m with a misfit m the
+    model cannot remove (|m|² > |a|²): residuals whitened alone fall toward |a|² far from the design."""
+
+    def __init__(self):
+        from types import SimpleNamespace
+
+        from sweep.discrepancy.noise import ScaledCovariance
+        from sweep.discrepancy.options import FitOptions
+        from sweep.discrepancy.spec import CalibParam
+
+        n = 6
+        self.a = np.array([1.0, 0.5, -0.5, 0.2, 0.0, 0.0])
+        m = np.array([0.0, 0.0, 0.0, 0.0, 2.0, -2.0])
+        self.params = (CalibParam(name="E", lower=-3.0, upper=5.0, initial=1.0, scale="linear"),
+                       CalibParam(name="effect:x", lower=0.0, upper=1.0, initial=0.5, scale="linear"))
+        self.mask = np.ones(n, bool)
+        self.problem = SimpleNamespace(y=self.a * 1.2 + m, spec=SimpleNamespace(fit=FitOptions(loss="linear")))
+        self._w = ScaledCovariance(np.ones(n), np.eye(n), np.eye(n))
+
+    def s(self, x):
+        return 0.01 + (x - 1.0) ** 2
+
+    def predict(self, x):
+        return self.a * float(x[0]), self.s(float(x[0]))
+
+    def whitener(self):
+        return self._w
+
+
+def test_a_profile_refit_on_the_emulator_is_the_optimum_of_its_predictive_likelihood():
+    """The profile's refit of the others at a held strength (fit_on_emulator) minimizes −2 ln L of the data
+    under the emulator's predictive distribution, r·r + ln det(Σ + V)/det Σ (the known answer: its minimum on
+    a fine grid), not the whitened residuals alone, which on this emulator fall away from its design (V grows
+    there) and would send the refit to the parameter's bound."""
+    from sweep.discrepancy.emulator import fit_on_emulator
+
+    em = _GrowingSdEmulator()
+    grid = np.linspace(-3.0, 5.0, 80001)
+    rr = np.array([float(np.sum((em.problem.y - em.a * g) ** 2)) / (1.0 + em.s(g)) for g in grid])
+    dev = rr + len(em.a) * np.log1p(em.s(grid))
+    for start in (-2.5, 1.0, 4.5):
+        f = fit_on_emulator(em, 1, 0.5, np.array([start]))
+        assert f.x[0] == pytest.approx(grid[np.argmin(dev)], abs=1e-3)
+        assert f.logdet == pytest.approx(len(em.a) * math.log1p(em.s(f.x[0])), rel=1e-9)
+        assert float(f.r @ f.r) == pytest.approx(float(np.sum((em.problem.y - em.a * f.x[0]) ** 2)) / (1 + em.s(f.x[0])),
+                                                 rel=1e-9)
+    assert grid[np.argmin(rr)] in (grid[0], grid[-1])          # the residuals alone: the refit at a bound
+
+
+
+def test_the_named_model_after_an_emulated_linear_profile_is_a_real_fit_under_its_own_correction(tmp_path):
+    """With ``[profile] correction = "linear"`` the profile measures every Δχ² from the model at the fit's
+    strength under the modelled correction c(x̂) (StrengthCorrection) with the others refitted.  The model the
+    workflow then reports (residual test, held-out gap: profile.settled_fit) is that one, from real runs, also
+    when the others' refit ran on the emulator: the correction in use is the line through the anchors' real
+    corrections (fine − real coarse) at x̂, the others are the real refit's at x̂ under it (the known answer:
+    real least squares to convergence, to its tolerance, from the emulated refit's point) and the residuals
+    are the real model's there.  The toy's mesh error grows with β, so the fit's own correction (made at
+    β = 20) is not c(x̂)."""
+    from sweep.discrepancy.noise import correction_at
+    from sweep.discrepancy.profile import StrengthCorrection, emulator_for, settled_fit
+    from sweep.discrepancy.emulator import fit_on_emulator
+
+    prob, fine, fit, train = _mesh_dependent_toy_fit(tmp_path, {"emulator": "gp", "fine": True,
+                                                                 "correction": "linear", "emulator_polish": 3},
+                                                      corrected_at_beta=20.0)
+    em = emulator_for(prob, fit, train)
+    params, xj = fit.params, float(fit.x[2])
+    xs = [xj - 3.0, xj + 3.0]
+    real = [correction_at(prob, fine, {**fit.values(), "effect:damage_viscosity": x}) for x in xs]
+    cm = StrengthCorrection(xs, real)
+    held = fit_on_emulator(em, 2, xj, np.asarray(fit.x[:2], float))
+    final = settled_fit(prob, params, 2, xj, held.x, train, cm, em)
+    assert np.allclose(prob.noise.y_measured - prob.noise.y, cm.real_at(xj)) and final.x[2] == xj
+    assert not np.allclose(cm.real_at(xj), correction_at(prob, fine, {**fit.values(), "effect:damage_viscosity": 20.0}))
+    prob.fixed = {params[2].name: params[2].from_x(xj)}
+    exact = prob.fit(params[:2], [held.x], train, max_nfev=50)
+    prob.fixed = {}
+    span = np.ptp(np.array([p.x_bounds for p in params[:2]]), axis=1)
+    assert np.all(np.abs(final.x[:2] - exact.x) <= 1e-3 * span)
+    assert np.array_equal(prob.residual_batch(params, [final.x], train)[0], final.r)
+
+
+def test_an_emulated_refit_reaches_an_optimum_outside_the_baselines_box(tmp_path):
+    """The toy with the outer compliance hidden (c = 0.05 mm/kPa: the early pressure over 1 + 2c) and k̄
+    calibrated: the baseline, without the effect, raises k̄ by 1 + 2c to mimic it, far outside its own Wald
+    box from the truth (the premise).  The candidate's refit starts also from the spec's initial k̄; its
+    emulator's design box holds every start (EmulatedRefits._box), so the emulated optimum is the real joint
+    optimum (the known answer: the same refit on real runs) within its stated error."""
+    from sweep.discrepancy.emulated import EmulatedRefits
+    from sweep.discrepancy.emulator import wald_box
+    from sweep.discrepancy.problem import Problem
+
+    data = load_measured(make_twin(tmp_path / "data", ToyForward(DATA_BASE, h=2.0), CONDS, TIMES,
+                                   {"outer_compliance": 0.05, "kbar": 0.0015}, seed=1,
+                                   observables=("p_inj", "front_radius_mean")))
+    spec = _spec({"emulator": "gp", "emulate_refits": True}, calibrate=("kbar",))
+    prob = Problem(data, spec, ToyForward({}, h=8.0))
+    train = ["a", "b", "c"]
+    base = prob.fit(tuple(spec.calibrate), [np.array([spec.calibrate[0].to_x(0.0015)])], train)
+    cp = spec.candidate_param("compliant_boundary")
+    params = tuple(spec.calibrate) + (cp,)
+    starts = [np.append(base.x, cp.initial), np.array([spec.calibrate[0].to_x(0.0015), cp.initial])]
+    real = prob.fit(params, starts, train)
+    lo, hi = wald_box(prob, base, train)
+    assert not lo[0] <= real.x[0] <= hi[0]                       # the premise: the optimum is outside
+    refits = EmulatedRefits(prob, train)
+    refits.fit(params, starts, base, "refits")
+    rec, em = refits.records[0], refits.emulators[("kbar", "effect:compliant_boundary")]
+    assert all(np.all(em.lo <= s) and np.all(s <= em.hi) for s in starts)
+    x_em = np.array([p.to_x(rec["emulated"][p.name]) for p in params])
+    assert np.all(np.abs(x_em - real.x) <= np.array(rec["emulated_error_x"]))

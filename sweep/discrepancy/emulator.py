@@ -272,8 +272,13 @@ class CurveEmulator:
 def fit_on_emulator(em: CurveEmulator, j: int, xj: float, x0_free: np.ndarray, max_nfev: int = 200) -> Fit:
     """The refit of the parameters other than ``j`` with parameter ``j`` held at ``xj`` (fit coordinates),
     on the emulator: robust least squares (the spec's [fit] loss) on the residuals whitened with the noise
-    model's covariance plus the emulator's (:class:`~.noise.ScaledCovariance`).  The returned Fit's ``cost``
-    is ½ r·r, ``x_full`` the point in all the emulator's parameters and ``logdet`` the log-determinant the
+    model's covariance plus the emulator's (:class:`~.noise.ScaledCovariance`), with √(log-determinant) that
+    covariance adds as one more residual, as in the refits of whole models (emulated.py): the optimum of
+    −2 ln L under the emulator's predictive distribution.  Without the log-determinant the whitened residuals
+    alone shrink where the emulator knows least, and the others drift there (to a bound, beyond the
+    design) instead of to their conditional optimum.  The returned Fit's ``r`` and ``J`` are the whitened
+    residuals and their Jacobian, its ``cost`` ½ r·r (the profile's Δχ² leaves the log-determinant out,
+    profile.py), ``x_full`` the point in all the emulator's parameters and ``logdet`` the log-determinant the
     emulator's covariance adds there."""
     problem, fo = em.problem, em.problem.spec.fit
     free = [i for i in range(len(em.params)) if i != j]
@@ -286,12 +291,13 @@ def fit_on_emulator(em: CurveEmulator, j: int, xj: float, x0_free: np.ndarray, m
 
     def resid(xf):
         mean, s = em.predict(full(xf))
-        return em.whitener().standardize(y - mean, s)[0]
+        r, logdet = em.whitener().standardize(y - mean, s)
+        return np.append(r, math.sqrt(max(logdet, 0.0)))
 
     if free:
         res = least_squares(resid, np.clip(np.asarray(x0_free, float), lb, ub), bounds=(lb, ub), loss=fo.loss,
                             f_scale=fo.f_scale, max_nfev=max_nfev, x_scale=ub - lb, method="trf")
-        xf, nfev, J = res.x, res.nfev, res.jac
+        xf, nfev, J = res.x, res.nfev, res.jac[:-1]
     else:
         xf, nfev, J = np.zeros(0), 1, np.zeros((int(em.mask.sum()), 0))
     mean, s = em.predict(full(xf))

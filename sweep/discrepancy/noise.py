@@ -24,7 +24,8 @@ from .layout import CurveLayout
 from .observables import CURVES
 from .realizations import RealizationCovariance, realization_mean_spread, realizations
 
-__all__ = ["NoiseModel", "ScaledCovariance", "ScaledMixture", "add_discretization_error", "correction_at", "add_model_jitter", "model_jitter_at",
+__all__ = ["NoiseModel", "ScaledCovariance", "ScaledMixture", "add_discretization_error", "correction_at", "correction_from",
+           "coarse_and_fines", "add_model_jitter", "model_jitter_at",
            "rms_per_observable"]
 
 
@@ -256,7 +257,7 @@ def rms_per_observable(layout: CurveLayout, v: np.ndarray) -> dict:
     return {o: float(np.sqrt(np.mean(v[layout.obs == o] ** 2))) for o in CURVES if np.any(layout.obs == o)}
 
 
-def _coarse_and_fines(problem, fines_fw: list, values: dict) -> tuple[np.ndarray, np.ndarray]:
+def coarse_and_fines(problem, fines_fw: list, values: dict) -> tuple[np.ndarray, np.ndarray]:
     """The coarse model (n,) and each fine model (k, n) at ``values`` on every curve row of ``problem``."""
     ids = problem.data.ids
     allm = np.ones(problem.y.size, bool)
@@ -268,8 +269,22 @@ def _coarse_and_fines(problem, fines_fw: list, values: dict) -> tuple[np.ndarray
 
 def correction_at(problem, fine_forward, values: dict) -> np.ndarray:
     """Mesh correction err = mean_k(fine_k) − coarse at ``values`` on every curve row (0 where not finite)."""
-    coarse, fines = _coarse_and_fines(problem, realizations(fine_forward), values)
-    err = realization_mean_spread(fines)[0] - coarse
+    coarse, fines = coarse_and_fines(problem, realizations(fine_forward), values)
+    return correction_from(coarse, fines)
+
+
+def correction_from(coarse: np.ndarray, fines: np.ndarray, ref: np.ndarray | None = None) -> np.ndarray:
+    """err = mean_k(fine_k) − coarse per row (0 where not finite) from the coarse run (n,) and fine
+    realizations (m, n) at one point.  With ``ref`` (k, n; k >= m), the same realizations at another point,
+    the first m of them in the same order: err = mean(ref) + mean_k<m(fine_k − ref_k) − coarse, the mean over
+    all k realizations carried to this point by the change of the m run here (common random numbers: each
+    realization's own deviation cancels in its change).  kPa / mm."""
+    mean = realization_mean_spread(fines)[0]
+    if ref is not None:
+        ref = np.atleast_2d(np.asarray(ref, float))
+        fines = np.atleast_2d(np.asarray(fines, float))
+        mean = realization_mean_spread(ref)[0] + realization_mean_spread(fines - ref[: len(fines)])[0]
+    err = mean - coarse
     return np.where(np.isfinite(err), err, 0.0)
 
 
@@ -286,7 +301,7 @@ def add_discretization_error(problem, fine_forward, values: dict | None = None) 
     if not fines_fw:
         raise ValueError("add_discretization_error: no fine forward model")
     vals = values if values is not None else {p.name: p.initial for p in problem.spec.calibrate}
-    coarse, fines = _coarse_and_fines(problem, fines_fw, vals)
+    coarse, fines = coarse_and_fines(problem, fines_fw, vals)
     err = realization_mean_spread(fines)[0] - coarse
     err = np.where(np.isfinite(err), err, 0.0)
     problem.noise.set_discretization(err, fines, problem.spec.noise.disc_error_fraction)

@@ -126,6 +126,11 @@ class ProfileOptions(_Checked):
     correction_span: float = _rule(1.0, "float", 0.0, 10.0, lo_open=True,
                                    doc="with correction = linear: the anchors' reach about the fit, in Wald "
                                        "half-widths of the 95 % interval")
+    correction_slope_realizations: int = _rule(
+        0, "int", 0, 50, doc="with correction = linear: 0 runs every fine realization at every anchor; m >= 1 runs "
+                             "them all at the first anchor and the first m at the others, whose correction is the "
+                             "first's plus the mean change of those m realizations between the two (common random "
+                             "numbers: a realization's own deviation cancels in its change)")
     smoothing: str = _rule("none", "choice", choices=("none", "quadratic"),
                            doc="quadratic: the interval from a quadratic through noisy profile points (MCAP)")
     grid: int = _rule(4, "int", 2, 20, doc="with quadratic smoothing: extra profile points per side")

@@ -33,14 +33,14 @@ from . import stats
 from .emulated import emulated_fit
 from .emulator import AGREE_SD, CurveEmulator, design_points, fill_design, fit_on_emulator, wald_box
 from .evidence import wald_bounds
-from .noise import correction_at
+from .noise import coarse_and_fines, correction_at, correction_from
 from .problem import Fit, Problem
 from .realizations import realizations
 from .report import jsonable
 
 log = logging.getLogger("dchfrac.discrepancy")
 
-__all__ = ["profile_interval", "recentre_target", "profile_recentred", "emulator_for", "StrengthCorrection"]
+__all__ = ["profile_interval", "recentre_target", "profile_recentred", "emulator_for", "StrengthCorrection", "settled_fit"]
 
 
 class StrengthCorrection:
@@ -55,7 +55,8 @@ class StrengthCorrection:
     influence on the correction is taken along the profile's own path (each anchor's others refitted at its
     strength)."""
 
-    def __init__(self, xs, corrs, values=None):
+    def __init__(self, xs, corrs, values=None, real=None):
+        self.real = real            # the same line through the corrections of real runs, when ``corrs`` are not
         self.xs = np.asarray(xs, float)
         C = np.vstack([np.asarray(c, float) for c in corrs])
         if self.xs.size < 2 or C.shape[0] != self.xs.size:
@@ -66,16 +67,23 @@ class StrengthCorrection:
         self.b = (u @ (C - self.a)) / float(u @ u)
         self.resid_rms = float(np.sqrt(np.mean((C - self.a - np.outer(u, self.b)) ** 2)))
         self.values = list(values) if values is not None else [float(x) for x in self.xs]
+        self.realizations = self.slope_realizations = None   # fine realizations at the first / the other anchors
 
     def at(self, x: float) -> np.ndarray:
         """c(x) on every curve row."""
         return self.a + self.b * (float(x) - self.xbar)
 
+    def real_at(self, x: float) -> np.ndarray:
+        """c(x) for a real run of the coarse model: the line through the anchors' fine − real coarse runs
+        (``real``; on the emulator ``at`` is taken against the emulator's mean, :meth:`_Profile.model_correction`)."""
+        return (self.real if self.real is not None else self).at(x)
+
     def summary(self, layout=None) -> dict:
         """The anchors (parameter units), the slope's RMS change of the correction over the anchors' span and
         the residual RMS of the line through them (kPa / mm: per observable with ``layout``)."""
         span = float(np.ptp(self.xs))
-        out = {"model": "linear", "anchors": self.values, "line_residual_rms": self.resid_rms}
+        out = {"model": "linear", "anchors": self.values, "line_residual_rms": self.resid_rms,
+               "realizations": self.realizations, "slope_realizations": self.slope_realizations}
         if layout is not None:
             from .noise import rms_per_observable
             out["change_over_anchors_rms"] = rms_per_observable(layout, self.b * span)
@@ -117,7 +125,9 @@ class _Profile:
         """The correction modelled linearly in the strength (:class:`StrengthCorrection`): estimated from the
         fine realizations at ``correction_anchors`` strengths evenly over the fit ± ``correction_span`` Wald
         half-widths (clipped to the bounds), the others refitted at each under the fit's correction; on the
-        emulator each taken against the emulator's mean (:meth:`model_correction`)."""
+        emulator each taken against the emulator's mean (:meth:`model_correction`).  With
+        ``correction_slope_realizations`` = m > 0 the anchors after the first run the first m realizations
+        only (:func:`~.noise.correction_from` with the first anchor's as reference)."""
         po, xh = self.po, float(self.x_hat[self.j])
         wl, wh = (self.p.to_x(b) if np.isfinite(b) else np.nan for b in self.wald)
         half = 0.5 * abs(wh - wl) if np.isfinite(wh - wl) and wh != wl else 0.1 * max(abs(xh), 1e-3 * (self.x_hi - self.x_lo))
@@ -125,12 +135,23 @@ class _Profile:
                                self.x_lo, self.x_hi))
         if xs.size < 2:
             xs = np.array([self.x_lo, self.x_hi])
-        corrs = []
+        corrs, real, first = [], [], None
+        m = po.correction_slope_realizations
         for x in xs:
             f = self.held(float(x))
-            corr = correction_at(self.problem, self.fines, {**f.values(), self.p.name: self.p.from_x(float(x))})
-            corrs.append(self.model_correction(corr, f))
-        return StrengthCorrection(xs, corrs, [float(self.p.from_x(x)) for x in xs])
+            vals = {**f.values(), self.p.name: self.p.from_x(float(x))}
+            if first is None or not 0 < m < len(self.fines):
+                coarse, fines = coarse_and_fines(self.problem, self.fines, vals)
+                real.append(correction_from(coarse, fines))
+                first = fines if first is None else first
+            else:                            # the first anchor's mean carried here by m realizations' change
+                coarse, fines = coarse_and_fines(self.problem, self.fines[:m], vals)
+                real.append(correction_from(coarse, fines, ref=first))
+            corrs.append(self.model_correction(real[-1], f))
+        values = [float(self.p.from_x(x)) for x in xs]
+        cm = StrengthCorrection(xs, corrs, values, real=StrengthCorrection(xs, real, values) if self.em else None)
+        cm.realizations, cm.slope_realizations = len(self.fines), (m if 0 < m < len(self.fines) else len(self.fines))
+        return cm
 
     def reference_deviance(self) -> float:
         """With fine models, the χ² every Δχ² is measured from: the fit's own point taken as each profile point
@@ -463,12 +484,34 @@ def _profile_minimum(problem: Problem, fit: Fit, j: int, ids, pr: dict, fine_for
     xj = float(res.x) if res.fun <= pf.dchi2(best) else best
     with pf.holding(xj):
         held = pf.modelled_refit(xj)
-    x = np.insert(np.asarray(held.x, float), j, xj)
-    problem.noise.shift_correction(cm.at(xj))
-    r = problem.residual_batch(fit.params, [x], ids)[0]
+    return settled_fit(problem, fit.params, j, xj, held.x, ids, cm, em, refit=False)
+
+
+def settled_fit(problem: Problem, params: tuple, j: int, xj: float, x_free, ids, cm, em=None,
+                refit: bool = True) -> Fit:
+    """The model at strength ``xj`` (fit coordinates, parameter ``j`` of ``params``) under the modelled
+    correction c(xj) for real runs (:meth:`StrengthCorrection.real_at`, left in use), as a Fit of real runs: the others from
+    ``x_free`` (an emulated refit's when ``em`` is given, then polished with ``[profile] emulator_polish``
+    real least-squares evaluations at the held strength, so that the named model's residuals, held-out gap
+    and residual test are those of a real conditional optimum, not of the emulator's), its residuals and
+    Jacobian from real runs.  Without ``em`` the others are refitted from ``x_free`` by real least squares (from
+    the fit's values that is the profile's own reference refit, its runs cached); ``refit = False``: ``x_free``
+    is that real refit already.  The polished point joins ``em``'s design."""
+    problem.noise.shift_correction(cm.real_at(xj))
+    p = params[j]
+    x_free = np.asarray(x_free, float)
+    if x_free.size and (refit or em is not None):
+        problem.fixed = {p.name: p.from_x(xj)}
+        try:
+            x_free = np.asarray(problem.fit(params[:j] + params[j + 1:], [x_free], ids,
+                                            max_nfev=problem.spec.profile.emulator_polish if em else None).x, float)
+        finally:
+            problem.fixed = {}
+    x = np.insert(x_free, j, xj)
+    r = problem.residual_batch(params, [x], ids)[0]
     if em is not None and not em.has(x):
         em.add([x])                          # the minimum's own run (cached): the design grows by it
-    return Fit(fit.params, x, r, problem.jacobian(fit.params, x, ids), 0.5 * float(r @ r), 0)
+    return Fit(params, x, r, problem.jacobian(params, x, ids), 0.5 * float(r @ r), 0)
 
 
 def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int = 2, fine_forward=None,
@@ -488,10 +531,11 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     With ``[profile] correction = "linear"`` the correction's model is built about ``fit`` and kept for every
     pass (common random numbers): a re-centring moves the reference, not the likelihood, and goes to the
     profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' span has the model
-    rebuilt about it for the next pass.
+    rebuilt about it for the next pass.  Without a re-centring the fit is settled under that correction at its
+    own strength (:func:`settled_fit`): the model reported is always the one the profile measured from.
     Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima, and
     "_correction": the linear correction's model or None, to be popped before the dict is serialized)."""
-    history = []
+    history, settled = [], None
     em = None
     if problem.spec.profile.emulator == "gp":
         em = emulator if emulator is not None else emulator_for(problem, fit, ids)
@@ -503,7 +547,7 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
         history.append({"strength": float(fit.params[j].from_x(fit.x[j])), "min_delta_chi2": best["delta_chi2"],
                         "at": best["value"]})
         if cm is not None:                   # the same correction function: the profile's own minimum
-            fit = _profile_minimum(problem, fit, j, ids, pr, fine_forward, em, cm)
+            fit, settled = _profile_minimum(problem, fit, j, ids, pr, fine_forward, em, cm), cm
             if not cm.xs.min() <= fit.x[j] <= cm.xs.max():
                 cm = None                    # outside the anchors: the next pass models it about the new fit
             pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
@@ -520,6 +564,9 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
         if em is not None and not em.has(fit.x):
             em.add([fit.x])                  # the re-centred fit's own run (cached): the design grows by it
         pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
+    if cm is not None and settled is not cm:    # the named model under the profile's correction at its strength
+        xj = float(fit.x[j])
+        fit = settled_fit(problem, fit.params, j, xj, np.delete(np.asarray(fit.x, float), j), ids, cm, em)
     pr["recentred"] = history
     pr["_correction"] = cm       # the linear correction's model (not JSON: the caller pops it), None otherwise
     return fit, pr

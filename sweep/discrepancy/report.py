@@ -421,7 +421,11 @@ def _profile_lines(report: dict) -> list[str]:
                       f"\"linear\"`), from the fine realizations at {_f(cm['anchors'])}; the same function for every point "
                       f"and re-centring (common random numbers).  Its change over the anchors, RMS: "
                       + ", ".join(f"{o} {v:.3g}" for o, v in (cm.get("change_over_anchors_rms") or {}).items())
-                      + f"; the line's residual RMS {cm['line_residual_rms']:.3g}."]
+                      + f"; the line's residual RMS {cm['line_residual_rms']:.3g}."
+                      + (f"  The anchors after the first ran {cm['slope_realizations']} of the {cm['realizations']} "
+                         "realizations, the first's mean carried to them by those realizations' change "
+                         "(`correction_slope_realizations`)." if (cm.get("slope_realizations") or 0)
+                         < (cm.get("realizations") or 0) else "")]
         if pr.get("points"):
             L += ["", f"![Profile likelihood of {eff}](profile_{eff}.png)"]
         L += _emulator_lines(pr.get("emulator"))

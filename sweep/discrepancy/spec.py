@@ -64,6 +64,8 @@ Example (units mm, s, kPa)::
     correction_anchors = 3           # strength from the realizations at correction_anchors strengths over the
     correction_span = 1.0            # fit ± correction_span Wald half-widths; the same for every point and
                                      # re-centring: common random numbers, a smooth profile)
+    correction_slope_realizations = 0    # with "linear", m > 0: the anchors after the first run m realizations,
+                                     # the first's mean carried by their change (0: all at every anchor)
     smoothing = "none"               # "quadratic": interval from a quadratic through noisy points (MCAP)
     grid = 4                         # with "quadratic": extra profile points per side
     likelihood = "weighted"          # delta chi2: "weighted" (lag-1 series weights), "gaussian" (whitened chi2),

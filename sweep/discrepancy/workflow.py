@@ -332,6 +332,7 @@ def profile_named(run: WorkflowRun) -> None:
     each re-centred on the profile's minimum when the fit stopped short of it."""
     names = [p.name for p in run.current.params]
     fine = run.fine if run.spec.profile.fine else None
+    before = run.current
     for a in run.accepted:
         j = names.index("effect:" + a["effect"])
         run.current, pr = profile_recentred(run.problem, run.current, j, run.train, fine_forward=fine,
@@ -343,13 +344,12 @@ def profile_named(run: WorkflowRun) -> None:
         a["strength_interval_rough"] = pr["rough"]
         if pr.get("smoothing") == "quadratic":
             a["strength_interval_raw"] = pr["raw"]
-    if any(pr["recentred"] for pr in run.profiles.values()):
-        final = run.current.values()    # the fit moved: every accepted strength is reported at the final fit
+    if run.current is not before:       # re-centred, or settled under the profile's modelled correction
+        final = run.current.values()    # every accepted strength is reported at the final fit
         for a in run.accepted:
             a["strength_before_profile"] = a["strength"]
             a["strength"] = float(final["effect:" + a["effect"]])
-        run.gap_cur = gap(run.problem, run.current.params, run.current.x, run.holdout)
-        run.loc = localize(run.problem, run.current, run.train)
+        run.move_to(run.current)        # gaps before and after, residual test: under the final correction
     run.ledger.mark("profile_likelihood")
 
 
