@@ -45,6 +45,7 @@ class Discretization:
     outlet: "Outlet | None" = None  # the outflow condition's rows (outer_saturation_bc = "outflow"); None: off
     inner_weights: np.ndarray | None = None  # ∫_Γi N_a ds (mm) of the inner nodes, with line_compliance; None: off
     inner_injection: bool = False  # the inlet feeds the invading balance w_i (inner_saturation_bc = "injection")
+    inner_sp_slots: np.ndarray | None = None  # CSR slots (S row, p column) of the inner nodes: injection with the line
     # arrays reused by every assembly (by name; see _element_matrices)
     workspace: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -184,6 +185,8 @@ def build_discretization(mesh, params, phi0: np.ndarray, transport: str = "galer
         outlet=_outlet(asm, outer_n, nf) if params.outer_saturation_bc == "outflow" else None,
         inner_weights=fem.edge_load(pts, inner_e, n, 1.0)[inner_n] if params.line_compliance > 0 else None,
         inner_injection=params.inner_saturation_bc == "injection",
+        inner_sp_slots=(asm.slots(nf * inner_n + S, nf * inner_n + P)
+                        if params.inner_saturation_bc == "injection" and params.line_compliance > 0 else None),
     )
 
 

@@ -233,10 +233,9 @@ def _add_line_storage(disc: Discretization, params, U: np.ndarray, data: StepDat
     if J is not None:
         J.data[disc.asm.diag_slot[rows]] += rate.d[:, 0]
     if disc.inner_injection:
-        s_rows = disc.n_fields * disc.inner_nodes + S
-        R[s_rows] += rate.v
+        R[disc.n_fields * disc.inner_nodes + S] += rate.v
         if J is not None:
-            J.data[disc.asm.slots(s_rows, rows)] += rate.d[:, 0]
+            J.data[disc.inner_sp_slots] += rate.d[:, 0]
 
 
 # ---------------------------------------------------------------- element fields

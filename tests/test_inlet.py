@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from solver import Parameters, RunOptions, simulate
-from test_outlet import BL, DT, H, PHI, ROWS, _f_prime, _strip, _welge_outflow, taylor_state
+from test_outlet import BL, DT, H, PHI, ROWS, _f_prime, _strip, _welge_outflow, taylor_remainders, taylor_state
 
 
 def _strip_run(**changes):
@@ -74,7 +74,7 @@ def test_the_papers_inlet_draws_water_in_beyond_the_pumped_volume(annulus_runs):
 def test_injection_inlet_jacobian_with_the_line_storage_is_exact():
     """|R(U + εV) − R(U) − ε J V| falls as ε² with the line's storage on the inlet's p and S rows."""
     from solver.mesh import annulus_mesh
-    from solver.model import build_discretization, residual_and_jacobian, step_data
+    from solver.model import build_discretization, step_data
     from solver.porosity import random_porosity
 
     p = Parameters(inner_saturation_bc="injection", line_compliance=3.0)
@@ -83,12 +83,7 @@ def test_injection_inlet_jacobian_with_the_line_storage_is_exact():
     rng = np.random.default_rng(2)
     U = taylor_state(disc, rng)
     data = step_data(disc, p, 0.9 * U, np.zeros(disc.n_nodes), 1e-3)
-    R, J = residual_and_jacobian(disc, p, U, data)
-    nf = disc.n_fields
-    V = rng.standard_normal(U.shape) * np.array([0.01, 0.01, 1, 0.05, 0.01, 0.05, 0.05])[:nf]
-    rem = []
-    for eps in (1e-2, 1e-3, 1e-4):
-        Re, _ = residual_and_jacobian(disc, p, U + eps * V, data, need_jacobian=False)
-        rem.append(np.linalg.norm(Re - R - eps * (J @ V.ravel())))
-    rates = np.log10(np.array(rem[:-1]) / np.array(rem[1:]))
-    assert np.all(rates > 1.8), (rem, rates)
+    V = rng.standard_normal(U.shape) * np.array([0.01, 0.01, 1, 0.05, 0.01, 0.05, 0.05])[:disc.n_fields]
+    eps = np.array([1e-2, 1e-3, 1e-4])
+    rem = taylor_remainders(disc, p, U, data, V, eps)
+    assert np.all(np.diff(np.log(rem)) / np.diff(np.log(eps)) > 1.8), rem
