@@ -181,7 +181,7 @@ def test_the_reference_experiment_is_valid_measured_data():
     from sweep.discrepancy.data import load_measured
 
     m = load_measured(Path(__file__).resolve().parents[1] / "results" / "fidelity" / "experiment")
-    assert set(m.curves["observable"]) == {"p_inj", "front_radius_branches", "crack_length"}
+    assert set(m.curves["observable"]) == {"p_inj", "front_radius_branches", "crack_length", "crack_count"}
     assert m.regimes == {"reference": (2.0, "invasive_fracturing")}
     # one experiment at the measured rate (issue #47)
     assert m.conditions.loc["reference", "w_i"] == pytest.approx(measured_injection_velocity(), rel=1e-12)
@@ -205,7 +205,8 @@ def test_the_reference_experiment_starts_a_spec_and_its_spec_checks_against_it(t
     assert main(["discrepancy", "init", "--measured", str(folder), "--out", str(tmp_path / "s.toml")]) in (0, None)
     from sweep.discrepancy.heldout import heldout_data
 
-    assert 'observables = ["crack_length", "front_radius_branches", "regime"]' in (tmp_path / "s.toml").read_text()
+    assert ('observables = ["crack_count", "crack_length", "front_radius_branches", "regime"]'
+            in (tmp_path / "s.toml").read_text())
     spec = load_spec(root / "results" / "experiment_model" / "discrepancy" / "spec.toml")
     data = heldout_data(load_measured(folder), spec)
     fw = SolverForward(spec.baseline_overrides(), RunOptions.from_dict(spec.options), tmp_path / "cache")

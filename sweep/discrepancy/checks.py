@@ -6,7 +6,8 @@ combination shows is checked here (units mm, s, kPa):
 * the held-out ids are conditions of the data, and both training and held-out sets are non-empty;
 * every condition's parameters (baseline, calibrated initial values, the condition's columns) run on
   every solver forward model's mesh (``solver.options.check_run_inputs``: h fits the annulus, ...);
-* no observation time is after a solver forward model's ``t_end`` (times in ms instead of s);
+* no observation time is after a solver forward model's ``t_end`` (times in ms instead of s), and a snapshot
+  observable (the crack count, read from the last snapshot) is observed at ``t_end``;
 * measured ``p_inj`` is within ``PRESSURE_SCALE_FACTOR`` times the condition's Young's modulus E
   (kPa): the model's pressures stay within a few E, so values 1000x larger are pressures in Pa;
 * a measured front radius is not clearly (by ``data.LENGTH_SIGMAS`` uncertainties) inside r_inner or beyond r_outer;
@@ -37,6 +38,7 @@ def check_data_against_model(data, spec, forwards=(), strict: bool = False) -> l
     solver_options = [f.options for f in forwards if _is_run_options(getattr(f, "options", None))]
     warnings = _check_runnable(params, solver_options)
     _check_times(data, solver_options)
+    _check_snapshot_times(data, solver_options)
     _check_pressure_scale(data, params)
     _check_front_radii(data, params)
     for f in forwards:
@@ -132,6 +134,21 @@ def _check_times(data, solver_options: list) -> None:
         if t > t_end * (1 + 1e-9):
             raise ValueError(f"observations.csv: condition {cid!r} regime time={t:g} s is after the model's "
                              f"t_end = {t_end:g} s (allowed: times in [0, t_end] s; were they given in ms?)")
+
+
+def _check_snapshot_times(data, solver_options: list) -> None:
+    """Snapshot observables (``observables.SNAPSHOT_CURVES``) are read from the forward runs' last snapshot,
+    at t_end (s): observed at any other time they would be compared with the wrong state."""
+    from .observables import SNAPSHOT_CURVES
+
+    c = data.curves
+    for o in solver_options:
+        off = c[c.observable.isin(SNAPSHOT_CURVES) & ((c.time - o.t_end).abs() > 1e-9 * max(o.t_end, 1.0))]
+        if len(off):
+            r = off.iloc[0]
+            raise ValueError(f"observations.csv: condition {r.condition!r} {r.observable} time={r.time:g} s: this "
+                             f"observable is read from the run's last snapshot, at the model's t_end = {o.t_end:g} s "
+                             "(allowed: time = t_end)")
 
 
 def _check_pressure_scale(data, params: dict) -> None:

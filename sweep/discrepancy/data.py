@@ -9,7 +9,7 @@ Format (a folder, units mm, s, kPa)::
                       condition  an ``id`` of conditions.csv
                       observable one of OBSERVABLES (the registry, observables.py:
                                  p_inj kPa; front_radius_mean, front_radius_branches,
-                                 crack_length mm; regime a label)
+                                 crack_length mm; crack_count -, at t_end; regime a label)
                       time       s (finite, >= 0)
                       value      in the observable's unit; for ``regime`` a label
                                  (e.g. "invasive_fracturing", one of sweep.regimes.classify.REGIMES), its time the moment of classification

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .observables import get_observable, read_curves
+from .observables import REGISTRY, SNAPSHOT_CURVES, get_observable, read_curves
 
 log = logging.getLogger("dchfrac.discrepancy")
 
@@ -224,6 +224,9 @@ class SolverForward(ForwardModel):
         ts = _timeseries(rd) if ok or summ.get("t_reached") is not None else None
         r_inner = self._pdict(overrides)["r_inner"]
         out = observables_from_timeseries(ts, times, r_inner, summ.get("t_reached") if not ok else None)
+        for name in SNAPSHOT_CURVES:
+            if name in times:
+                out[name] = _snapshot_values(rd, name, times[name], ok)
         if "regime" in times:
             out["regime"] = _regime(rd) if ok else None
         return out
@@ -242,6 +245,20 @@ def fine_forwards(spec, cache_dir, n_jobs: int = 1) -> list:
 
     return [SolverForward(spec.baseline_overrides(), RunOptions.from_dict(o), cache_dir, n_jobs=n_jobs)
             for o in fine_options(spec)]
+
+
+def _snapshot_values(rd: Path, name: str, times, ok: bool) -> np.ndarray:
+    """Snapshot observable ``name`` (:data:`.observables.SNAPSHOT_CURVES`) of the finished entry ``rd`` at
+    ``times`` (s): its last snapshot's value, which is the value at t_end, where the checks put every such
+    observation; NaN for a failed run or a snapshot the classifier cannot read (logged)."""
+    v = np.full(len(times), np.nan)
+    if not ok:
+        return v
+    try:
+        v[:] = REGISTRY[name].snapshot(rd)
+    except Exception as exc:  # noqa: BLE001 - no prediction, never a made-up value
+        log.warning("%s of %s not read: %s", name, rd, exc)
+    return v
 
 
 def _regime(rd: Path):
