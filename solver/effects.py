@@ -103,6 +103,15 @@ EFFECTS: dict[str, Effect] = {
         "tubing swelling, :func:`tube_compliance`: 1 m of flexible tubing, inner radius 2 mm, wall 1 mm, "
         "E = 10 MPa: 5.0 mm^3/kPa, 2.6 mm^2/kPa per unit cell height (the rig's tubing is not reported: an "
         "order of magnitude; water's own compressibility adds 0.006 mm^3/kPa)"),
+    "critical_saturation": Effect(
+        "critical_saturation", 0.0,
+        "critical saturation S_c (-) of the invading water: immobile below S_c, the paper's k_r1 of the reduced "
+        "saturation (S - S_c)/(1 - S_c) above (Eq. relative_permeabilities; "
+        "solver.physics.relative_permeabilities)",
+        "no water precursor at a few percent saturation ahead of the front: the water stays behind a compact "
+        "front and displaces the oil, so less water leaves through r_o early, p_inj rises higher and the front "
+        "and cracks move out; nothing where the paper's law already keeps S near 0 or 1",
+        0.0, 0.5, 0.1, "-"),
 }
 
 

@@ -126,7 +126,7 @@ def supg_flux(c: Constitutive, params, Sat, Sx, Sy, accumulation, h_e, dt: float
     zero as h_e -> 0.  Being a flux in divergence form, it keeps the discrete volume balance.  ``h_e`` (mm) per
     element, shaped to broadcast against the points.
     """
-    slope = physics.invading_permeability_slope(Sat, params.viscosity_ratio)
+    slope = physics.invading_permeability_slope(Sat, params.viscosity_ratio, params.critical_saturation)
     dlam = c.k * slope / params.eta_w
     vx, vy = -dlam * c.yx / c.phi, -dlam * c.yy / c.phi
     root = ad.sqrt if isinstance(vx, Dual) else np.sqrt
@@ -148,7 +148,8 @@ def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -
       ceiling;
     * k from :func:`solver.physics.permeability` (Eq. permeability), with the optional permeability floor;
     * σ = g(d) σ_A + σ_I − κ ∇S⊗∇S − b p I with Miehe's split (Eq. summary_equations_4, _secondary_3);
-    * w_α = −λ_α (∇p + φ⁻¹ κ ∇·(∇S⊗∇S)), λ_α = k k_rα/η_α (Eq. fluid_equation);
+    * w_α = −λ_α (∇p + φ⁻¹ κ ∇·(∇S⊗∇S)), λ_α = k k_rα/η_α (Eq. fluid_equation; k_rα with the critical
+      saturation ``critical_saturation``);
     * M from :func:`solver.physics.ch_mobility` (Sec. 2.8, option ``ch_mobility``).
     """
     kap = params.kappa * params.korteweg_factor
@@ -166,7 +167,8 @@ def constitutive(params, phi0, exx, eyy, exy, p, Sat, Sx, Sy, gd, S_flow=None) -
                              params.permeability_floor)
     if params.cell_compliance > 0:  # the opened gap above the pack carries both fluids in parallel
         k = k + physics.gap_permeability(p, params.cell_compliance, params.cell_height)
-    kr1, kr2 = physics.relative_permeabilities(Sat if S_flow is None else S_flow, params.viscosity_ratio)
+    kr1, kr2 = physics.relative_permeabilities(Sat if S_flow is None else S_flow, params.viscosity_ratio,
+                                               params.critical_saturation)
     lam1 = k * kr1 / params.eta_w
     lam2 = k * kr2 / params.eta_o
     return Constitutive(phi=phi, sxx=sxx, syy=syy, sxy=sxy, psi_a=psi_a, k=k, lam1=lam1, lam2=lam2,

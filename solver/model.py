@@ -80,7 +80,8 @@ def outlet_water_outflow(disc: Discretization, params, U: np.ndarray, R: np.ndar
     """Water leaving each outer node (mm²/s), :func:`solver.physics.outlet_water_flux` of the node's S and total
     outflow Q_a = −R_p,a, the reaction of its p = 0 row in the unconstrained residual ``R`` (ndof,)."""
     nf, nodes = disc.n_fields, disc.outlet.nodes
-    return physics.outlet_water_flux(U[nodes, S], -R[nf * nodes + P], params.viscosity_ratio)
+    return physics.outlet_water_flux(U[nodes, S], -R[nf * nodes + P], params.viscosity_ratio,
+                                     params.critical_saturation)
 
 
 def _add_outlet(disc: Discretization, params, U: np.ndarray, R: np.ndarray, J) -> None:
@@ -90,7 +91,7 @@ def _add_outlet(disc: Discretization, params, U: np.ndarray, R: np.ndarray, J) -
     nf, out = disc.n_fields, disc.outlet
     Q = -R[nf * out.nodes + P]
     S_a = ad.Dual.variables([U[out.nodes, S]])[0]
-    f = physics.fractional_flow(S_a, params.viscosity_ratio)
+    f = physics.fractional_flow(S_a, params.viscosity_ratio, params.critical_saturation)
     R[nf * out.nodes + S] += f.v * np.maximum(Q, 0.0)
     if J is None:
         return

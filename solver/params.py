@@ -197,6 +197,11 @@ class Parameters:
         "lumped compliance C_line of the injection line and cavity per unit cell height: the pack receives "
         "w_i − (C_line/L_i) ∂p/∂t on r_i (0 = stiff line, the paper; solver.physics.line_storage_rate)",
         plausible=(0.0, 100.0))
+    critical_saturation: float = _param(0.0, "-", "in [0, 0.5]",
+        "critical saturation S_c of the invading water: below it the water is immobile (k_r1 = 0) and above it "
+        "k_r1 is the paper's law of the reduced saturation (S − S_c)/(1 − S_c) (0 = the paper's Fourar–Lenormand "
+        "law, Eq. relative_permeabilities; solver.physics.relative_permeabilities)",
+        plausible=(0.0, 0.5))
 
     def __post_init__(self):
         _coerce_and_check(self)
@@ -366,7 +371,8 @@ _SIMPLE_BOUNDS = {f.name: (0.0, f.metadata["allowed"].endswith("> 0")) for f in 
 # fields added after runs were stored: left out of to_dict() at their default (None, or the off value 0 of an
 # effect), so the parameter dicts (and the run keys made from them) of older runs do not change
 _OMIT_AT_DEFAULT = {"porosity_floor": None, "permeability_floor": None, "porosity_ceiling": None,
-                    "cell_compliance": 0.0, "line_compliance": 0.0, "inner_saturation_bc": "dirichlet"}
+                    "cell_compliance": 0.0, "line_compliance": 0.0, "inner_saturation_bc": "dirichlet",
+                    "critical_saturation": 0.0}
 _CHOICES = tuple((f.name, f.metadata["choices"]) for f in fields(Parameters) if f.metadata["choices"])
 CHOICE_FIELDS = tuple(name for name, _ in _CHOICES)
 
@@ -429,6 +435,8 @@ def _check_relations(p: Parameters) -> None:
         _fail("cement", p.cement, "> 0.0" if p.psi_c is None else ">= 0.0")
     if not (-1.0 < p.nu < 0.5):
         _fail("nu", p.nu, "the open interval (-1, 0.5)")
+    if not 0.0 <= p.critical_saturation <= 0.5:
+        _fail("critical_saturation", p.critical_saturation, "in [0, 0.5]")
     K = _bulk(p.E, p.nu)
     if not p.K_s > K:
         if implausible(p.E, PLAUSIBLE["E"]) and not implausible(p.K_s, PLAUSIBLE["K_s"]):  # E the likely culprit

@@ -166,38 +166,51 @@ def _saturation_in_bounds(S):
     return ad.clip(S, 0.0, 1.0) if isinstance(S, Dual) else np.clip(S, 0.0, 1.0)
 
 
-def relative_permeabilities(S, M: float):
+def _reduced_saturation(Sc, S_c: float):
+    """The water's mobile share (S − S_c)/(1 − S_c) of an in-bounds saturation ``Sc``, clipped to [0, 1] (-);
+    ``Sc`` itself when S_c = 0 (the paper)."""
+    return Sc if S_c <= 0.0 else _saturation_in_bounds((Sc - S_c) / (1.0 - S_c))
+
+
+def relative_permeabilities(S, M: float, S_c: float = 0.0):
     """Fourar–Lenormand k_r1(S), k_r2(1 − S) (Eq. relative_permeabilities).
 
     Phase 1 (S) is the invading water, M = η_o/η_w the viscosity ratio.  S is
     clipped to [0, 1] inside these laws only: the Cahn–Hilliard saturation
     overshoots its bounds by a few percent near the interface, and outside
     [0, 1] the cubic laws turn negative, which would give negative mobility.
+
+    ``S_c`` (parameter ``critical_saturation``, -): the water is immobile below it and k_r1 is the same law of
+    the reduced saturation S_e = (S − S_c)/(1 − S_c); k_r2 is unchanged.  The paper's law (S_c = 0) carries
+    the water at M k_r1 ≈ 1.5 S + M S³, so at M ~ 1e5 a few percent of water outruns the oil through the whole
+    pack; a critical saturation is the pore-scale fact that the invading phase needs a connected path.
     """
     Sc = _saturation_in_bounds(S)
+    S1 = _reduced_saturation(Sc, S_c)
     S2 = 1.0 - Sc
-    kr1 = Sc**3 + (1.5 / M) * Sc * (1.0 - Sc) * (1.0 + Sc)
+    kr1 = S1**3 + (1.5 / M) * S1 * (1.0 - S1) * (1.0 + S1)
     kr2 = 0.5 * S2 * S2 * (3.0 - S2)
     return kr1, kr2
 
 
-def invading_permeability_slope(S, M: float):
-    """dk_r1/dS of :func:`relative_permeabilities` (-), 3S² + (1.5/M)(1 − 3S²), at S clipped to [0, 1]: continuous
-    in S (outside [0, 1] it keeps its value at the bound).  The speed of the saturation's convective transport is
-    proportional to it."""
-    Sc = _saturation_in_bounds(S)
-    return 3.0 * Sc * Sc + (1.5 / M) * (1.0 - 3.0 * Sc * Sc)
+def invading_permeability_slope(S, M: float, S_c: float = 0.0):
+    """dk_r1/dS of :func:`relative_permeabilities` (-), [3S_e² + (1.5/M)(1 − 3S_e²)]/(1 − S_c) at the reduced
+    saturation S_e clipped to [0, 1]: continuous in S (outside the mobile range it keeps its value at the
+    bound).  The speed of the saturation's convective transport is proportional to it."""
+    Se = _reduced_saturation(_saturation_in_bounds(S), S_c)
+    return (3.0 * Se * Se + (1.5 / M) * (1.0 - 3.0 * Se * Se)) / (1.0 - S_c)
 
 
 # ---------------------------------------------------------------- Cahn–Hilliard
-def fractional_flow(S, M: float):
+def fractional_flow(S, M: float, S_c: float = 0.0):
     """Water's share f = λ_1/(λ_1 + λ_2) = M k_r1 / (M k_r1 + k_r2) of the total Darcy flux (-), M = η_o/η_w
-    (Eq. relative_permeabilities; the absolute permeability cancels).  f(S <= 0) = 0, f(S >= 1) = 1."""
-    kr1, kr2 = relative_permeabilities(S, M)
+    (Eq. relative_permeabilities; the absolute permeability cancels; ``S_c`` the critical saturation).
+    f(S <= S_c) = 0, f(S >= 1) = 1."""
+    kr1, kr2 = relative_permeabilities(S, M, S_c)
     return M * kr1 / (M * kr1 + kr2)
 
 
-def outlet_water_flux(S, Q, M: float):
+def outlet_water_flux(S, Q, M: float, S_c: float = 0.0):
     """Water leaving an outlet node (mm²/s per unit cell height): f(S) Q⁺, upwinded from inside the domain.
 
     ``Q`` (mm²/s) is the node's total outflow, the reaction of its p = 0 condition (Sec. 3.4); where it runs
@@ -205,7 +218,7 @@ def outlet_water_flux(S, Q, M: float):
     node's saturation S; where it runs in, the outlet reservoir's oil (S = 0) enters and no water.  Before the
     front reaches the node S = 0 and f = 0: no water leaves.
     """
-    return fractional_flow(S, M) * np.maximum(Q, 0.0)
+    return fractional_flow(S, M, S_c) * np.maximum(Q, 0.0)
 
 
 def harmonic_viscosity(eta_o: float, eta_w: float) -> float:

@@ -21,10 +21,11 @@ def test_catalogue_has_the_five_effects_with_exact_off_values():
     assert p.beta == 0.0 and p.volumetric_coupling == 0.0 and p.korteweg_factor == 0.0
     assert p.outer_compliance == 0.0 and p.crack_permeability == 0.0
     assert sorted(off_effects(p)) == sorted(EFFECTS)
-    # the paper's model: β follows 65.7 √C, the outer wall, the cell and the line rigid (= off), the others on
+    # the paper's model: β follows 65.7 √C, the outer wall, the cell and the line rigid (= off), the water mobile
+    # at any saturation (no critical saturation, = off), the others on
     ref = Parameters(cement=1.44)
     assert effect_strength(ref, "damage_viscosity") == pytest.approx(65.7 * 1.2)
-    assert off_effects(ref) == ["compliant_boundary", "elastic_cell", "line_compliance"]
+    assert off_effects(ref) == ["compliant_boundary", "elastic_cell", "line_compliance", "critical_saturation"]
     assert not is_off(ref, "damage_viscosity")
     with pytest.raises(ValueError, match="not in the catalogue"):
         get_effect("gravity")

@@ -26,7 +26,8 @@ def _state(disc, rng):
 @pytest.mark.parametrize("changes,stab", [({}, None), ({"korteweg_factor": 0.0}, None),
                                           ({"crack_permeability": 0.5, "outer_compliance": 0.1, "volumetric_coupling": 0.0}, None),
                                           ({}, 1.0), ({"transport": "supg"}, None),
-                                          ({"cell_compliance": 1e-3, "line_compliance": 3.0}, None)])
+                                          ({"cell_compliance": 1e-3, "line_compliance": 3.0}, None),
+                                          ({"critical_saturation": 0.2, "transport": "supg"}, None)])
 def test_taylor_remainder_is_second_order(changes, stab, backend, monkeypatch):
     """|R(U + εV) − R(U) − ε J V| must fall as ε²: halving the slope test over three decades.
 

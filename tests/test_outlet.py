@@ -31,20 +31,22 @@ def _strip():
     return Mesh(m.points, m.triangles, e)
 
 
-def _f_prime(s, M, e=1e-7):
-    return (physics.fractional_flow(s + e, M) - physics.fractional_flow(s - e, M)) / (2 * e)
+def _f_prime(s, M, e=1e-7, S_c=0.0):
+    return (physics.fractional_flow(s + e, M, S_c) - physics.fractional_flow(s - e, M, S_c)) / (2 * e)
 
 
 def _welge_outflow(par, t):
-    """Water (mm² per unit cell height) that has left a strip of length L and height H by time t (Welge)."""
-    M = par.viscosity_ratio
-    f = lambda s: physics.fractional_flow(s, M)
-    s_star = brentq(lambda s: _f_prime(s, M) - f(s) / s, 0.01, 0.99)
+    """Water (mm² per unit cell height) that has left a strip of length L and height H by time t (Welge), with
+    the fractional flow of ``par`` (its viscosity ratio and critical saturation S_c: the shock lies above S_c)."""
+    M, S_c = par.viscosity_ratio, par.critical_saturation
+    f = lambda s: physics.fractional_flow(s, M, S_c)
+    fp = lambda s: _f_prime(s, M, S_c=S_c)
+    s_star = brentq(lambda s: fp(s) - f(s) / s, S_c + 0.01, 0.99)
     t_b = LENGTH * PHI * s_star / (par.w_i * f(s_star))
     if t <= t_b:
         return 0.0, s_star, t_b
-    s_L = brentq(lambda s: par.w_i * t / PHI * _f_prime(s, M) - LENGTH, s_star, 1.0 - 1e-9)
-    s_bar = s_L + (1.0 - f(s_L)) / _f_prime(s_L, M)
+    s_L = brentq(lambda s: par.w_i * t / PHI * fp(s) - LENGTH, s_star, 1.0 - 1e-9)
+    s_bar = s_L + (1.0 - f(s_L)) / fp(s_L)
     return ROWS * H * (par.w_i * t - PHI * LENGTH * s_bar), s_star, t_b
 
 
