@@ -259,13 +259,14 @@ def _resumed_loop(ck: dict, sim, writer) -> _Loop:
     for i in range(n):
         with np.load(writer.snap_dir / f"snap_{i:05d}.npz", allow_pickle=False) as z:
             snaps.append((float(z["t"]), {k: z[k] for k in z.files if k != "t"}))
-    writer.remove_snapshots(n)
-    sim.U, sim.d, sim.t, sim.previous = ck["U"], ck["d"], float(ck["t"]), ck["previous"]
-    sim.fact0 -= int(ck["factorizations"])
+    t = float(ck["t"])
     loop = _Loop(ck["pending"], ck["dt"], ck["cum"], ck["V0"], ck["rows"], snaps, ck["rejected"], ck["warned"],
-                 ck["elapsed"], int(ck["factorizations"]), ck["resumed_from_t"] + [sim.t])
+                 ck["elapsed"], int(ck["factorizations"]), ck["resumed_from_t"] + [t])
+    writer.remove_snapshots(n)
     writer.write_timeseries(pd.DataFrame(loop.rows))
-    writer.log(f"resumed from the checkpoint at t = {sim.t:.6g} s ({len(loop.rows)} steps)")
+    writer.log(f"resumed from the checkpoint at t = {t:.6g} s ({len(loop.rows)} steps)")
+    sim.U, sim.d, sim.t, sim.previous = ck["U"], ck["d"], t, ck["previous"]
+    sim.fact0 -= loop.factorizations
     return loop
 
 
