@@ -19,6 +19,9 @@ STEP_CONTROLS = ("state_change", "iterations")  # the step-size controllers solv
 # option dicts (and the run keys / cache hashes made from them) of older runs do not change
 _OMIT_WHEN_NONE = ("h_inner", "inner_grading_length", "h_outer", "frames", "xdmf_format", "pressure_stabilization", "first_stagger_rtol",
                    "linear_precision", "newton_krylov")
+# options that do not change an uninterrupted run's result: left out of to_dict() at their default and never part
+# of a run key or cache hash (``keyed``), so setting them names the same run
+RESULT_NEUTRAL = {"checkpoint_interval": 600.0}
 # written when not given; those after t_end are skipped (times given explicitly must lie in [0, t_end])
 DEFAULT_SNAPSHOT_TIMES = (0.5, 1.0, 1.5, 2.0)
 
@@ -92,7 +95,8 @@ class RunOptions:
     jacobian_reuse : keep a factorized Jacobian (over Newton iterations, stagger iterations and
         time steps of equal dt) while the Newton updates contract by at least this factor per
         iteration; 0 disables reuse (exact Newton: every iteration factorizes).
-    max_wall_time : give up (status "failed") after this many seconds of wall time (None: no limit).
+    max_wall_time : give up (status "failed") after this many seconds of wall time, s, counted over every piece of
+        a resumed run (None: no limit).
     write_xdmf : also write the snapshots as XDMF for ParaView.
     transport : discretization of the convective transport of S: "galerkin" (the plain P1 Galerkin
         form, the paper's Sec. 3.1) or "upwind" (phase mobilities at the saturation shifted upstream by
@@ -134,6 +138,11 @@ class RunOptions:
         iteration is then inexact Newton with the exact Jacobian (Dembo, Eisenstat and Steihaug 1982), not the
         chord iteration of ``jacobian_reuse`` (nor Anderson's acceleration of it); the Newton test is the same.
         None (default): the chord iteration.  Omitted from :meth:`to_dict` when None, as h_inner.
+    checkpoint_interval : wall time between two checkpoints of a run with a run folder, s (default 600): at the end
+        of an accepted step, when at least this long has passed since the last one, the whole state of the time
+        loop is written to ``checkpoint.npz`` (``solver.checkpoint``), from which a run killed part-way resumes;
+        None or 0: no checkpoints.  It does not change the run's result, so it is no part of a run key or cache
+        hash (``keyed``) and is omitted from :meth:`to_dict` at its default.
     """
 
     h: float = 1.0
@@ -170,6 +179,7 @@ class RunOptions:
     anderson_depth: int = 3
     first_stagger_rtol: float | None = None
     newton_krylov: int | None = None
+    checkpoint_interval: float | None = RESULT_NEUTRAL["checkpoint_interval"]
 
     def __post_init__(self):
         _check(self)
@@ -180,6 +190,9 @@ class RunOptions:
         d["snapshot_times"] = list(self.snapshot_times)
         for name in _OMIT_WHEN_NONE:
             if d[name] is None:
+                del d[name]
+        for name, default in RESULT_NEUTRAL.items():
+            if d[name] == default:
                 del d[name]
         return d
 
@@ -215,6 +228,12 @@ class RunOptions:
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def keyed(options: dict) -> dict:
+    """The options dict ``options`` (a :meth:`RunOptions.to_dict`) without the options that do not change an
+    uninterrupted run's result (``RESULT_NEUTRAL``): what a run key or cache hash names."""
+    return {k: v for k, v in options.items() if k not in RESULT_NEUTRAL}
 
 
 def _fail(name, value, allowed):
@@ -253,6 +272,7 @@ _NUMBERS = (
     ("anderson_depth", int, 0, 20, False, True, None),     # None: 0 (the plain iteration), set after the loop
     ("first_stagger_rtol", float, 0.0, 0.1, True, True, None),
     ("newton_krylov", int, 1, 100, False, True, None),
+    ("checkpoint_interval", float, 0.0, None, False, True, None),
 )
 
 
@@ -264,7 +284,7 @@ OPTION_UNITS = {
     "newton_rtol": "-", "newton_mass_tol": "-", "newton_max_its": "", "stagger_tol": "-", "stagger_max_its": "", "damage_max_its": "",
     "linear_solver": "", "linear_precision": "", "jacobian_reuse": "-", "max_wall_time": "s", "write_xdmf": "", "frames": "",
     "xdmf_format": "", "transport": "", "pressure_stabilization": "-", "anderson_depth": "",
-    "first_stagger_rtol": "-", "newton_krylov": "",
+    "first_stagger_rtol": "-", "newton_krylov": "", "checkpoint_interval": "s",
 }
 
 

@@ -6,7 +6,9 @@ Layout of ``run_dir``::
     timeseries.csv                   one row per accepted step
     timeseries_columns.csv           its column dictionary: name, unit, meaning (TIMESERIES_COLUMNS)
     summary.json                     status, reason, wall time, t reached, versions, code_hash, complete, path
-                                     (linear solver, precision and kernels that ran)
+                                     (linear solver, precision and kernels that ran), resumed_from_t (the
+                                     times a resumed run continued from, s)
+    checkpoint.npz                   while a run is in progress: its last checkpoint (solver.checkpoint)
     log.txt                          rejected steps, warnings, tracebacks
     snapshots/mesh.npz               points (N, 2) mm, triangles (M, 3)
     snapshots/snap_00000.npz ...     t; nodal S, mu, p, d, u; element phi, eps_v, hoop_stress, k, w1_mag
@@ -169,17 +171,26 @@ class RunWriter:
         self.dir = Path(run_dir)
         self.snap_dir = self.dir / "snapshots"
 
-    def start(self, params, options) -> None:
+    def start(self, params, options, resume: bool = False) -> None:
+        """Write the inputs and a "running" summary; a fresh run (not ``resume``) first removes the snapshots and
+        the log of an earlier run in the folder, a resumed one (``solver.checkpoint``) keeps them."""
         self.xdmf_format = getattr(options, "xdmf_format", None)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.snap_dir.mkdir(exist_ok=True)
-        for old in self.snap_dir.glob("snap_*.npz"):
-            old.unlink()
+        if not resume:
+            self.remove_snapshots()
         for name, obj in (("params.toml", params), ("options.toml", options)):
             with atomic_path(self.dir / name) as tmp:
                 obj.to_toml(tmp)
         self._summary({"status": "running", "reason": None, "complete": False})
-        atomic_write_text(self.dir / "log.txt", "")
+        if not resume:
+            atomic_write_text(self.dir / "log.txt", "")
+
+    def remove_snapshots(self, first: int = 0) -> None:
+        """Remove the snapshots of index ``first`` and later."""
+        for old in self.snap_dir.glob("snap_*.npz"):
+            if int(old.stem.split("_")[1]) >= first:
+                old.unlink()
 
     def log(self, line: str) -> None:
         with open(self.dir / "log.txt", "a") as f:
@@ -195,10 +206,11 @@ class RunWriter:
         atomic_write_text(self.dir / "timeseries.csv", df.to_csv(index=False))
 
     def finish(self, df, status, reason, wall, t_reached, rejected, factorizations, xdmf: bool = True,
-               path: dict | None = None) -> None:
+               path: dict | None = None, resumed_from_t: list | None = None) -> None:
         """Final time series and its column dictionary, XDMF (when ``xdmf``: RunOptions.write_xdmf) and the
-        summary, which comes last; ``path``: the linear solver, precision and kernels that ran
-        (:func:`solver.simulate.run_path`)."""
+        summary, which comes last; ``wall``: the run's wall time, s (of every piece of a resumed run);
+        ``path``: the linear solver, precision and kernels that ran (:func:`solver.simulate.run_path`);
+        ``resumed_from_t``: the times (s) the run resumed from checkpoints, recorded when not empty."""
         self.write_timeseries(df)
         rows = ["name,unit,meaning"] + [f'{c},{TIMESERIES_COLUMNS[c][0]},"{TIMESERIES_COLUMNS[c][1]}"'
                                         for c in df.columns if c in TIMESERIES_COLUMNS]
@@ -212,6 +224,7 @@ class RunWriter:
             "status": status, "reason": reason, "complete": status == "ok",
             "wall_time_s": wall, "t_reached": t_reached, "accepted_steps": int(len(df)),
             "rejected_steps": len(rejected), "factorizations": int(factorizations), "path": dict(path or {}),
+            **({"resumed_from_t": list(resumed_from_t)} if resumed_from_t else {}),
         })
 
     def _summary(self, d: dict) -> None:

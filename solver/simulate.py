@@ -5,7 +5,8 @@ the paper); what an accepted step records (time-series row, snapshots) is :mod:`
 After an accepted step the next dt follows the step's change of S and d
 (``_next_dt``).  A step whose Newton or stagger iterations fail is retried with a
 smaller dt (every rejection logged); past ``dt_min`` the run ends with status
-"failed", keeping everything written so far.
+"failed", keeping everything written so far.  A run with a run folder writes checkpoints
+(:mod:`solver.checkpoint`), from which a run killed part-way resumes.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from . import linsolve, paths, profiling
+from . import checkpoint, linsolve, paths, profiling
 from .model import element_fields, porosity_state, storage_fraction
 from .options import RunOptions, check_environment, check_run_inputs
 from .output import RunWriter
@@ -41,6 +42,7 @@ class SimulationResult:
     factorizations: int = 0
     profile: dict | None = None  # wall seconds by phase and part of the run (solver.profiling.Profile.to_dict)
     path: dict | None = None  # the linear solver, its precision and the kernels that ran (run_path)
+    resumed_from_t: list = field(default_factory=list)  # times (s) the run resumed from checkpoints
 
 
 def _validate_mesh(mesh):
@@ -50,7 +52,7 @@ def _validate_mesh(mesh):
 
 
 def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None, phi0=None, progress: bool = False,
-             check_memory: bool = True) -> SimulationResult:
+             check_memory: bool = True, resume: bool = True) -> SimulationResult:
     """Run the coupled model from t = 0 to ``options.t_end`` (s).
 
     Parameters
@@ -64,6 +66,13 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     phi0 : optional initial porosity per element (default: ``params.porosity_field``).
     progress : report progress (``solver.progress.StepProgress``: a bar with % of t_end and ETA on a
         terminal, periodic INFO lines of the logger ``dchfrac.solver`` otherwise); or a StepProgress.
+    resume : continue from the checkpoint in ``out_dir`` (``solver.checkpoint``, written every
+        ``options.checkpoint_interval`` s of wall time) when it was written by this code for these parameters,
+        options and mesh; any other checkpoint is ignored with one line in ``log.txt`` and the run starts at
+        t = 0, as it does with ``resume=False``.  The resumed run keeps the snapshots and time series written
+        before the checkpoint; its first step factorizes a fresh Jacobian (none is kept in the checkpoint), which
+        is the only difference from the uninterrupted run: none with ``jacobian_reuse = 0``, the Newton tolerance
+        otherwise.  ``summary.json`` then records ``resumed_from_t`` (s) and the wall time of every piece.
 
     Inputs that cannot run on the annulus (``solver.options.check_run_inputs``: h too large for it,
     stop_front_radius outside it) raise ValueError before the run folder is written, and so does a mesh whose
@@ -90,12 +99,12 @@ def simulate(params, options: RunOptions | None = None, out_dir=None, mesh=None,
     prof = profiling.Profile()
     path = {}
     with profiling.activate(prof), one_openblas_thread():
-        status, reason, rows, snaps, rejected, nfact = _run(params, options, out_dir, mesh, phi0, progress, t_wall,
-                                                            warnings, path)
-    ts = pd.DataFrame(rows)
-    wall = time.perf_counter() - t_wall
-    return SimulationResult(status, reason, ts, snaps, wall, str(out_dir) if out_dir is not None else None, rejected, nfact,
-                            profile=prof.to_dict(), path=path)
+        status, reason, loop, nfact = _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings, path,
+                                           resume)
+    wall = loop.elapsed + time.perf_counter() - t_wall
+    return SimulationResult(status, reason, pd.DataFrame(loop.rows), loop.snaps, wall,
+                            str(out_dir) if out_dir is not None else None, loop.rejected, nfact,
+                            profile=prof.to_dict(), path=path, resumed_from_t=loop.resumed_from_t)
 
 
 def run_path(sim: "Simulation | None", options: RunOptions) -> dict:
@@ -129,40 +138,136 @@ def one_openblas_thread():
     return ThreadpoolController().select(internal_api="openblas").limit(limits=1)
 
 
-def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=(), path=None):
-    """Set up, run the time loop and write the run folder; returns (status, reason, rows, snapshots,
-    rejected steps, factorizations); fills ``path`` with the run's :func:`run_path`."""
-    rows, snaps, rejected = [], [], []
-    sim = None
+def _run(params, options, out_dir, mesh, phi0, progress, t_wall, warnings=(), path=None, resume=True):
+    """Set up, run the time loop (from the run folder's checkpoint when ``resume`` and it matches) and write the run
+    folder; returns (status, reason, the loop's state, factorizations of the run); fills ``path`` with the run's
+    :func:`run_path`."""
+    sim, loop = None, None
     status, reason = "ok", None
     fact0 = linsolve.STATS["factorizations"]
     with phase("output"):
-        writer = RunWriter(out_dir) if out_dir is not None else None
-        if writer:
-            writer.start(params, options)
-            for w in warnings:
-                writer.log(f"WARNING: {w}")
+        writer, ck = _start_writer(out_dir, params, options, warnings, resume)
     try:
         with phase("setup"):
             sim = _setup(params, options, mesh, phi0)
-        if writer:
-            with phase("output"):
-                writer.write_mesh(sim.disc.points, sim.disc.triangles)
-        status, reason = _time_loop(sim, options, rows, snaps, rejected, writer, progress, t_wall)
+        with phase("output"):
+            loop = _start_loop(sim, params, options, writer, ck, t_wall)
+        status, reason = _time_loop(sim, options, loop, writer, progress, t_wall)
     except Exception as exc:  # never a traceback as the only trace
         status, reason = "failed", f"{type(exc).__name__}: {exc}"
         if writer:
             writer.log(traceback.format_exc())
-    nfact = linsolve.STATS["factorizations"] - fact0
+    loop = loop or _Loop([], options.dt0, {}, 0.0)
+    nfact = linsolve.STATS["factorizations"] - fact0 + loop.factorizations
     if path is not None:
         path.update(run_path(sim, options))
     if writer:
         with phase("output"):
-            writer.finish(pd.DataFrame(rows), status, reason, time.perf_counter() - t_wall, rows[-1]["t"] if rows else 0.0,
-                          rejected, nfact, xdmf=options.write_xdmf, path=run_path(sim, options))
+            writer.finish(pd.DataFrame(loop.rows), status, reason, loop.elapsed + time.perf_counter() - t_wall,
+                          loop.rows[-1]["t"] if loop.rows else 0.0, loop.rejected, nfact, xdmf=options.write_xdmf,
+                          path=run_path(sim, options), resumed_from_t=loop.resumed_from_t)
+            checkpoint.remove(writer.dir)  # a run that ended is not resumed
     if progress:
         progress.close()
-    return status, reason, rows, snaps, rejected, nfact
+    return status, reason, loop, nfact
+
+
+@dataclass
+class _Loop:
+    """The time loop's state besides the Simulation's (U, d, t, predictor): what a checkpoint holds with it."""
+
+    pending: list  # snapshot times still to write, s
+    dt: float  # the next step to try, s
+    cum: dict  # cumulative balances, mm² ("W0": the invading fluid stored at t = 0)
+    V0: float  # fluid stored at t = 0, mm²
+    rows: list = field(default_factory=list)  # time-series rows
+    snaps: list = field(default_factory=list)  # (t, fields) of the snapshots
+    rejected: list = field(default_factory=list)  # rejected steps
+    warned: bool = False  # the outer-layer warning was logged
+    elapsed: float = 0.0  # wall time of the earlier pieces of a resumed run, s
+    factorizations: int = 0  # factorizations of the earlier pieces of a resumed run
+    resumed_from_t: list = field(default_factory=list)  # times the run resumed from, s
+    identity: dict | None = None  # the run's identity (solver.checkpoint.identity)
+    saved_at: float = 0.0  # perf_counter time of the last checkpoint or of this piece's start, s
+
+    def checkpoint_state(self, sim, wall: float) -> dict:
+        """The JSON part of a checkpoint (solver.checkpoint) after ``wall`` s of this piece of the run."""
+        return {"dt": self.dt, "pending": self.pending, "cum": self.cum, "V0": self.V0, "rows": self.rows,
+                "rejected": self.rejected, "warned": self.warned, "n_snapshots": len(self.snaps),
+                "factorizations": linsolve.STATS["factorizations"] - sim.fact0, "elapsed": self.elapsed + wall,
+                "resumed_from_t": self.resumed_from_t, "identity": self.identity}
+
+
+def _start_writer(out_dir, params, options, warnings, resume):
+    """(RunWriter, checkpoint to resume from or None) of a run with ``out_dir``, started (inputs written, a fresh
+    run's old files removed); (None, None) without.  A checkpoint of other code, parameters or options, or one that
+    cannot be read, is ignored with one log line."""
+    if out_dir is None:
+        return None, None
+    writer = RunWriter(out_dir)
+    ck, why = checkpoint.load(out_dir) if resume else (None, None)
+    if ck is not None:
+        why = checkpoint.mismatch(ck.get("identity") or {}, checkpoint.inputs_identity(params, options))
+        ck = None if why else ck
+    if ck is None:
+        checkpoint.remove(out_dir)
+    writer.start(params, options, resume=ck is not None)
+    for w in warnings if ck is None else ():  # a resumed run's log holds them
+        writer.log(f"WARNING: {w}")
+    if why:
+        writer.log(f"checkpoint ignored, the run starts at t = 0: {why}")
+    return writer, ck
+
+
+def _start_loop(sim, params, options, writer, ck, t_wall) -> _Loop:
+    """The loop's state at the start of this piece of the run: resumed from the checkpoint ``ck`` when it is of
+    this mesh and its snapshots are on disk, else at t = 0 (the initial snapshot taken)."""
+    ident = checkpoint.identity(params, options, sim) if writer else None
+    if writer:
+        writer.write_mesh(sim.disc.points, sim.disc.triangles)
+    loop = None
+    if ck is not None:
+        why = checkpoint.mismatch(ck["identity"], ident)
+        try:
+            loop = None if why else _resumed_loop(ck, sim, writer)
+        except (OSError, ValueError, KeyError) as exc:
+            why = f"its snapshots cannot be read ({type(exc).__name__}: {exc})"
+        if loop is None:
+            writer.remove_snapshots()
+            writer.log(f"checkpoint ignored, the run starts at t = 0: {why}")
+    loop = loop or _initial_loop(sim, options, writer)
+    loop.identity, loop.saved_at = ident, t_wall
+    return loop
+
+
+def _initial_loop(sim, o: RunOptions, writer) -> _Loop:
+    """The loop's state at t = 0: the stored volumes of the initial state and its snapshot."""
+    cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0, "w_src": 0.0, "line": 0.0}
+    store0 = storage_fraction(sim.disc, sim.params, sim.U, porosity_state(sim.disc, sim.params, sim.U)[2])
+    cum["W0"] = stored_volume(sim, water_fraction(sim, sim.U, store0))
+    loop = _Loop(o.frame_times(), o.dt0, cum, stored_volume(sim, store0))
+    take_snapshot(sim, loop.snaps, writer)  # the initial state, t = 0
+    return loop
+
+
+def _resumed_loop(ck: dict, sim, writer) -> _Loop:
+    """The loop's state and ``sim``'s (U, d, t, predictor, factorization count) from the checkpoint ``ck``; the
+    snapshots written before it are read back, those written after it removed.  Raises OSError, ValueError or
+    KeyError (``sim`` untouched) when a snapshot is missing or unreadable."""
+    n = int(ck["n_snapshots"])
+    snaps = []
+    for i in range(n):
+        with np.load(writer.snap_dir / f"snap_{i:05d}.npz", allow_pickle=False) as z:
+            snaps.append((float(z["t"]), {k: z[k] for k in z.files if k != "t"}))
+    t = float(ck["t"])
+    loop = _Loop(ck["pending"], ck["dt"], ck["cum"], ck["V0"], ck["rows"], snaps, ck["rejected"], ck["warned"],
+                 ck["elapsed"], int(ck["factorizations"]), ck["resumed_from_t"] + [t])
+    writer.remove_snapshots(n)
+    writer.write_timeseries(pd.DataFrame(loop.rows))
+    writer.log(f"resumed from the checkpoint at t = {t:.6g} s ({len(loop.rows)} steps)")
+    sim.U, sim.d, sim.t, sim.previous = ck["U"], ck["d"], t, ck["previous"]
+    sim.fact0 -= loop.factorizations
+    return loop
 
 
 def _setup(params, options, mesh, phi0) -> Simulation:
@@ -181,65 +286,84 @@ def _setup(params, options, mesh, phi0) -> Simulation:
     return Simulation(params, options, mesh, phi0)
 
 
-def _time_loop(sim: Simulation, o: RunOptions, rows, snaps, rejected, writer, progress, t_wall):
-    pending = o.frame_times()
-    dt = o.dt0
-    cum = {"inj": 0.0, "src": 0.0, "out": 0.0, "w_in": 0.0, "w_out": 0.0, "w_src": 0.0, "line": 0.0}
-    store0 = storage_fraction(sim.disc, sim.params, sim.U, porosity_state(sim.disc, sim.params, sim.U)[2])
-    V0 = stored_volume(sim, store0)
-    cum["W0"] = stored_volume(sim, water_fraction(sim, sim.U, store0))
-    warned_layer = False
+def _time_loop(sim: Simulation, o: RunOptions, loop: _Loop, writer, progress, t_wall):
+    """Advance ``sim`` from its time to ``o.t_end`` (s), recording into ``loop``; returns (status, reason)."""
     prof = profiling.active()
-    with phase("output"):
-        take_snapshot(sim, snaps, writer)  # the initial state, t = 0
     while sim.t < o.t_end - 1e-12:
-        if o.max_wall_time is not None and time.perf_counter() - t_wall > o.max_wall_time:
+        if o.max_wall_time is not None and loop.elapsed + time.perf_counter() - t_wall > o.max_wall_time:
             return "failed", f"max_wall_time {o.max_wall_time} s exceeded at t = {sim.t:.4g} s"
         prof.set_part(sim.t)
-        target = min(o.t_end, pending[0]) if pending else o.t_end
-        dt_try = min(dt, o.dt_max, target - sim.t)
+        target = min(o.t_end, loop.pending[0]) if loop.pending else o.t_end
+        dt_try = min(loop.dt, o.dt_max, target - sim.t)
         try:
             U, d, info = sim.step(dt_try)
         except (StepFailure, np.linalg.LinAlgError, RuntimeError, FloatingPointError, ValueError) as exc:
-            prof.count("rejected_steps")
-            rejected.append({"t": sim.t, "dt": dt_try, "reason": str(exc)})
-            if writer:
-                writer.log(f"rejected step at t={sim.t:.6g} dt={dt_try:.3g}: {exc}")
-            dt = dt_try * o.dt_cut
-            if dt < o.dt_min:
-                limit = physical_limit(sim, getattr(exc, "node", None))
-                return "failed", (f"time step below dt_min={o.dt_min} at t = {sim.t:.6g} s (last: {exc})"
-                                  + (f"; physical limit: {limit}" if limit else ""))
+            failure = _reject(sim, o, loop, writer, dt_try, exc)
+            if failure:
+                return "failed", failure
             continue
-        with phase("metrics"):
-            _, ev, phi_q = porosity_state(sim.disc, sim.params, U)  # the new state's porosity, read twice below
-            accumulate_balances(sim, U, info["data"], dt_try, cum, ev, phi_q)
-            sim.commit(U, d, dt_try)
-            store = storage_fraction(sim.disc, sim.params, U, phi_q)
-            row = step_row(sim, dt_try, info, cum, V0, stored_volume(sim, store),
-                       stored_volume(sim, water_fraction(sim, U, store)))
-        rows.append(row)
-        _count_step(prof, info)
-        if row["outer_layer_area"] > 0 and not warned_layer:
-            warned_layer = True
-            if writer:
-                writer.log(f"WARNING: invaded layer not connected to the inlet at the outer circle (area {row['outer_layer_area']:.3g} mm^2) at t={sim.t:.4g} s; see mu_outer_bc")
+        row = _accept(sim, U, d, dt_try, info, loop, writer)
         if progress:
             progress.update(sim.t, f"dt = {dt_try:.2e} s, newton {info['newton_its']}, stagger {info['stagger_its']}, "
                                    f"p_inj = {row['p_inj']:.1f} kPa, front = {row['front_radius_mean']:.1f} mm")
         with phase("output"):
-            if pending and abs(sim.t - pending[0]) < 1e-9:
-                pending.pop(0)
-                take_snapshot(sim, snaps, writer)
-            if writer and len(rows) % 25 == 0:
-                writer.write_timeseries(pd.DataFrame(rows))
+            if loop.pending and abs(sim.t - loop.pending[0]) < 1e-9:
+                loop.pending.pop(0)
+                take_snapshot(sim, loop.snaps, writer)
+            if writer and len(loop.rows) % 25 == 0:
+                writer.write_timeseries(pd.DataFrame(loop.rows))
         if o.stop_front_radius is not None and np.isfinite(row["front_radius_max"]) and row["front_radius_max"] >= o.stop_front_radius:
             break
-        dt = _next_dt(o, dt_try, info)
-    if not snaps or snaps[-1][0] != sim.t:
+        loop.dt = _next_dt(o, dt_try, info)
+        _checkpoint_if_due(sim, o, loop, writer, t_wall)
+    if not loop.snaps or loop.snaps[-1][0] != sim.t:
         with phase("output"):
-            take_snapshot(sim, snaps, writer)
+            take_snapshot(sim, loop.snaps, writer)
     return "ok", None
+
+
+def _reject(sim, o: RunOptions, loop: _Loop, writer, dt_try: float, exc: Exception) -> str | None:
+    """Record the rejected step of size dt_try (s) and cut the next dt; returns the run's failure reason when
+    the cut falls below ``dt_min``, else None."""
+    profiling.active().count("rejected_steps")
+    loop.rejected.append({"t": sim.t, "dt": dt_try, "reason": str(exc)})
+    if writer:
+        writer.log(f"rejected step at t={sim.t:.6g} dt={dt_try:.3g}: {exc}")
+    loop.dt = dt_try * o.dt_cut
+    if loop.dt >= o.dt_min:
+        return None
+    limit = physical_limit(sim, getattr(exc, "node", None))
+    return (f"time step below dt_min={o.dt_min} at t = {sim.t:.6g} s (last: {exc})"
+            + (f"; physical limit: {limit}" if limit else ""))
+
+
+def _accept(sim, U, d, dt_try: float, info: dict, loop: _Loop, writer) -> dict:
+    """Commit the step of size dt_try (s) ending at (U, d): balances, time-series row (returned), counts and the
+    outer-layer warning."""
+    with phase("metrics"):
+        _, ev, phi_q = porosity_state(sim.disc, sim.params, U)  # the new state's porosity, read twice below
+        accumulate_balances(sim, U, info["data"], dt_try, loop.cum, ev, phi_q)
+        sim.commit(U, d, dt_try)
+        store = storage_fraction(sim.disc, sim.params, U, phi_q)
+        row = step_row(sim, dt_try, info, loop.cum, loop.V0, stored_volume(sim, store),
+                       stored_volume(sim, water_fraction(sim, U, store)))
+    loop.rows.append(row)
+    _count_step(profiling.active(), info)
+    if row["outer_layer_area"] > 0 and not loop.warned:
+        loop.warned = True
+        if writer:
+            writer.log(f"WARNING: invaded layer not connected to the inlet at the outer circle (area {row['outer_layer_area']:.3g} mm^2) at t={sim.t:.4g} s; see mu_outer_bc")
+    return row
+
+
+def _checkpoint_if_due(sim, o: RunOptions, loop: _Loop, writer, t_wall: float) -> None:
+    """Write the checkpoint (solver.checkpoint) when the run has a folder and ``o.checkpoint_interval`` s of wall
+    time have passed since the last one."""
+    if writer is None or not o.checkpoint_interval or time.perf_counter() - loop.saved_at < o.checkpoint_interval:
+        return
+    with phase("output"):
+        checkpoint.save(writer.dir, sim, loop.checkpoint_state(sim, time.perf_counter() - t_wall))
+    loop.saved_at = time.perf_counter()
 
 
 def physical_limit(sim: Simulation, node: int | None) -> str | None:

@@ -118,12 +118,15 @@ def _run_inputs(args):
 
 
 def _check_run_out(out: str, force: bool) -> None:
-    """``--out``: a folder name (not empty), and not an existing run folder unless ``force``."""
+    """``--out``: a folder name (not empty), and not an existing run folder unless ``force`` or it holds a
+    checkpoint (a run killed part-way, which resumes: ``solver.checkpoint``)."""
+    from solver.checkpoint import NAME
+
     if not str(out).strip():
         raise ValueError("--out '' is not allowed: a run folder name")
-    if (Path(out) / "summary.json").exists() and not force:
-        raise ValueError(f"--out {str(out)!r} is an existing run folder (allowed: a new folder, or --force to "
-                         "overwrite it)")
+    if (Path(out) / "summary.json").exists() and not force and not (Path(out) / NAME).exists():
+        raise ValueError(f"--out {str(out)!r} is an existing run folder (allowed: a new folder, a run killed "
+                         f"part-way with its {NAME}, which resumes, or --force to overwrite it)")
 
 
 def cmd_run(args) -> int:
@@ -141,7 +144,7 @@ def cmd_run(args) -> int:
 
         LOG.info("dchfrac run: estimate: %s", estimate_run(params, options).line())
     res = simulate(params, options, out_dir=args.out, progress=not args.quiet and LOG.isEnabledFor(logging.INFO),
-                   check_memory=not args.force)
+                   check_memory=not args.force, resume=not args.force)
     ts = res.timeseries
     last = ts.iloc[-1] if len(ts) else None
     print(f"status: {res.status}" + (f" ({res.reason})" if res.reason else ""))

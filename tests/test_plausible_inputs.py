@@ -104,7 +104,8 @@ def test_dchfrac_run_refuses_an_empty_out_and_an_existing_run_folder_without_for
     (tmp_path / "run").mkdir()
     (tmp_path / "run" / "summary.json").write_text("{}")
     assert main(["run", "--out", str(tmp_path / "run"), "--quiet"]) == 2
-    assert "is an existing run folder (allowed: a new folder, or --force to overwrite it)" in capsys.readouterr().err
+    assert ("is an existing run folder (allowed: a new folder, a run killed part-way with its checkpoint.npz, which "
+            "resumes, or --force to overwrite it)") in capsys.readouterr().err
     with pytest.raises(AssertionError, match="a simulation started"):   # --force: the run starts
         main(["run", "--out", str(tmp_path / "run"), "--quiet", "--force"])
 

@@ -306,7 +306,8 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
     reasons = []
     attempt = 0
     for attempt in range(1, cfg.retries + 2):
-        tmp = store.new_tmp_dir(task.key)
+        # an execution killed part-way left a checkpoint: the first attempt resumes it (solver.checkpoint)
+        tmp = (attempt == 1 and store.resumable_tmp_dir(task.key)) or store.new_tmp_dir(task.key)
         t0 = time.perf_counter()
         if isolate == "process":
             try:
@@ -346,6 +347,9 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         record["classifier_hash"] = out["classifier_hash"]
     if "numbers" in out:
         record["numbers"] = out["numbers"]
+    from solver import checkpoint
+
+    checkpoint.remove(tmp)  # left by a run the timeout killed: a recorded run is final, a rerun starts at t = 0
     record["files"] = file_manifest(tmp)
     if "traceback" in out:
         record["traceback"] = out["traceback"]

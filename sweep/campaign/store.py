@@ -13,7 +13,9 @@ Layout under a configurable root (default ``results/``)::
 parameters and run options (floats at 12 significant digits, so 0.1 and 0.1000000000001
 give one key). A run is executed in ``runs/.tmp-<key>-<uuid>/`` and renamed to
 ``runs/<key>/`` once its ``record.json`` (status "ok" | "failed", reason, metrics, ...)
-is written: a folder named by its key is always complete.
+is written: a folder named by its key is always complete.  A campaign process killed part-way leaves the
+folders of its runs in flight; those holding a checkpoint of the current solver code (``solver.checkpoint``) are
+kept, and the next execution of their key resumes in them.
 
 The record states the code that made the run (``code_hash``: the solver's source;
 ``classifier_hash``: the classifier's, when sweep.regimes.classify labelled it) and the size and
@@ -47,8 +49,11 @@ KEY_FORMAT = "0.1.0"
 
 
 def run_key(params: Mapping[str, Any], options: Mapping[str, Any], key_format: str = KEY_FORMAT) -> str:
-    """Hash of canonical (params, options): 16 hex digits, the name of the run's folder."""
-    text = canonical_json({"params": dict(params), "options": dict(options), "solver_version": str(key_format)})
+    """Hash of canonical (params, options): 16 hex digits, the name of the run's folder.  The options that do
+    not change a run's result (``solver.options.keyed``: checkpoint_interval) are no part of it."""
+    from solver.options import keyed
+
+    text = canonical_json({"params": dict(params), "options": keyed(dict(options)), "solver_version": str(key_format)})
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -192,6 +197,16 @@ class ResultsStore:
         d.mkdir()
         return d
 
+    def resumable_tmp_dir(self, key: str) -> Path | None:
+        """The folder of an interrupted execution of run ``key`` that holds a checkpoint of the current solver code
+        (``solver.checkpoint.resumable``; the newest when several do), or None."""
+        from solver.checkpoint import NAME, resumable
+
+        if not self.runs_dir.is_dir():
+            return None
+        found = [d for d in self.runs_dir.glob(f".tmp-{key}-*") if resumable(d)]
+        return max(found, key=lambda d: (d / NAME).stat().st_mtime) if found else None
+
     def finalize(self, tmp_dir: Path, key: str) -> Path:
         """Move a finished run's folder (record.json written) to ``runs/<key>`` (replacing an old one)."""
         final = self.run_dir(key)
@@ -224,11 +239,15 @@ class ResultsStore:
         return out
 
     def clean_tmp(self) -> int:
-        """Remove folders of runs that were in flight when a previous campaign process died."""
+        """Remove folders of runs that were in flight when a previous campaign process died, except those holding
+        a checkpoint of the current solver code (``solver.checkpoint``): the next execution of their key resumes
+        there (:meth:`resumable_tmp_dir`).  Returns the number removed."""
+        from solver.checkpoint import resumable
+
         n = 0
         if self.runs_dir.is_dir():
             for d in self.runs_dir.iterdir():
-                if d.name.startswith((".tmp-", ".trash-")):
+                if d.name.startswith(".trash-") or (d.name.startswith(".tmp-") and not resumable(d)):
                     shutil.rmtree(d, ignore_errors=True)
                     n += 1
         return n

@@ -43,7 +43,12 @@ class ForwardModel:
 def params_hash(params_dict: dict, options_dict: dict) -> str:
     """Stable short hash of (parameters, options): the name of a forward run's cache folder. The code
     that made the entry is checked by :func:`finished` (summary.json ``code_hash``), so an entry of other
-    code is run again in the same folder."""
+    code is run again in the same folder.  The options that do not change a run's result
+    (``solver.options.keyed``: checkpoint_interval) are no part of it."""
+    from solver.options import keyed
+
+    options_dict = keyed(options_dict)
+
     def norm(v):
         if isinstance(v, float):
             return float(f"{v:.12g}")
@@ -109,7 +114,8 @@ def _timeseries(rd: Path):
 
 
 def _run_one(pdict: dict, odict: dict, run_dir: str, code_hash: str) -> None:
-    """Run the solver into ``run_dir`` (a cache entry) unless it is already finished by code ``code_hash``.
+    """Run the solver into ``run_dir`` (a cache entry) unless it is already finished by code ``code_hash``; an
+    entry interrupted with a checkpoint of the current solver code resumes from it (``solver.checkpoint``).
 
     A run that raises is recorded as a failure (summary.json: status "failed", the reason, no t_reached),
     which the workflow reads as no prediction (NaN), never as a result."""
@@ -118,10 +124,12 @@ def _run_one(pdict: dict, odict: dict, run_dir: str, code_hash: str) -> None:
     from solver import Parameters, RunOptions, simulate
     from sweep.campaign.store import write_json_atomic
 
+    from solver import checkpoint
+
     rd = Path(run_dir)
     if finished(rd, code_hash):
         return
-    if rd.exists():
+    if rd.exists() and not checkpoint.resumable(rd):
         shutil.rmtree(rd)  # an interrupted or other code's run's files must not mix with the new run's
     try:
         simulate(Parameters.from_dict(pdict), RunOptions.from_dict(odict), out_dir=rd)
