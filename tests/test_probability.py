@@ -92,6 +92,32 @@ def test_diagram_draws_only_a_significant_separatrix(tmp_path):
     assert out["band"] is None and "not significant" in out["no_fit_reason"]
 
 
+# the first 38 runs of results/ca_star_band_h2 (C %, Ca*, fracturing): a significant separatrix whose
+# simultaneous band is open at both ends (ln Ca* beyond exp's range)
+BAND_C = [1.77962, 2.09153, 1.20656, 2.42641, 1.55996, 2.72298, 2.68261, 0.509329, 0.98046, 0.536988, 2.99239,
+          2.09153, 2.99007, 0.536988, 0.50711, 0.50711, 0.526332, 0.50711, 2.99816, 2.99007, 2.99552, 0.50711, 0.5181,
+          0.536988, 2.99787, 0.645567, 0.508804, 0.508804, 2.99512, 2.99813, 1.20656, 1.77962, 2.99706, 1.77962,
+          1.77962, 0.508804, 0.509329, 2.99787]
+BAND_CA = [1.37126e+08, 8.63422e+07, 6.84559e+07, 1.45726e+07, 5.15259e+08, 3.54342e+07, 1.04495e+09, 2.88338e+07,
+           3.20179e+08, 2.17443e+07, 4.49852e+07, 8.63422e+07, 4.98165e+08, 2.17443e+07, 1.30132e+07, 1.30132e+07,
+           7.79425e+07, 1.30132e+07, 2.95502e+07, 4.98165e+08, 7.54111e+07, 1.30132e+07, 4.0776e+07, 2.17443e+07,
+           2.21916e+08, 5.88921e+07, 5.73315e+07, 5.73315e+07, 1.06322e+08, 8.04283e+08, 6.84559e+07, 1.37126e+08,
+           1.44655e+08, 1.37126e+08, 1.37126e+08, 5.73315e+07, 2.88338e+07, 2.21916e+08]
+BAND_Y = [0, 0, 1, 0, 1, 0, 1, 0, 1, 1, 0, 0, 1, 0, 1, 1, 0, 1, 0, 1, 0, 1, 1, 1, 1, 1, 1, 1, 0, 1, 0, 0, 1, 1, 0, 1,
+          1, 0]
+
+
+def test_diagram_clips_a_band_open_beyond_the_plot(tmp_path):
+    """A significant separatrix on few runs can have a band whose ends reach ln Ca* of hundreds (exp overflows):
+    the diagram clips the band to the plotted range and says so in its legend, instead of failing on infinite
+    axis limits under the smooth classifier's shading (as this campaign's report did)."""
+    df = pd.DataFrame({"cement": BAND_C, "Ca_star": BAND_CA, "fracturing": np.array(BAND_Y, bool)})
+    out = plot_probability_diagram(df, tmp_path / "open", formats=())
+    band = out["band"]
+    assert band is not None and band.significant and np.max(band.hi) > 709.0 and np.min(band.lo) < -745.0
+    assert out["paths"][0].exists()
+
+
 def test_nf_vs_nb_probabilities_groups_replicates(tmp_path):
     from sweep.regimes.probability import plot_nf_vs_nb_probabilities
 

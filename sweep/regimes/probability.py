@@ -232,11 +232,14 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
         ax.plot([], [], ls="--", color="0.2", lw=1.0, label="smooth classifier: P(fracturing) = 0.5")
         ax.plot([], [], ls=":", color="0.2", lw=0.7, label="its 95 % band (edge)")
     band, why = _band_or_reason(C, cs, fr, level, alpha)
+    ylim = (cs.min() / 10**0.5, cs.max() * 10**0.5)   # the band may leave the sampled range: it is clipped
     if band is not None:
-        e = np.exp
-        ax.fill_between(band.C, e(band.lo), e(band.hi), color="0.5", alpha=0.35, lw=0, zorder=1,
-                        label=f"{level:.0%} band of Ca*$_c$" + (" (whole line)" if band.simultaneous else ""))
-        ax.plot(band.C, e(band.center), "k-", lw=1.4, zorder=2,
+        lo, hi = (np.exp(np.clip(v, *np.log(ylim))) for v in (band.lo, band.hi))
+        clipped = bool(np.any(band.lo < np.log(ylim[0])) or np.any(band.hi > np.log(ylim[1])))
+        ax.fill_between(band.C, lo, hi, color="0.5", alpha=0.35, lw=0, zorder=1,
+                        label=f"{level:.0%} band of Ca*$_c$" + (" (whole line)" if band.simultaneous else "")
+                        + (" (beyond the plot where clipped)" if clipped else ""))
+        ax.plot(band.C, np.exp(band.center), "k-", lw=1.4, zorder=2,
                 label=f"Ca*$_c$ = A exp(B C): A = {band.A:.3g}, B = {band.B:.3g} /% (p = {band.p_value:.2g})")
     else:
         ax.text(0.5, -0.30, "no separatrix drawn: " + why, transform=ax.transAxes, fontsize=6.5, va="top",
@@ -251,7 +254,7 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
                linewidth=1.0, zorder=4, label=f"replicates disagree ({int(m.sum())} of {m.size} points)")
     fig.colorbar(sc, ax=ax, label="fraction of replicates fracturing", fraction=0.046, pad=0.04)
     ax.set_yscale("log")
-    ax.set_ylim(cs.min() / 10**0.5, cs.max() * 10**0.5)   # the band may leave the sampled range: it is clipped
+    ax.set_ylim(*ylim)
     ax.set_xlabel("cement volume ratio C (%)")
     ax.set_ylabel("modified capillary number Ca*")
     ax.set_title(title or f"{C.size} runs at {m.size} points (replicates {int(pts['n'].min())}-{int(pts['n'].max())})",
