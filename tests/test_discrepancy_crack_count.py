@@ -16,7 +16,7 @@ from scipy.spatial import Delaunay
 from solver import RunOptions
 from sweep.discrepancy.checks import check_data_against_model
 from sweep.discrepancy.data import load_measured, write_measured
-from sweep.discrepancy.forward import SolverForward, _snapshot_values
+from sweep.discrepancy.forward import SolverForward, snapshot_observables
 from sweep.discrepancy.heldout import split_observables
 from sweep.discrepancy.observables import CURVES, REGISTRY, SNAPSHOT_CURVES, read_curves
 
@@ -69,15 +69,16 @@ def test_crack_count_is_a_registered_snapshot_curve():
 @pytest.mark.parametrize("angles, lengths", [((), ()), ((0.3, 2.4, 4.4), (10.0, 12.0, 11.0))])
 def test_crack_count_reads_the_open_slots_of_the_last_snapshot(tmp_path, angles, lengths):
     rd = _run_folder(tmp_path / "run", angles, lengths)
-    np.testing.assert_array_equal(_snapshot_values(rd, "crack_count", [2.0], True), [float(len(angles))])
+    np.testing.assert_array_equal(snapshot_observables(rd, {"crack_count": [2.0]}, True)["crack_count"],
+                                  [float(len(angles))])
 
 
 def test_crack_count_of_a_failed_or_unreadable_run_is_no_prediction(tmp_path, caplog):
     rd = _run_folder(tmp_path / "run", (0.3,), (10.0,), status="failed")
-    assert np.isnan(_snapshot_values(rd, "crack_count", [2.0], False)).all()
+    assert np.isnan(snapshot_observables(rd, {"crack_count": [2.0]}, False)["crack_count"]).all()
     (rd / "snapshots" / "snap_00000.npz").unlink()                 # no snapshot to classify
     with caplog.at_level("WARNING", logger="dchfrac.discrepancy"):
-        assert np.isnan(_snapshot_values(rd, "crack_count", [2.0], True)).all()
+        assert np.isnan(snapshot_observables(rd, {"crack_count": [2.0]}, True)["crack_count"]).all()
     assert "crack_count" in caplog.text
 
 

@@ -232,12 +232,7 @@ class SolverForward(ForwardModel):
         ts = _timeseries(rd) if ok or summ.get("t_reached") is not None else None
         r_inner = self._pdict(overrides)["r_inner"]
         out = observables_from_timeseries(ts, times, r_inner, summ.get("t_reached") if not ok else None)
-        for name in SNAPSHOT_CURVES:
-            if name in times:
-                out[name] = _snapshot_values(rd, name, times[name], ok)
-        if "regime" in times:
-            out["regime"] = _regime(rd) if ok else None
-        return out
+        return {**out, **snapshot_observables(rd, times, ok)}
 
 
 def fine_forwards(spec, cache_dir, n_jobs: int = 1) -> list:
@@ -255,25 +250,29 @@ def fine_forwards(spec, cache_dir, n_jobs: int = 1) -> list:
             for o in fine_options(spec)]
 
 
-def _snapshot_values(rd: Path, name: str, times, ok: bool) -> np.ndarray:
-    """Snapshot observable ``name`` (:data:`.observables.SNAPSHOT_CURVES`) of the finished entry ``rd`` at
-    ``times`` (s): its last snapshot's value, which is the value at t_end, where the checks put every such
-    observation; NaN for a failed run or a snapshot the classifier cannot read (logged)."""
-    v = np.full(len(times), np.nan)
-    if not ok:
-        return v
-    try:
-        v[:] = REGISTRY[name].snapshot(rd)
-    except Exception as exc:  # noqa: BLE001 - no prediction, never a made-up value
-        log.warning("%s of %s not read: %s", name, rd, exc)
-    return v
+def snapshot_observables(rd: Path, times: dict, ok: bool) -> dict:
+    """The observables of ``times`` read from the last snapshot of the finished entry ``rd``, classified once
+    (sweep.regimes.classify): the regime label (None when unavailable) and each snapshot curve
+    (:data:`.observables.SNAPSHOT_CURVES`) at its times (s), the last snapshot's value, which is the value at t_end
+    where the checks put every such observation (NaN when unavailable).  A failed run gives none; a snapshot the
+    classifier cannot read is logged."""
+    curves = [n for n in SNAPSHOT_CURVES if n in times]
+    if not curves and "regime" not in times:
+        return {}
+    c = _last_classification(rd, curves + (["regime"] if "regime" in times else [])) if ok else None
+    out = {n: np.full(len(times[n]), np.nan if c is None else REGISTRY[n].snapshot(c)) for n in curves}
+    if "regime" in times:
+        out["regime"] = None if c is None else str(c.regime)
+    return out
 
 
-def _regime(rd: Path):
-    """Regime label of the last snapshot of run folder ``rd`` (sweep.regimes.classify), None if unavailable."""
+def _last_classification(rd: Path, wanted: list):
+    """The classification of the last snapshot of run folder ``rd``, None if unavailable (logged with the
+    observables ``wanted`` of it)."""
     try:
         from sweep.regimes.classify import classify_run
 
-        return str(classify_run(rd).classification.regime)
-    except Exception:  # classifier missing or run without snapshot: no label, reported as such
+        return classify_run(rd).classification
+    except Exception as exc:  # noqa: BLE001 - classifier missing or run without snapshot: no prediction
+        log.warning("%s of %s not read: its last snapshot is not classified (%s)", ", ".join(wanted), rd, exc)
         return None

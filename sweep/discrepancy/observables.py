@@ -32,8 +32,8 @@ class ObservableUnavailable(ValueError):
 class Observable:
     """name; unit ("kPa", "mm", "-", "label"); kind "curve" | "label"; columns: the time-series columns it reads;
     read(ts, r_inner) -> values per time-series row (None for a label or a snapshot observable); default_noise:
-    one sd in ``unit`` (None for a label); doc: what it measures; snapshot(run_dir) -> its value at the run's
-    last snapshot (None: read from the time series)."""
+    one sd in ``unit`` (None for a label); doc: what it measures; snapshot(classification) -> its value from the
+    classification of the run's last snapshot (sweep.regimes.classify; None: read from the time series)."""
 
     name: str
     unit: str
@@ -55,12 +55,10 @@ def _crack_length(ts, r_inner: float) -> np.ndarray:
     return np.where(tip > 0, np.maximum(tip - r_inner, 0.0), 0.0)
 
 
-def _crack_count(run_dir) -> float:
-    """Open crack branches at the run's last snapshot (sweep.regimes.classify: tips of the open-porosity
-    cracks whose depth in r is at least max(L_min, l_d)); the experiments' "main cracks"."""
-    from sweep.regimes.classify import classify_run
-
-    return float(classify_run(run_dir).classification.n_cracks)
+def _crack_count(c) -> float:
+    """Open crack branches of the classification ``c`` of a run's last snapshot (sweep.regimes.classify: tips of
+    the open-porosity cracks whose depth in r is at least max(L_min, l_d)); the experiments' "main cracks"."""
+    return float(c.n_cracks)
 
 
 REGISTRY: dict[str, Observable] = {o.name: o for o in (
