@@ -868,6 +868,11 @@ def test_a_profile_reaching_off_reports_the_effect_not_identifiable(tmp_path, mo
     assert u["nearest_off"] == {"strength": 0.0, "delta_chi2": 1.5, "others": {"kbar": 0.0012, "E": 420.0}}
     md = (tmp_path / "out" / "report.md").read_text()
     assert "damage_viscosity: improved the joint fit" in md and "reaches off" in md
+    # the measurements that would tell the effect from the parameters making up for it (discriminate.py) are
+    # listed; here the point nearest off is made up, not a refit, so the pressure the data hold separates most
+    rows = rep["discriminating_measurements"]
+    assert rows[0]["observable"] == "p_inj" and rows[0]["measured"] and rows[0]["separation"] > 2.0
+    assert "the measurements that would are listed below" in md
 
 
 def test_confounded_twin_pass_rule_and_condition_subsets():

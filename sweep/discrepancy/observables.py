@@ -11,7 +11,7 @@ condition, classified from the run's last snapshot (sweep.regimes.classify), not
 curve observable with ``snapshot`` set (the crack count) is read from the run's last snapshot, which the
 workflow's forward runs write at t_end only: it is observed at t_end (checked before any run,
 ``checks.check_data_against_model``).
-Units: mm, s, kPa.
+Units: mm, s, kPa; volumes per unit cell height in mm² (mm³/mm).
 """
 from __future__ import annotations
 
@@ -72,6 +72,10 @@ REGISTRY: dict[str, Observable] = {o.name: o for o in (
                "(Sec. 3.5); noisier than the angular mean, it follows three tips"),
     Observable("crack_length", "mm", "curve", ("open_tip_radius",), _crack_length, 0.3,
                "length of the open crack beyond the inner radius (0 before initiation)"),
+    Observable("water_outflow_volume", "mm²", "curve", ("water_outflow_volume",), _column("water_outflow_volume"),
+               5.0, "cumulative invading water out through the outer circle r_o, a volume per unit cell height "
+               "(mm² = mm³/mm: divide a collected volume by the gap); 0 until the water reaches r_o, so it also "
+               "dates the breakthrough.  Default noise 5 mm²: 0.01 g of water on a balance over a 1.96 mm gap"),
     Observable("crack_count", "-", "curve", (), None, 1.0,
                "number of open crack branches at the last snapshot (t_end): the main cracks of the experiment; "
                "read from the snapshot, so observed at t_end only", snapshot=_crack_count),

@@ -78,7 +78,7 @@ def build_report(run, forward) -> dict:
               "rounds": run.rounds, "forward_runs": int(getattr(forward, "n_runs", 0)),
               "forward_runs_by_stage": run.ledger.stages, **_noise_fields(run),
               "profiles": run.profiles, "partial_explanation": run.partial, "rivals": run.rivals,
-              "failed_points": run.failed_points}
+              "failed_points": run.failed_points, "discriminating_measurements": run.discriminating}
     report["independent_estimates"] = independent_comparison(run.accepted, run.spec.independent)
     if run.emulated is not None:
         report["emulated_refits"] = run.emulated.summary()
@@ -304,7 +304,9 @@ def _caveat_lines(report: dict) -> list[str]:
               f"misses systematically (series: {[k for k, v in pe['localization_after']['series'].items() if v['systematic']]}), "
               f"so no effect is named: the cause may lie outside the catalogue.", ""]
     if report["tie"]:
-        L += [f"Tie between {report['tie']}: the data cannot tell them apart; add a discriminating condition.", ""]
+        L += [f"Tie between {report['tie']}: the data cannot tell them apart; "
+              + ("the measurements that would are listed below." if report.get("discriminating_measurements")
+                 else "add a discriminating condition."), ""]
     for r in report.get("rivals") or []:
         L += [f"Rival of {r['candidate']}: the baseline refitted with {r['alternative']} freed ([[alternative]]) "
               f"reaches {r['alternative']} = {r['value']:.4g}, BIC {r['delta_bic']:+.1f} against the candidate's model "
@@ -332,8 +334,34 @@ def _caveat_lines(report: dict) -> list[str]:
         L += [f"{u['effect']}: improved the joint fit, but its profile-likelihood interval {_f(u['interval'])} reaches "
               f"off: at strength {_f(n['strength'])} the calibrated parameters ({_f(n['others'])}) refit to within "
               f"Δχ² = {_f(n['delta_chi2'])}.  A discriminating condition (another injection rate, a later time) "
-              f"is needed to tell it from them.", ""]
+              f"is needed to tell it from them"
+              + (": the measurements that would are listed below." if report.get("discriminating_measurements")
+                 else "."), ""]
     return L
+
+
+def _discriminating_lines(report: dict) -> list[str]:
+    """The measurements that would tell apart the models the data cannot (sweep.discrepancy.discriminate)."""
+    rows = report.get("discriminating_measurements") or []
+    if not rows:
+        return []
+    models = list(rows[0]["predictions"])
+    L = ["", "## The measurements that would tell them apart", "",
+         "Each tied model predicted at every condition for every registered observable; the separation is the "
+         "smallest difference over pairs of models in noise sd (the data's own where they hold the observable, "
+         "else the registry's default), at the time it is largest; `measured`: the data already hold it there.", "",
+         "| observable | condition | t (s) | " + " | ".join(models) + " | separation (sd) | sd | measured |",
+         "|---|---|---|" + "---|" * len(models) + "---|---|---|"]
+    for r in rows:
+        vals = " | ".join(str(v) if isinstance(v, str) or v is None else f"{v:.4g}" for v in r["predictions"].values())
+        sd = "label" if r["noise_source"] == "label" else f"{r['noise_sd']:.3g} {r['unit']} ({r['noise_source']})"
+        sep = "labels differ" if r["separation"] is None else f"{r['separation']:.3g}"   # inf in JSON is None
+        L.append(f"| {r['observable']} | {r['condition']} | {r['time']:.3g} | {vals} | {sep} | {sd} "
+                 f"| {'yes' if r['measured'] else 'no'} |")
+    if rows[0]["separation"] is not None and rows[0]["separation"] < 2.0:
+        L += ["", "No registered observable at these conditions separates them by 2 sd: a discriminating condition "
+                  "(another injection rate, oil viscosity or a later time) is needed."]
+    return L + [""]
 
 
 def _noise_lines(report: dict) -> list[str]:
@@ -522,7 +550,8 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
         except Exception as exc:  # figures are optional; the verdict is not
             figs.append((f"figures failed: {type(exc).__name__}: {exc}", None))
     L = (_verdict_lines(report) + _caveat_lines(report) + _noise_lines(report) + _candidate_lines(report)
-         + _profile_lines(report) + _independent_lines(report) + _emulated_refit_lines(report.get("emulated_refits"))
+         + _discriminating_lines(report) + _profile_lines(report) + _independent_lines(report)
+         + _emulated_refit_lines(report.get("emulated_refits"))
          + _gap_and_localization_lines(report))
     for cap, f in figs:
         L += [f"![{cap}]({f})" if f else cap, ""]

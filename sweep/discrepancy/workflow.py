@@ -21,6 +21,7 @@ from solver.effects import get_effect
 from . import stats
 from .checks import check_data_against_model
 from .data import MeasuredData
+from .discriminate import discriminating_measurements
 from .emulated import EmulatedRefits
 from .heldout import heldout_data
 from .evidence import compare_passing, free_columns, gap, localize, refit, rival_refits, screen, wald_bounds
@@ -73,6 +74,8 @@ class WorkflowRun:
     emulated: EmulatedRefits | None = None
     failed_points: dict = field(default_factory=dict)
     correction_models: dict = field(default_factory=dict)   # effect -> the profile's linear correction or None
+    undecided: dict = field(default_factory=dict)   # models the data cannot tell apart: {name: fitted values}
+    discriminating: list = field(default_factory=list)   # the measurements that would (discriminate.py)
 
     @property
     def spec(self) -> DiscrepancySpec:
@@ -188,10 +191,13 @@ def accept(run: WorkflowRun, passing: list, remaining: list) -> bool:
     """Name the best passing candidate, or declare a tie with those within ``tie_bic`` of it.  Returns
     whether another round may follow (the named model still misses systematically)."""
     best = passing[0]
-    tied = [p["effect"] for p in passing[1:] if p["bic_common"] - best["bic_common"] < run.spec.acceptance.tie_bic]
-    tied += [f"alternative:{r['alternative']}" for r in rivals(run, best) if r["ties"]]
+    close = [p for p in passing[1:] if p["bic_common"] - best["bic_common"] < run.spec.acceptance.tie_bic]
+    tying = [r for r in rivals(run, best) if r["ties"]]
+    tied = [p["effect"] for p in close] + [f"alternative:{r['alternative']}" for r in tying]
     if tied:
         run.tie, run.verdict = [best["effect"]] + tied, "tie"
+        run.undecided = {**{p["effect"]: p["fit"].values() for p in [best] + close},
+                         **{f"alternative:{r['alternative']}": r["values"] for r in tying}}
         return False
     run.accepted.append({"effect": best["effect"], "strength": best["strength"],
                          "strength_interval": best["strength_interval"], "delta_bic": best["delta_bic"],
@@ -368,6 +374,18 @@ def check_identified(run: WorkflowRun) -> None:
                                          "nearest_off": {"strength": at_off["value"],
                                                          "delta_chi2": at_off["delta_chi2"],
                                                          "others": at_off.get("others", {})}})
+        if at_off.get("others"):   # the effect at its fit against the calibrated parameters making up for it
+            run.undecided = {a["effect"]: run.current.values(),
+                             f"{a['effect']} near off": {**at_off["others"], "effect:" + a["effect"]: at_off["value"]}}
+
+
+def name_discriminating_measurements(run: WorkflowRun) -> None:
+    """When the data cannot tell models apart (a tie, or a named strength the calibrated parameters make up
+    for down to off), the measurements that would (:func:`.discriminate.discriminating_measurements`)."""
+    if len(run.undecided) < 2:
+        return
+    run.discriminating = discriminating_measurements(run.problem, run.undecided)
+    run.ledger.mark("discriminating_measurements")
 
 
 def check_noise_level(run: WorkflowRun) -> None:
@@ -405,6 +423,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
     if check_reached(run, run.fit0, "calibrated baseline"):
         search(run)
         finalize(run)
+        name_discriminating_measurements(run)
         if run.verdict == "named":
             check_reached(run, run.current, "named model")
     named = run.accepted[0] if run.accepted and run.verdict == "named" else None
