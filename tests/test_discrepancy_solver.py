@@ -38,13 +38,20 @@ def test_params_hash_is_stable_and_sensitive():
     assert a != params_hash({"E": 331.0, "beta": 0.0}, {"h": 6.0})
 
 
-def test_solver_forward_runs_once_and_serves_the_cache(tmp_path):
+def test_solver_forward_runs_once_and_serves_the_cache(tmp_path, caplog):
     # one tiny run: h = 12 mm, 3 steps of 2 ms
+    import logging
+
     fwd = SolverForward({"beta": 0.0}, RunOptions(h=12.0, t_end=0.006, dt0=0.002, dt_max=0.002), tmp_path)
     times = {"p_inj": np.array([0.002, 0.004, 0.006]), "front_radius_mean": np.array([0.006])}
-    p1 = fwd.predict_one({"w_i": 50.0}, times)
-    p2 = fwd.predict_one({"w_i": 50.0}, times)
+    with caplog.at_level(logging.INFO, logger="dchfrac.discrepancy"):
+        p1 = fwd.predict_one({"w_i": 50.0}, times)
+        p2 = fwd.predict_one({"w_i": 50.0}, times)
     assert fwd.n_runs == 1
+    # a batch of runs says what it runs and when it is done (once: the second call reads the cache)
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("forward: ")]
+    assert len(lines) == 2 and "1 run(s) at h = 12 mm to t = 0.006 s" in lines[0] and " done in " in lines[1]
+    assert "failed" not in lines[1]
     np.testing.assert_array_equal(p1["p_inj"], p2["p_inj"])
     # the pressure rises monotonically under constant injection from rest
     assert np.all(np.diff(p1["p_inj"]) > 0) and p1["p_inj"][0] > 0

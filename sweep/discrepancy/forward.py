@@ -104,6 +104,14 @@ def finished(run_dir, code_hash: str | None = None) -> bool:
     return summ.get("status") == "ok" and _timeseries(rd) is not None
 
 
+def _status(rd: Path) -> str | None:
+    """The status of a cache entry's summary.json ("ok", "failed", ...), None when missing or unreadable."""
+    try:
+        return json.loads((rd / "summary.json").read_text()).get("status")
+    except (OSError, ValueError):
+        return None
+
+
 def _timeseries(rd: Path):
     """The run's time series (DataFrame), None if missing, empty or unreadable."""
     try:
@@ -208,18 +216,36 @@ class SolverForward(ForwardModel):
                 todo[str(rd)] = {k: v for k, v in self._pdict(o).items() if v is not None}
         if todo:
             self.n_runs += len(todo)
-            self.cache_dir.mkdir(parents=True, exist_ok=True)
-            od = self.options.to_dict()
-            if self.n_jobs != 1 and len(todo) > 1:
-                from joblib import Parallel, delayed, parallel_config
-
-                # one BLAS/PARDISO thread per solver run: n_jobs runs already share the cores
-                with parallel_config(backend="loky", inner_max_num_threads=1):
-                    Parallel(n_jobs=self.n_jobs)(delayed(_run_one)(p, od, rd, code) for rd, p in todo.items())
-            else:
-                for rd, p in todo.items():
-                    _run_one(p, od, rd, code)
+            self._run_batch(todo, code)
         return [self._read(self.run_dir(o), o, t) for o, t in jobs]
+
+    def _run_batch(self, todo: dict, code: str) -> None:
+        """Run the uncached entries ``todo`` ({run dir: parameter dict}), on ``n_jobs`` processes, with a
+        progress line before and after the batch (a fine run can take an hour: an overnight run says what it is
+        doing, and a resumed entry says so)."""
+        import time
+
+        from solver import checkpoint
+
+        self.cache_dir.mkdir(parents=True, exist_ok=True)
+        od = self.options.to_dict()
+        held = sum(1 for rd in todo if (Path(rd) / checkpoint.NAME).is_file())
+        log.info("forward: %d run(s) at h = %g mm to t = %g s%s, %d job(s); cache %s", len(todo), self.options.h,
+                 self.options.t_end, f" ({held} with a checkpoint to resume from)" if held else "", self.n_jobs,
+                 self.cache_dir)
+        t0 = time.perf_counter()
+        if self.n_jobs != 1 and len(todo) > 1:
+            from joblib import Parallel, delayed, parallel_config
+
+            # one BLAS/PARDISO thread per solver run: n_jobs runs already share the cores
+            with parallel_config(backend="loky", inner_max_num_threads=1):
+                Parallel(n_jobs=self.n_jobs)(delayed(_run_one)(p, od, rd, code) for rd, p in todo.items())
+        else:
+            for rd, p in todo.items():
+                _run_one(p, od, rd, code)
+        failed = sum(1 for rd in todo if _status(Path(rd)) != "ok")
+        log.info("forward: %d run(s) at h = %g mm done in %.0f s%s", len(todo), self.options.h,
+                 time.perf_counter() - t0, f", {failed} failed" if failed else "")
 
     def predict_one(self, overrides: dict, times: dict) -> dict:
         return self.predict_many([(overrides, times)])[0]
