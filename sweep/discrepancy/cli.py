@@ -31,7 +31,7 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     ``func(args) -> int``."""
     d = subparsers.add_parser("discrepancy", help="name the missing effect between simulation and measured data",
                               description="Discrepancy workflow (see sweep/discrepancy).")
-    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init}")
+    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init,status}")
     sub.required = True
     r = sub.add_parser("run", help="calibrate, localize, screen, refit, report")
     r.add_argument("--measured", required=True, help="measured-data folder (conditions.csv, observations.csv)")
@@ -51,7 +51,33 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     i.add_argument("--strict", action="store_true",
                    help="refuse implausible inputs (e.g. observation times in ms: an implausible t_end)")
     i.set_defaults(func=cmd_init)
+    st = sub.add_parser("status", help="the forward runs of a discrepancy run's cache: done, failed, in flight")
+    st.add_argument("--cache", required=True, help="forward-run cache folder (a run's --cache, default OUT/cache)")
+    st.set_defaults(func=cmd_status)
     return d
+
+
+def cmd_status(args) -> int:
+    """Print one line per forward run of a cache (sweep.discrepancy.forward.cache_status) and the counts: how
+    far a long discrepancy run has come, read while it runs (exit 2 when the folder does not exist)."""
+    from .forward import cache_status
+
+    cache = Path(args.cache)
+    if not cache.is_dir():
+        print(f"dchfrac discrepancy: --cache {str(cache)!r} is not a folder (a discrepancy run's cache: --cache, "
+              "default OUT/cache)", file=sys.stderr)
+        return 2
+    rows = cache_status(cache)
+    print(f"{'key':22s} {'h (mm)':>7s} {'seed':>5s} {'status':>10s} {'t (s)':>8s} {'wall (s)':>9s}  code")
+    for r in rows:
+        num = (lambda v, f: "-" if v is None else format(v, f))
+        print(f"{r['key']:22s} {num(r['h'], 'g'):>7s} {num(r['mesh_seed'], 'd'):>5s} {r['status']:>10s} "
+              f"{num(r['t'], '.4g'):>8s} {num(r['wall_s'], '.0f'):>9s}  {'current' if r['current_code'] else 'other'}")
+    counts = {s: sum(r["status"] == s for r in rows) for s in ("ok", "failed", "running", "unreadable")}
+    other = sum(not r["current_code"] for r in rows)
+    print(f"{len(rows)} runs: {counts['ok']} ok, {counts['failed']} failed, {counts['running']} running or "
+          f"interrupted, {counts['unreadable']} unreadable; {other} made by other solver code")
+    return 0
 
 
 def cmd_init(args) -> int:

@@ -302,3 +302,34 @@ def _last_classification(rd: Path, wanted: list):
     except Exception as exc:  # noqa: BLE001 - classifier missing or run without snapshot: no prediction
         log.warning("%s of %s not read: its last snapshot is not classified (%s)", ", ".join(wanted), rd, exc)
         return None
+
+
+def cache_status(cache_dir) -> list[dict]:
+    """One row per entry of a forward-run cache folder (a discrepancy run's progress, read while it runs or
+    after it stopped): key, mesh size h (mm) and mesh seed from its options, status ("ok", "failed", "running":
+    in flight or interrupted), the time reached (s: t_reached of a finished run, the checkpoint's time of a
+    running one, None before its first checkpoint), wall time (s, finished runs) and whether the current solver
+    code made it (an entry of other code is run again when the workflow needs it).  Sorted by key."""
+    import tomllib
+
+    from solver import checkpoint
+    from sweep.campaign.store import current_code_hash
+
+    code = current_code_hash()
+    rows = []
+    for rd in sorted(p for p in Path(cache_dir).iterdir() if p.is_dir()):
+        try:
+            summ = json.loads((rd / "summary.json").read_text())
+            opts = tomllib.loads((rd / "options.toml").read_text())
+        except (OSError, ValueError):
+            rows.append({"key": rd.name, "h": None, "mesh_seed": None, "status": "unreadable", "t": None,
+                         "wall_s": None, "current_code": False})
+            continue
+        t = summ.get("t_reached")
+        if summ.get("status") == "running":
+            ck, _ = checkpoint.load(rd)
+            t = None if ck is None else float(ck["t"])
+        rows.append({"key": rd.name, "h": opts.get("h"), "mesh_seed": opts.get("mesh_seed"),
+                     "status": summ.get("status"), "t": t, "wall_s": summ.get("wall_time_s"),
+                     "current_code": summ.get("code_hash") == code})
+    return rows
