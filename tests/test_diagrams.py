@@ -99,6 +99,11 @@ def test_plot_ca_star(tmp_path):
     ref = fit_exponential_separatrix(C[1:], cs[1:], y[1:])
     assert out["fit"].A == pytest.approx(ref.A) and out["fit"].B == pytest.approx(ref.B)
     assert out["no_fit_reason"] is None
+    # the separatrix's simultaneous 95 % band (profile likelihood, each run one Bernoulli draw) is drawn with it:
+    # significant, around the drawn line at every C, and (one draw, 119 runs) holding the true boundary
+    band = out["band"]
+    assert band.significant and band.covers(np.log(ref(band.C))) and band.covers(np.log(A_TRUE) + B_TRUE * band.C)
+    assert np.all(band.half_width_decades > 0)
     # fracturing that decreases with Ca*: no separatrix, and the figure says why instead of omitting it
     inv = plot_ca_star_vs_cement(df.assign(fracturing=~df["fracturing"].astype(bool)), tmp_path / "inv.png")
     assert inv["fit"] is None and "does not increase with Ca*" in inv["no_fit_reason"]
@@ -117,6 +122,7 @@ def test_plot_ca_star_does_not_draw_a_separatrix_outside_the_sampled_range(tmp_p
     df = pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": fr})
     out = plot_ca_star_vs_cement(df, tmp_path / "mixed.png")
     assert out["fit"] is None and "outside the sampled Ca* range" in out["no_fit_reason"]
+    assert out["band"] is None                               # no line, no band
     # a separatrix through the sampled range is still drawn (the first test's fit)
     C2, cs2, y2 = draw(0, n=120)
     assert plot_ca_star_vs_cement(pd.DataFrame({"cement": C2, "Ca_star": cs2, "fracturing": y2}),

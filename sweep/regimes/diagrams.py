@@ -116,6 +116,12 @@ def _fmt_pm(v: float, s: float) -> str:
 
 
 # --------------------------------------------------------------------------- Ca* vs C
+#: the caption of a diagram with one run per point: what it does not show (sweep.regimes.probability draws the
+#: label probabilities of a campaign with [replicates])
+ONE_RUN_NOTE = ("one run per point: each label's own uncertainty (another porosity draw) is not measured; declare "
+                "[replicates] for label probabilities")
+
+
 def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
                            formats: Sequence[str] = ("svg",), title: str | None = None,
                            ridge: float = 1e-3) -> dict[str, Any]:
@@ -162,12 +168,16 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     if no_fit:
         ax.text(0.5, -0.27, "no exponential separatrix: " + no_fit, transform=ax.transAxes, fontsize=6.5,
                 va="top", ha="center", wrap=True)
+    band = None
     if sep is not None:
         cc = np.linspace(C.min(), C.max(), 200) if np.ptp(C) > 0 else np.array([C[0] - 0.5, C[0] + 0.5])
         note = " (separable)" if sep.separable else ""
         ax.plot(cc, sep(cc), "k-", lw=1.5,
                 label=f"Ca*$_c$ = A exp(B C){note}\nA = {_fmt_pm(sep.A, sep.sigma_A)}, "
                       f"B = {_fmt_pm(sep.B, sep.sigma_B)}")
+        band = _draw_separatrix_band(ax, C, cs, fr)
+    ax.text(0.5, -0.38 if no_fit else -0.30, ONE_RUN_NOTE, transform=ax.transAxes, fontsize=6, va="top",
+            ha="center", color="0.35", wrap=True)
     ax.set_yscale("log")
     ax.set_xlabel("cement volume ratio C (%)")
     ax.set_ylabel("modified capillary number Ca*")
@@ -176,7 +186,26 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
               frameon=False)
     paths = _save(fig, out_path, formats)
-    return {"paths": paths, "fit": sep, "no_fit_reason": no_fit, "n_dropped": n_drop}
+    return {"paths": paths, "fit": sep, "band": band, "no_fit_reason": no_fit, "n_dropped": n_drop}
+
+
+def _draw_separatrix_band(ax, C, cs, fr, level: float = 0.95):
+    """The separatrix's simultaneous ``level`` profile-likelihood band of ln Ca*_c over the sampled C
+    (sweep.regimes.probability.separatrix_band: each run one Bernoulli observation), grey, clipped to half a
+    decade beyond the sampled Ca*; returns the band, or None when it cannot be computed (then not drawn)."""
+    from .probability import separatrix_band
+
+    try:
+        band = separatrix_band(C, cs, fr, level=level)
+    except ValueError:
+        return None
+    lim = np.log(cs.min()) - 0.5 * math.log(10.0), np.log(cs.max()) + 0.5 * math.log(10.0)
+    lo, hi = (np.exp(np.clip(v, *lim)) for v in (band.lo, band.hi))
+    clipped = bool(np.any(band.lo < lim[0]) or np.any(band.hi > lim[1]))
+    ax.fill_between(band.C, lo, hi, color="0.5", alpha=0.3, lw=0, zorder=0,
+                    label=f"{level:.0%} band of Ca*$_c$ (whole line, profile likelihood)"
+                          + (", clipped" if clipped else ""))
+    return band
 
 
 # --------------------------------------------------------------------------- N_f vs N_b
@@ -415,6 +444,8 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k:
         ax.set_title(t, fontsize=9)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3,
               frameon=False)
+    ax.text(0.5, -0.30, ONE_RUN_NOTE, transform=ax.transAxes, fontsize=6, va="top", ha="center", color="0.35",
+            wrap=True)
     _place_thumbnails(fig, ax, df, thumbnails or ())
     paths = _save(fig, out_path, formats)
     return {"paths": paths, "n_dropped": n_drop, "counts": counts}
