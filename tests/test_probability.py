@@ -129,3 +129,36 @@ def test_nf_vs_nb_probabilities_groups_replicates(tmp_path):
     assert out["n_dropped"] == 1 and out["paths"][0].exists()
     assert pts.loc[0.1, "top"] == "invasive_fracturing" and pts.loc[0.1, "p_top"] == pytest.approx(2 / 3)
     assert bool(pts.loc[0.1, "mixed"]) and not bool(pts.loc[10.0, "mixed"]) and pts.loc[10.0, "n"] == 3
+
+
+def test_the_separatrix_summary_states_the_fit_its_intervals_and_the_band_or_why_there_is_none():
+    """separatrix_summary (what a campaign report states): on labels from a known increasing boundary the
+    separatrix is significant, B > 0 at 95 %, the intervals hold the truth (one seeded draw of 200 runs) and are
+    the profile fit's own; labels independent of the axes, or one regime only, give no separatrix with the reason."""
+    from sweep.regimes.probability import separatrix_summary
+
+    C, cs, y = draw(0)
+    s = separatrix_summary(C, cs, y)
+    iv = separatrix_profile_interval(C, cs, y)
+    assert s["significant"] and s["reason"] is None and s["B_positive"]
+    assert (s["A"], s["B"], tuple(s["B_interval"])) == (iv.A, iv.B, iv.B_interval)
+    assert s["B_interval"][0] <= B_TRUE <= s["B_interval"][1] and s["A_interval"][0] <= A_TRUE <= s["A_interval"][1]
+    band = separatrix_band(C, cs, y, at=[C.min(), C.max()])
+    assert s["band_half_width_decades"] == pytest.approx(list(band.half_width_decades))
+    rng = np.random.default_rng(3)
+    flat = separatrix_summary(C, cs, rng.random(C.size) < 0.5)
+    assert not flat["significant"] and "not significant" in flat["reason"] and flat["p_value"] >= 0.05
+    assert "both regimes" in separatrix_summary(C, cs, np.ones(C.size, bool))["reason"]
+
+
+def test_a_campaign_report_with_a_ca_star_diagram_states_the_separatrix():
+    from types import SimpleNamespace
+
+    from sweep.campaign.report import _separatrix_lines
+
+    C, cs, y = draw(0)
+    table = pd.DataFrame({"status": "ok", "cement": C, "Ca_star": cs, "fracturing": y})
+    text = "\n".join(_separatrix_lines(SimpleNamespace(diagrams=[{"kind": "ca_star_vs_cement"}]), table))
+    assert "## The separatrix" in text and "200 finished runs" in text and "B > 0 at 95 %" in text
+    assert "simultaneous 95 % band" in text
+    assert _separatrix_lines(SimpleNamespace(diagrams=[{"kind": "nf_vs_nb"}]), table) == []

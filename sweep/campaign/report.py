@@ -67,6 +67,7 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
             reason = str(reason).replace("|", "\\|").replace("\n", " ")
             L.append(f"| `{k}` | {reason} |")
         L.append("")
+    L += _separatrix_lines(spec, table)
     L += _figure_lines(figs, store.dir)
     if not table.empty:
         L += _run_table_lines(spec, table)
@@ -75,6 +76,37 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
           f"`sweep.load_campaign` / `sweep.load_timeseries`.", ""]
     write_text_atomic(store.report_md, "\n".join(L))
     return store.report_md
+
+
+def _separatrix_lines(spec, table) -> list[str]:
+    """With a Ca*-C diagram: what the finished runs say about the separatrix Ca*_c = A exp(B C) (Sec. 3.6;
+    :func:`sweep.regimes.probability.separatrix_summary`), replicates counted as runs."""
+    if not any(g["kind"] == "ca_star_vs_cement" for g in spec.diagrams) or table.empty:
+        return []
+    need = ("cement", "Ca_star", "fracturing")
+    ok = table[table["status"] == "ok"] if "status" in table.columns else table
+    if any(c not in ok.columns for c in need):
+        return []
+    ok = ok.dropna(subset=list(need))
+    ok = ok[ok["Ca_star"].astype(float) > 0]
+    from sweep.regimes.probability import separatrix_summary
+
+    s = separatrix_summary(ok["cement"], ok["Ca_star"], ok["fracturing"].astype(bool))
+    L = ["## The separatrix", "", f"{s['runs']} finished runs, {s['fracturing']} fracturing."]
+    if s.get("p_value") is not None:
+        L.append(f"Against a constant fracturing probability the penalized likelihood ratio is {s['lr']:.3g} "
+                 f"(p = {s['p_value']:.2g}).")
+    if s["reason"]:
+        return L + [f"No separatrix: {s['reason']}.", ""]
+    lo, hi = s["B_interval"]
+    lvl = f"{100 * s['level']:g} %"
+    return L + [f"Ca*_c = A exp(B C): A = {s['A']:.3g} [{s['A_interval'][0]:.3g}, {s['A_interval'][1]:.3g}], "
+                f"B = {s['B']:.3g} [{lo:.3g}, {hi:.3g}] /% ({lvl} profile-likelihood intervals"
+                + (", separable labels" if s["separable"] else "") + "); "
+                + ("B > 0" if s["B_positive"] else "B > 0 is not established") + f" at {lvl}.",
+                f"The simultaneous {lvl} band of ln Ca*_c is ±{s['band_half_width_decades'][0]:.2g} decades "
+                f"at C = {s['band_C'][0]:.3g} % and ±{s['band_half_width_decades'][1]:.2g} at C = {s['band_C'][1]:.3g} %.",
+                ""]
 
 
 def _figure_lines(figs, folder: Path) -> list[str]:

@@ -30,7 +30,7 @@ from typing import Any, NamedTuple, Sequence
 import numpy as np
 
 __all__ = ["wilson_interval", "replicate_points", "SeparatrixBand", "separatrix_band", "separatrix_significance",
-           "fit_probability_map", "plot_probability_diagram", "plot_nf_vs_nb_probabilities"]
+           "fit_probability_map", "plot_probability_diagram", "plot_nf_vs_nb_probabilities", "separatrix_summary"]
 
 
 def wilson_interval(k: Any, n: Any, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
@@ -168,6 +168,35 @@ def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.9
         lo[i], hi[i] = _profile_bounds(rise, float(center[i]), step)
     return SeparatrixBand(grid, center, lo, hi, level, simultaneous, float(math.exp(lnA)), float(B), float(th[0]),
                           lr, pv, bool(pv < alpha), int(y.size))
+
+
+def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95, alpha: float = 0.05) -> dict:
+    """What the labels say about the separatrix Ca*_c = A exp(B C), as a campaign report states it: the runs,
+    the penalized likelihood-ratio test against a constant probability (``lr``, ``p_value``, ``significant`` at
+    ``alpha``), and when it is significant A and B with their ``level`` profile-likelihood intervals
+    (:func:`~.separatrix.separatrix_profile_interval`), ``B_positive`` (the interval of B above 0: the paper's
+    increasing separatrix, Sec. 3.6) and the simultaneous band's half-width in decades at the two ends of the
+    sampled C (:func:`separatrix_band`); ``reason`` says why there is no separatrix otherwise.  C in %, Ca* -."""
+    from .separatrix import separatrix_profile_interval
+
+    Cc, cs = np.asarray(C, float).ravel(), np.asarray(ca_star, float).ravel()
+    fr = np.asarray(fracturing).astype(bool).ravel()
+    out: dict = {"runs": int(Cc.size), "fracturing": int(fr.sum()), "significant": False, "reason": None}
+    if Cc.size < 3 or fr.all() or not fr.any():
+        return {**out, "reason": "both regimes are needed to fit a separatrix"}
+    lr, pv = separatrix_significance(Cc, cs, fr)
+    out.update({"lr": lr, "p_value": pv, "significant": bool(pv < alpha)})
+    if not out["significant"]:
+        return {**out, "reason": f"not significant: p = {pv:.2g} >= {alpha:g} against a constant probability"}
+    try:
+        iv = separatrix_profile_interval(Cc, cs, fr, level=level)
+        band = separatrix_band(Cc, cs, fr, level=level, at=[Cc.min(), Cc.max()])
+    except ValueError as exc:
+        return {**out, "significant": False, "reason": str(exc)}
+    half = band.half_width_decades
+    return {**out, "A": iv.A, "A_interval": list(iv.A_interval), "B": iv.B, "B_interval": list(iv.B_interval),
+            "B_positive": bool(iv.B_interval[0] > 0), "separable": iv.separable, "level": level,
+            "band_C": [float(c) for c in band.C], "band_half_width_decades": [float(h) for h in half]}
 
 
 def _wald_half(X, th, grid, z):
