@@ -285,9 +285,17 @@ def test_campaign_stores_resumes_after_ctrl_c_and_repeats_its_sequence(tmp_path)
     finally:
         _INTERRUPT_AFTER[0] = None
     assert len(_coords(tmp_path / "cut")) == 14
-    rest = run_campaign(spec, tmp_path / "cut", runner=separatrix_runner, code_hash="t", progress=None)
+    import io
+
+    log = io.StringIO()
+    rest = run_campaign(spec, tmp_path / "cut", runner=separatrix_runner, code_hash="t", progress=log)
     assert rest.n_executed == full.n_executed - 14
     assert _coords(tmp_path / "cut") == _coords(tmp_path / "full")
+    # the resumed campaign's log states the sampler's whole standing, not only this round's plan
+    standing = [ln for ln in log.getvalue().splitlines() if "sampler: round" in ln]
+    budget = state["budget"]
+    assert standing and f"{full.n_executed} of {budget} runs used, 0 pending" in standing[-1]
+    assert "stopped: " + state["reason"] in standing[-1]
 
 
 def test_cli_status_shows_round_budget_and_uncertainty(tmp_path, capsys):

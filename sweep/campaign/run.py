@@ -161,7 +161,7 @@ def run_campaign(
                 result.reclassified += _reclassify_keys(plan, other_labels, spec.classify)
             else:
                 result.labels_kept = sorted(set(result.labels_kept) | set(other_labels))
-            points = _refined_points(sampler, spec, root, plan, store, points, write=bool(todo))
+            points = _refined_points(sampler, spec, root, plan, store, points, write=bool(todo), progress=progress)
         result.n_skipped = result.n_points - result.n_executed
         if result.reclassified:
             result.table_paths = write_table(spec, root, plan=plan)
@@ -205,14 +205,27 @@ def _book_round(result: CampaignResult, plan: Plan, n_points: int, rerun_stale: 
 
 
 def _refined_points(sampler, spec: CampaignSpec, root, plan: Plan, store: ResultsStore, points: list,
-                    write: bool = True) -> list:
+                    write: bool = True, progress=None) -> list:
     """The points of the next round: ``points`` plus the sampler's new ones, or [] when it adds none;
-    ``sampler.json`` is rewritten when ``write`` (runs were made this round) or missing."""
+    ``sampler.json`` is rewritten when ``write`` (runs were made this round) or missing, and the sampler's
+    standing printed to ``progress`` (the round lines count this round's plan only: a resumed sampler replays
+    its earlier rounds from the table)."""
     table = build_table(spec, root, plan=plan)
     new = [p for p in sampler.refine(spec, table) if run_key(p.params, p.options) not in set(plan.keys)]
     if write or not (store.dir / "sampler.json").is_file():
-        _write_sampler_state(sampler, spec, table, store)
+        st = _write_sampler_state(sampler, spec, table, store)
+        if progress is not None and st:
+            print(f"[{spec.name}] {_sampler_text(st)}", file=progress, flush=True)
     return points + new if new else []
+
+
+def _sampler_text(st: dict) -> str:
+    """One line of an adaptive sampler's standing (its ``state`` dict): round, runs of the budget, pending runs,
+    the band's half-width when it has one, why it stopped."""
+    band = st.get("band_half_width_decades")
+    return (f"sampler: round {st['round']}, {st['runs_used']} of {st['budget']} runs used, {st['pending']} pending"
+            + (f", band half-width {band:.3g} decades" if band is not None else "")
+            + (f"; stopped: {st['reason']}" if st.get("stopped") else ""))
 
 
 def _check_run_settings(spec: CampaignSpec, jobs, timeout, retries, isolate):
@@ -263,12 +276,16 @@ def _execute(plan: Plan, todo, cfg: ExecConfig, result: CampaignResult, *, jobs,
         gen.close()
 
 
-def _write_sampler_state(sampler, spec: CampaignSpec, table, store: ResultsStore) -> None:
-    """``sampler.json``: where an adaptive sampler stands (round, runs of the budget, why it stopped)."""
-    if hasattr(sampler, "state"):
-        from sweep.campaign.store import write_json_atomic
+def _write_sampler_state(sampler, spec: CampaignSpec, table, store: ResultsStore) -> dict | None:
+    """``sampler.json``: where an adaptive sampler stands (round, runs of the budget, why it stopped); returns
+    that state (None for a grid)."""
+    if not hasattr(sampler, "state"):
+        return None
+    from sweep.campaign.store import write_json_atomic
 
-        write_json_atomic(store.dir / "sampler.json", sampler.state(spec, table))
+    st = sampler.state(spec, table)
+    write_json_atomic(store.dir / "sampler.json", st)
+    return st
 
 
 def sampler_status(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, table=None) -> dict | None:
