@@ -318,3 +318,32 @@ def test_a_correction_that_follows_the_calibrated_parameter_removes_its_bias():
         z[follows] = (np.asarray(f.x, float) - exact.x) / sd
     assert z["strength"][0] < -3.0                                  # the premise: k̄ biased by > 3 sd
     assert abs(z["all"][0]) < 0.5 and abs(z["all"][1]) < 0.5
+
+
+def test_inside_following_each_model_is_compared_with_the_data_corrected_at_its_own_parameters():
+    """NoiseModel.following: the residuals at x are those of y_measured − c(values at x) (the known answer
+    computed by hand from the standardization), the problem's cache does not serve a residual computed under
+    the vector before, the corrected data as one vector are refused inside, and the vector applies again after."""
+    data = _data(MeshToy(2.0, 0, spread=0.0))
+    prob, params = _problem(data, MeshToy(4.0, 0, spread=0.0), {})
+    vec = np.full(prob.y.size, 1.5)
+    prob.noise.shift_correction(vec)
+    xs = [np.array([params[0].to_x(300.0), 30.0]), np.array([params[0].to_x(360.0), 45.0])]
+    before = prob.residual_batch(params, xs, TRAIN)
+    slope = np.linspace(-1.0, 1.0, prob.y.size)
+
+    def corr(values):
+        return values["E"] / 100.0 + values["effect:damage_viscosity"] * slope
+
+    mask = prob.mask(TRAIN)
+    with prob.noise.following(corr):
+        inside = prob.residual_batch(params, xs, TRAIN)
+        with pytest.raises(RuntimeError, match="follows the parameters"):
+            prob.y
+    for x, r in zip(xs, inside):
+        v = {p.name: p.from_x(xi) for p, xi in zip(params, x)}
+        m = prob.model_vector(prob.prediction(params, x, TRAIN), mask)
+        want = prob.standardize((prob.noise.y_measured - corr(v))[mask] - m, mask, 50.0)
+        assert np.allclose(r, want, atol=1e-12)
+    assert np.allclose(prob.y, prob.noise.y_measured - vec)
+    assert all(np.array_equal(a, b) for a, b in zip(prob.residual_batch(params, xs, TRAIN), before))

@@ -132,7 +132,8 @@ class ProfileOptions(_Checked):
                                                         "estimated at (the fit and evenly about it)")
     correction_span: float = _rule(1.0, "float", 0.0, 10.0, lo_open=True,
                                    doc="with correction = linear: the anchors' reach about the fit, in Wald "
-                                       "half-widths of the 95 % interval")
+                                       "half-widths of the 95 % interval (of the strength; with correction_follows = "
+                                       "all also of each calibrated parameter)")
     correction_slope_realizations: int = _rule(
         0, "int", 0, 50, doc="with correction = linear: 0 runs every fine realization at every anchor; m >= 1 runs "
                              "them all at the first anchor and the first m at the others, whose correction is the "

@@ -82,7 +82,6 @@ class StrengthCorrection:
         U = self.X - self.xbar
         self.a = C.mean(axis=0)
         self.B = np.linalg.lstsq(U, C - self.a, rcond=None)[0]          # (d, rows)
-        self.b = self.B[0] if d == 1 else self.B
         self.resid_rms = float(np.sqrt(np.mean((C - self.a - U @ self.B) ** 2)))
         self.values = list(values) if values is not None else [float(x) for x in self.X[:, self.strength]]
         self.realizations = self.slope_realizations = None   # fine realizations at the first / the other anchors
@@ -618,8 +617,8 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     (:func:`emulator_for`).
     With ``[profile] correction = "linear"`` the correction's model is built about ``fit`` and kept for every
     pass (common random numbers): a re-centring moves the reference, not the likelihood, and goes to the
-    profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' span has the model
-    rebuilt about it for the next pass.  Without a re-centring the fit is settled under that correction at its
+    profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' range in a modelled
+    parameter (:meth:`StrengthCorrection.covers`) has the model rebuilt about it for the next pass.  Without a re-centring the fit is settled under that correction at its
     own strength (:func:`settled_fit`): the model reported is always the one the profile measured from.
     Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima, and
     "_correction": the linear correction's model or None, to be popped before the dict is serialized)."""
