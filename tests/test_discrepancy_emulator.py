@@ -611,7 +611,8 @@ class _GrowingSdEmulator:
         self.params = (CalibParam(name="E", lower=-3.0, upper=5.0, initial=1.0, scale="linear"),
                        CalibParam(name="effect:x", lower=0.0, upper=1.0, initial=0.5, scale="linear"))
         self.mask = np.ones(n, bool)
-        self.problem = SimpleNamespace(y=self.a * 1.2 + m, spec=SimpleNamespace(fit=FitOptions(loss="linear")))
+        y = self.a * 1.2 + m
+        self.problem = SimpleNamespace(y=y, data_at=lambda params, x: y, spec=SimpleNamespace(fit=FitOptions(loss="linear")))
         self._w = ScaledCovariance(np.ones(n), np.eye(n), np.eye(n))
 
     def s(self, x):
@@ -665,7 +666,7 @@ def test_the_named_model_after_an_emulated_linear_profile_is_a_real_fit_under_it
     params, xj = fit.params, float(fit.x[2])
     xs = [xj - 3.0, xj + 3.0]
     real = [correction_at(prob, fine, {**fit.values(), "effect:damage_viscosity": x}) for x in xs]
-    cm = StrengthCorrection(xs, real)
+    cm = StrengthCorrection(xs, real, params=(params[2],))
     held = fit_on_emulator(em, 2, xj, np.asarray(fit.x[:2], float))
     final = settled_fit(prob, params, 2, xj, held.x, train, cm, em)
     assert np.allclose(prob.noise.y_measured - prob.noise.y, cm.real_at(xj)) and final.x[2] == xj

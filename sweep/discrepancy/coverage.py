@@ -229,11 +229,11 @@ def _dchi2_others_fixed(pf: _Profile, value: float) -> float:
     problem, others = pf.problem, np.delete(pf.x_hat, pf.j)
     problem.fixed = {pf.p.name: value}
     old = None
+    vals = {**{q.name: q.from_x(x) for q, x in zip(pf.free, others)}, pf.p.name: value}
     try:
         if pf.cm is not None:
-            old = problem.noise.shift_correction(pf.cm.at(pf.p.to_x(value)))
+            old = problem.noise.shift_correction(pf.cm(vals))
         elif pf.fines:
-            vals = {**{q.name: q.from_x(x) for q, x in zip(pf.free, others)}, pf.p.name: value}
             old = problem.noise.shift_correction(correction_at(problem, pf.fines, vals))
         r = problem.residual_batch(pf.free, [others], pf.ids)[0]
     finally:

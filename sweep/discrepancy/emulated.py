@@ -51,11 +51,10 @@ def fit_all_on_emulator(em: CurveEmulator, starts: list) -> Fit:
     problem, fo = em.problem, em.problem.spec.fit
     lb = np.array([p.x_bounds[0] for p in em.params])
     ub = np.array([p.x_bounds[1] for p in em.params])
-    y = problem.y[em.mask]
 
     def resid(x):
         mean, s = em.predict(x)
-        r, logdet = em.whitener().standardize(y - mean, s)
+        r, logdet = em.whitener().standardize(problem.data_at(em.params, x)[em.mask] - mean, s)
         return np.append(r, math.sqrt(max(logdet, 0.0)))
 
     best = None

@@ -241,7 +241,7 @@ class CurveEmulator:
         coordinates), with the covariance s·Σ_out of a real run about it in every Gaussian term
         (:meth:`mixture`)."""
         mean, s = self.predict(x)
-        return self.mixture().deviance(self.problem.y[self.mask] - mean, s)
+        return self.mixture().deviance(self.problem.data_at(self.params, x)[self.mask] - mean, s)
 
     def sd_norm(self, x, run: bool = False) -> float:
         """√tr(Σ⁻¹ V) at ``x`` (Σ the noise model's covariance on the rows, V the emulator's): its predictive
@@ -284,14 +284,13 @@ def fit_on_emulator(em: CurveEmulator, j: int, xj: float, x0_free: np.ndarray, m
     free = [i for i in range(len(em.params)) if i != j]
     lb = np.array([em.params[i].x_bounds[0] for i in free])
     ub = np.array([em.params[i].x_bounds[1] for i in free])
-    y = problem.y[em.mask]
 
     def full(xf):
         return np.insert(np.asarray(xf, float), j, xj)
 
     def resid(xf):
         mean, s = em.predict(full(xf))
-        r, logdet = em.whitener().standardize(y - mean, s)
+        r, logdet = em.whitener().standardize(problem.data_at(em.params, full(xf))[em.mask] - mean, s)
         return np.append(r, math.sqrt(max(logdet, 0.0)))
 
     if free:
@@ -301,7 +300,7 @@ def fit_on_emulator(em: CurveEmulator, j: int, xj: float, x0_free: np.ndarray, m
     else:
         xf, nfev, J = np.zeros(0), 1, np.zeros((int(em.mask.sum()), 0))
     mean, s = em.predict(full(xf))
-    r, logdet = em.whitener().standardize(y - mean, s)
+    r, logdet = em.whitener().standardize(problem.data_at(em.params, full(xf))[em.mask] - mean, s)
     f = Fit(tuple(em.params[i] for i in free), xf, r, J, 0.5 * float(r @ r), nfev)
     f.logdet = logdet
     f.x_full = full(xf)

@@ -28,7 +28,7 @@ def gap(problem: Problem, params, x, ids) -> dict:
         return {}
     mask = problem.mask(ids)
     m = problem.model_vector(problem.prediction(params, x, ids), mask)
-    r = (problem.y[mask] - m) / problem.sig[mask]
+    r = (problem.data_at(params, x)[mask] - m) / problem.sig[mask]
     r = np.where(np.isfinite(r), r, problem.spec.fit.nan_residual)
     obs = problem.obs[mask]
     g = {o: float(np.sqrt(np.mean(r[obs == o] ** 2))) for o in CURVES if np.any(obs == o)}

@@ -10,11 +10,16 @@ with
 per series s (condition × observable), C_s the mesh-realization covariance (realizations.py) plus the
 coarse model's jitter (jitter.py) when those are modelled.  :class:`NoiseModel` holds this state and is
 owned by the fitting problem; every change to it bumps ``version``, which the problem's residual cache is
-keyed on.  The functions below compute its pieces from forward runs.  Units: kPa, mm (observables), s.
+keyed on.  The correction is a vector (``err``: :meth:`NoiseModel.set_discretization`,
+:meth:`NoiseModel.shift_correction`) or, inside :meth:`NoiseModel.following`, a function of the parameter values
+each model is evaluated at (the profile's linear model, profile.StrengthCorrection): the data a model at θ is
+compared with are then y − err(θ) (:meth:`NoiseModel.data_for`), so a fit under it sees the correction's own
+derivative.  The functions below compute its pieces from forward runs.  Units: kPa, mm (observables), s.
 """
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -32,7 +37,8 @@ __all__ = ["NoiseModel", "ScaledCovariance", "ScaledMixture", "add_discretizatio
 class NoiseModel:
     """The data the coarse model is compared with and their covariance (see the module docstring).
 
-    y : corrected data (y_measured − err); sig_diag : σ without the realization and jitter terms; sig :
+    y : corrected data (y_measured − err; refused while the correction follows the parameters: use
+    :meth:`data_for`); follows : the correction as a function of the parameter values, or None; sig_diag : σ without the realization and jitter terms; sig :
     marginal σ of each point (all terms; figures and held-out gaps); real_cov : the per-series covariance
     (:class:`RealizationCovariance`, jitter included) or None; jitter : :class:`ModelJitter` or None;
     realization_spread : per-point sample std of the fine realizations (0 without them)."""
@@ -40,7 +46,8 @@ class NoiseModel:
     def __init__(self, y: np.ndarray, sig: np.ndarray, layout: CurveLayout):
         self.layout = layout
         self.y_measured, self.sig_measured = np.asarray(y, float), np.asarray(sig, float)
-        self.y, self.sig, self.sig_diag = self.y_measured, self.sig_measured, self.sig_measured
+        self._y, self.sig, self.sig_diag = self.y_measured, self.sig_measured, self.sig_measured
+        self.follows = None
         self.real_cov: RealizationCovariance | None = None
         self.jitter: ModelJitter | None = None
         self.realization_spread = np.zeros(self.y.size)
@@ -62,7 +69,7 @@ class NoiseModel:
         fines = np.atleast_2d(np.asarray(fines, float))
         err = np.where(np.isfinite(err), err, 0.0)
         spread = realization_mean_spread(fines)[1]
-        self.y = self.y_measured - err
+        self._y = self.y_measured - err
         sig_diag = np.sqrt(self.sig_measured**2 + (fraction * err) ** 2)
         if fines.shape[0] >= 2:
             self.real_cov = RealizationCovariance.estimate(fines, self.layout)
@@ -93,12 +100,40 @@ class NoiseModel:
                     else self.sig_diag)
         self._changed(covariance=True)
 
+    @property
+    def y(self) -> np.ndarray:
+        """The data corrected by the correction vector in use (kPa, mm)."""
+        if self.follows is not None:
+            raise RuntimeError("NoiseModel.y: the correction follows the parameters here; the data a model is "
+                               "compared with are data_for(its values)")
+        return self._y
+
+    def data_for(self, values: dict) -> np.ndarray:
+        """The data a model at ``values`` ({name: value}, each parameter's unit) is compared with, on every
+        row: y_measured − err(values) inside :meth:`following`, else y (kPa, mm)."""
+        return self._y if self.follows is None else self.y_measured - self.follows(values)
+
+    @contextmanager
+    def following(self, correction):
+        """Inside: the correction is ``correction(values)`` (a callable of the parameter values, kPa / mm per
+        row) at each model's own values (:meth:`data_for`), σ and the covariance unchanged; the vector in
+        use before applies again after.  Not nested."""
+        if self.follows is not None:
+            raise RuntimeError("NoiseModel.following: a correction already follows the parameters")
+        self.follows = correction
+        self._changed(covariance=False)
+        try:
+            yield self
+        finally:
+            self.follows = None
+            self._changed(covariance=False)
+
     def shift_correction(self, err: np.ndarray | None) -> np.ndarray:
         """Compare with y_measured − ``err`` (σ and the covariance unchanged); None changes nothing.
-        Returns the correction in use before (to restore it)."""
-        old = self.y_measured - self.y
+        Returns the correction vector in use before (to restore it)."""
+        old = self.y_measured - self._y
         if err is not None:
-            self.y = self.y_measured - err
+            self._y = self.y_measured - err
             self._changed(covariance=False)
         return old
 

@@ -121,11 +121,19 @@ class ProfileOptions(_Checked):
                                 "realizations) or linear (the correction as a linear function of the strength, fitted "
                                 "once from the realizations at correction_anchors strengths and the same for every "
                                 "point and re-centring: common random numbers, a smooth profile)")
+    correction_follows: str = _rule(
+        "strength", "choice", choices=("strength", "all"),
+        doc="with correction = linear: what the correction is a linear function of: strength (the profiled "
+            "strength only; each refit made under its value at the held strength) or all (the strength and every "
+            "calibrated parameter, from two more anchors per calibrated parameter at the fit +- correction_span Wald "
+            "half-widths; every refit of the profile and the named model's settling evaluate it at their own "
+            "trial parameters, so a fit sees how the fine-minus-coarse difference moves with what it fits)")
     correction_anchors: int = _rule(3, "int", 2, 9, doc="with correction = linear: strengths the correction is "
                                                         "estimated at (the fit and evenly about it)")
     correction_span: float = _rule(1.0, "float", 0.0, 10.0, lo_open=True,
                                    doc="with correction = linear: the anchors' reach about the fit, in Wald "
-                                       "half-widths of the 95 % interval")
+                                       "half-widths of the 95 % interval (of the strength; with correction_follows = "
+                                       "all also of each calibrated parameter)")
     correction_slope_realizations: int = _rule(
         0, "int", 0, 50, doc="with correction = linear: 0 runs every fine realization at every anchor; m >= 1 runs "
                              "them all at the first anchor and the first m at the others, whose correction is the "
@@ -165,6 +173,10 @@ class ProfileOptions(_Checked):
         if self.correction == "linear" and not self.fine:
             raise ValueError("discrepancy spec: profile.correction=\"linear\" is not allowed with profile.fine=false "
                              "(the fit's correction for every point): set fine = true or correction = \"point\"")
+        if self.correction_follows != "strength" and self.correction != "linear":
+            raise ValueError(f"discrepancy spec: profile.correction_follows=\"{self.correction_follows}\" is not allowed "
+                             f"with profile.correction=\"{self.correction}\" (only the linear correction is a function "
+                             "of the parameters): set correction = \"linear\" or correction_follows = \"strength\"")
         if self.emulate_refits and self.emulator == "none":
             raise ValueError("discrepancy spec: profile.emulate_refits=true is not allowed with "
                              "profile.emulator=\"none\": set emulator = \"gp\" or emulate_refits = false")

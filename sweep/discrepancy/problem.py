@@ -159,10 +159,16 @@ class Problem:
         """Standardized residuals of ``diff`` (data − model) on ``mask``'s rows: :meth:`NoiseModel.standardize`."""
         return self.noise.standardize(diff, mask, nan_value)
 
-    def residuals_for(self, preds: list, mask: np.ndarray) -> list:
-        """Standardized residuals of each prediction on ``mask``'s rows (a failed point: nan_residual)."""
+    def data_at(self, params, x) -> np.ndarray:
+        """The data the model at x (internal coordinates of ``params``, with ``fixed``) is compared with, on
+        every row (kPa, mm): :meth:`NoiseModel.data_for` its values."""
+        return self.noise.data_for(self._values(params, x))
+
+    def residuals_for(self, preds: list, mask: np.ndarray, ys: list) -> list:
+        """Standardized residuals of each prediction on ``mask``'s rows against its data ``ys`` (every row,
+        :meth:`data_at`; a failed point: nan_residual)."""
         nanr = self.spec.fit.nan_residual
-        return [self.standardize(self.y[mask] - self.model_vector(pred, mask), mask, nanr) for pred in preds]
+        return [self.standardize(y[mask] - self.model_vector(pred, mask), mask, nanr) for pred, y in zip(preds, ys)]
 
     def failed_points(self, params, x, ids) -> dict:
         """{condition: {"failed": n, "points": N}} of the conditions ``ids`` at x: the observation points the
@@ -196,7 +202,8 @@ class Problem:
                 self._preds[keys[i]] = pr
         if need:
             preds = [self._preds[keys[i]] for i in need]
-            for i, r, pr in zip(need, self.residuals_for(preds, self.mask(ids)), preds):
+            ys = [self.data_at(params, xs[i]) for i in need]
+            for i, r, pr in zip(need, self.residuals_for(preds, self.mask(ids), ys), preds):
                 self._cache[keys[i]] = (r, pr)
         return [self._cache[k][0] for k in keys]
 

@@ -17,7 +17,11 @@ modelled linearly in the strength from the realizations at a few anchor strength
 :class:`StrengthCorrection`).  The linear model is fixed once per profile and kept through its re-centrings, so
 every point is evaluated with the same realizations, the same correction function and the same covariance
 (common random numbers): Δχ² differences then come from the strength alone, and the profile is as smooth as
-the coarse model; a point-wise correction carries the fine realizations' own jitter in the parameters into
+the coarse model.  ``[profile] correction_follows``: the model is linear in the strength alone ("strength") or
+in every parameter of the fit ("all": two more anchors per calibrated parameter), and each refit of the profile
+and the named model's settling (:func:`settled_fit`) evaluate it at their own trial parameters
+(:meth:`~.noise.NoiseModel.following`), so they are optima of the likelihood with the correction where each
+model is, not fixed points of "correct, then refit" (results/discrepancy/ten_minute_twin/diagnosis/, finding 1); a point-wise correction carries the fine realizations' own jitter in the parameters into
 every point (measured on the toy, tests/test_discrepancy_crn.py).  A profile that is not monotone on each side
 of its lowest point is flagged (``non_monotone``); a re-centring is recorded in ``recentred`` and reported.
 """
@@ -45,48 +49,92 @@ __all__ = ["profile_interval", "recentre_target", "profile_recentred", "emulator
 
 class StrengthCorrection:
     """The discretization correction (fine − coarse, per curve row, kPa / mm) as a linear function of the
-    profiled strength's internal coordinate x: c(x) = a + b (x − x̄), least squares per row through the
-    corrections estimated at the anchors ``xs`` (``corrs``: one row vector each; exact through two anchors).
+    fitted parameters' internal coordinates x (log10 or linear): c(x) = a + Bᵀ (x − x̄), least squares per
+    row through the corrections estimated at the anchors ``xs`` (``corrs``: one row vector each; exact through
+    d + 1 anchors in general position).  ``xs``: (n,) for one parameter (the profiled strength:
+    ``[profile] correction_follows = "strength"``) or (n, d) for d (``"all"``: the strength and the calibrated
+    parameters, the strength in column ``strength``); ``params``: the CalibParam of each column, which lets
+    the model be evaluated at a values dict (:meth:`__call__`, the noise model's correction that follows the parameters, :meth:`NoiseModel.following`).
 
     The fine-minus-coarse difference of damage- and crack-dependent observables changes with the effect's
-    strength (results/discrepancy/long_bias/README.md); one correction taken at the fit and applied along the
-    profile gives the profile the coarse model's sensitivity to the strength instead of the fine one's.  A
-    linear model in the strength holds the fine model's first-order sensitivity; the other parameters'
-    influence on the correction is taken along the profile's own path (each anchor's others refitted at its
-    strength)."""
+    strength (results/discrepancy/long_bias/README.md), and with the calibrated parameters (k̄ through the
+    pressure's scale, results/discrepancy/ten_minute_twin/diagnosis/): one correction vector taken at one
+    point and applied elsewhere gives the fit the coarse model's sensitivity to the parameters instead of the
+    fine one's.  A linear model holds the fine model's first-order sensitivity to each parameter it models;
+    with the strength alone, the other parameters' influence is taken along the profile's own path (each
+    strength anchor's others refitted at its strength)."""
 
-    def __init__(self, xs, corrs, values=None, real=None):
-        self.real = real            # the same line through the corrections of real runs, when ``corrs`` are not
-        self.xs = np.asarray(xs, float)
+    def __init__(self, xs, corrs, values=None, real=None, params=None, strength: int = 0):
+        self.real = real            # the same model through the corrections of real runs, when ``corrs`` are not
+        X = np.asarray(xs, float)
+        self.X = X[:, None] if X.ndim == 1 else X
+        self.xs = X                 # the anchors as given: (n,) for one parameter
         C = np.vstack([np.asarray(c, float) for c in corrs])
-        if self.xs.size < 2 or C.shape[0] != self.xs.size:
-            raise ValueError(f"StrengthCorrection: {self.xs.size} anchors for {C.shape[0]} corrections (>= 2 each)")
-        self.xbar = float(self.xs.mean())
-        u = self.xs - self.xbar
+        n, d = self.X.shape
+        if n < max(2, d + 1) or C.shape[0] != n:
+            raise ValueError(f"StrengthCorrection: {n} anchors for {C.shape[0]} corrections and {d} parameters "
+                             f"(needs as many corrections as anchors, >= {max(2, d + 1)})")
+        self.params = tuple(params) if params is not None else None
+        self.strength = int(strength)          # the profiled strength's column (its anchors: ``values``)
+        if self.params is not None and len(self.params) != d:
+            raise ValueError(f"StrengthCorrection: {len(self.params)} parameters for anchors of {d} coordinates")
+        self.xbar = self.X.mean(axis=0)
+        U = self.X - self.xbar
         self.a = C.mean(axis=0)
-        self.b = (u @ (C - self.a)) / float(u @ u)
-        self.resid_rms = float(np.sqrt(np.mean((C - self.a - np.outer(u, self.b)) ** 2)))
-        self.values = list(values) if values is not None else [float(x) for x in self.xs]
+        self.B = np.linalg.lstsq(U, C - self.a, rcond=None)[0]          # (d, rows)
+        self.resid_rms = float(np.sqrt(np.mean((C - self.a - U @ self.B) ** 2)))
+        self.values = list(values) if values is not None else [float(x) for x in self.X[:, self.strength]]
         self.realizations = self.slope_realizations = None   # fine realizations at the first / the other anchors
 
-    def at(self, x: float) -> np.ndarray:
-        """c(x) on every curve row."""
-        return self.a + self.b * (float(x) - self.xbar)
+    def at(self, x) -> np.ndarray:
+        """c(x) on every curve row; ``x`` the model's coordinates (a number for one parameter)."""
+        return self.a + (np.atleast_1d(np.asarray(x, float)) - self.xbar) @ self.B
 
-    def real_at(self, x: float) -> np.ndarray:
-        """c(x) for a real run of the coarse model: the line through the anchors' fine − real coarse runs
-        (``real``; on the emulator ``at`` is taken against the emulator's mean, :meth:`_Profile.model_correction`)."""
-        return (self.real if self.real is not None else self).at(x)
+    def coordinates(self, values: dict) -> np.ndarray:
+        """The model's coordinates of ``values`` ({name: value}, each parameter's unit)."""
+        if self.params is None:
+            raise ValueError("StrengthCorrection: built without its parameters, it cannot be evaluated at values")
+        missing = [p.name for p in self.params if p.name not in values]
+        if missing:
+            raise ValueError(f"StrengthCorrection: values {sorted(values)} lack the modelled parameters {missing}")
+        return np.array([p.to_x(values[p.name]) for p in self.params])
+
+    def __call__(self, values: dict) -> np.ndarray:
+        """c at ``values`` ({name: value}, each parameter's unit; names beyond the model's are ignored)."""
+        return self.at(self.coordinates(values))
+
+    def for_real_runs(self) -> "StrengthCorrection":
+        """The model for real runs of the coarse model: the one through the anchors' fine − real coarse runs
+        (``real``; on the emulator this model is taken against the emulator's mean,
+        :meth:`_Profile.model_correction`)."""
+        return self.real if self.real is not None else self
+
+    def real_at(self, x) -> np.ndarray:
+        """c(x) for a real run of the coarse model (:meth:`for_real_runs`)."""
+        return self.for_real_runs().at(x)
+
+    def covers(self, values: dict) -> bool:
+        """Whether every modelled parameter of ``values`` lies within its anchors' range (no extrapolation)."""
+        x = self.coordinates(values)
+        return bool(np.all((self.X.min(axis=0) <= x) & (x <= self.X.max(axis=0))))
 
     def summary(self, layout=None) -> dict:
-        """The anchors (parameter units), the slope's RMS change of the correction over the anchors' span and
-        the residual RMS of the line through them (kPa / mm: per observable with ``layout``)."""
-        span = float(np.ptp(self.xs))
+        """The strength anchors (parameter units), the slope's RMS change of the correction over the anchors'
+        span and the residual RMS of the model at the anchors (kPa / mm: per observable with ``layout``); with
+        more than one parameter the anchors and the change over them per parameter."""
         out = {"model": "linear", "anchors": self.values, "line_residual_rms": self.resid_rms,
                "realizations": self.realizations, "slope_realizations": self.slope_realizations}
+        if self.params is not None and len(self.params) > 1:
+            out["follows"] = [p.name for p in self.params]
+            out["parameter_anchors"] = {p.name: sorted({float(p.from_x(v)) for v in self.X[:, i]})
+                                        for i, p in enumerate(self.params)}
         if layout is not None:
             from .noise import rms_per_observable
-            out["change_over_anchors_rms"] = rms_per_observable(layout, self.b * span)
+            span = np.ptp(self.X, axis=0)
+            ch = [rms_per_observable(layout, self.B[i] * span[i]) for i in range(len(span))]
+            out["change_over_anchors_rms"] = ch[self.strength]
+            if len(ch) > 1:
+                out["change_over_anchors_rms_by_parameter"] = {p.name: c for p, c in zip(self.params, ch)}
         return out
 
 
@@ -122,24 +170,18 @@ class _Profile:
         self.chi2_hat = self.reference_deviance() if self.fines else self.chi2_fit
 
     def linear_correction(self) -> StrengthCorrection:
-        """The correction modelled linearly in the strength (:class:`StrengthCorrection`): estimated from the
-        fine realizations at ``correction_anchors`` strengths evenly over the fit ± ``correction_span`` Wald
-        half-widths (clipped to the bounds), the others refitted at each under the fit's correction; on the
-        emulator each taken against the emulator's mean (:meth:`model_correction`).  With
-        ``correction_slope_realizations`` = m > 0 the anchors after the first run the first m realizations
-        only (:func:`~.noise.correction_from` with the first anchor's as reference)."""
-        po, xh = self.po, float(self.x_hat[self.j])
-        wl, wh = (self.p.to_x(b) if np.isfinite(b) else np.nan for b in self.wald)
-        half = 0.5 * abs(wh - wl) if np.isfinite(wh - wl) and wh != wl else 0.1 * max(abs(xh), 1e-3 * (self.x_hi - self.x_lo))
-        xs = np.unique(np.clip(xh + po.correction_span * half * np.linspace(-1.0, 1.0, po.correction_anchors),
-                               self.x_lo, self.x_hi))
-        if xs.size < 2:
-            xs = np.array([self.x_lo, self.x_hi])
+        """The correction modelled linearly (:class:`StrengthCorrection`) in the strength, or with ``[profile]
+        correction_follows = "all"`` in every parameter of the fit: estimated from the fine realizations at the
+        anchors (:meth:`anchors`); on the emulator each taken against the emulator's mean
+        (:meth:`model_correction`).  With ``correction_slope_realizations`` = m > 0 the anchors after the first
+        run the first m realizations only (:func:`~.noise.correction_from` with the first anchor's as
+        reference)."""
+        follows_all = self.po.correction_follows == "all"
+        anchors, n_strength = self.anchors()
         corrs, real, first = [], [], None
-        m = po.correction_slope_realizations
-        for x in xs:
-            f = self.held(float(x))
-            vals = {**f.values(), self.p.name: self.p.from_x(float(x))}
+        m = self.po.correction_slope_realizations
+        for full, at in anchors:
+            vals = {q.name: q.from_x(float(v)) for q, v in zip(self.fit.params, full)}
             if first is None or not 0 < m < len(self.fines):
                 coarse, fines = coarse_and_fines(self.problem, self.fines, vals)
                 real.append(correction_from(coarse, fines))
@@ -147,11 +189,50 @@ class _Profile:
             else:                            # the first anchor's mean carried here by m realizations' change
                 coarse, fines = coarse_and_fines(self.problem, self.fines[:m], vals)
                 real.append(correction_from(coarse, fines, ref=first))
-            corrs.append(self.model_correction(real[-1], f))
-        values = [float(self.p.from_x(x)) for x in xs]
-        cm = StrengthCorrection(xs, corrs, values, real=StrengthCorrection(xs, real, values) if self.em else None)
+            corrs.append(self.model_correction(real[-1], at))
+        X = np.array([full if follows_all else full[self.j] for full, _ in anchors])
+        values = [float(self.p.from_x(full[self.j])) for full, _ in anchors[:n_strength]]
+        kw = {"params": self.fit.params if follows_all else (self.p,), "strength": self.j if follows_all else 0}
+        cm = StrengthCorrection(X, corrs, values, real=StrengthCorrection(X, real, values, **kw) if self.em else None,
+                                **kw)
         cm.realizations, cm.slope_realizations = len(self.fines), (m if 0 < m < len(self.fines) else len(self.fines))
         return cm
+
+    def anchors(self) -> tuple[list, int]:
+        """The linear correction's anchors as (the point in all the fit's parameters, fit coordinates; where
+        the model's correction is taken: a refit or that point, :meth:`model_correction`), and how many of them
+        are strength anchors (the first): ``correction_anchors`` strengths evenly over the fit ±
+        ``correction_span`` Wald half-widths (clipped to the bounds), the others refitted at each under the
+        fit's correction; with ``correction_follows = "all"`` then, per calibrated parameter, the fit displaced
+        along it by ± ``correction_span`` of its Wald half-widths (clipped; a displacement the bound leaves
+        at zero is dropped), the others as at the fit."""
+        po, xh = self.po, float(self.x_hat[self.j])
+        xs = np.unique(np.clip(xh + po.correction_span * self.half_width(self.j)
+                               * np.linspace(-1.0, 1.0, po.correction_anchors), self.x_lo, self.x_hi))
+        if xs.size < 2:
+            xs = np.array([self.x_lo, self.x_hi])
+        out = []
+        for x in xs:
+            f = self.held(float(x))
+            out.append((np.insert(np.asarray(f.x, float), self.j, x), f))
+        if po.correction_follows == "all":
+            for i, q in enumerate(self.fit.params):
+                lo, hi = q.x_bounds
+                for sign in ((-1.0, 1.0) if i != self.j else ()):
+                    full = np.array(self.x_hat, float)
+                    full[i] = float(np.clip(full[i] + sign * po.correction_span * self.half_width(i), lo, hi))
+                    if full[i] != self.x_hat[i]:
+                        out.append((full, full))
+        return out, xs.size
+
+    def half_width(self, i: int) -> float:
+        """Half the Wald interval of the fit's parameter ``i`` (fit coordinates); where it is undetermined,
+        0.1 of |x| (at least 1e-3 of the parameter's range)."""
+        q, xi = self.fit.params[i], float(self.x_hat[i])
+        wald = self.wald if i == self.j else wald_bounds(self.fit, i, self.w)[:2]
+        wl, wh = (q.to_x(b) if np.isfinite(b) else np.nan for b in wald)
+        lo, hi = q.x_bounds
+        return 0.5 * abs(wh - wl) if np.isfinite(wh - wl) and wh != wl else 0.1 * max(abs(xi), 1e-3 * (hi - lo))
 
     def reference_deviance(self) -> float:
         """With fine models, the χ² every Δχ² is measured from: the fit's own point taken as each profile point
@@ -169,14 +250,14 @@ class _Profile:
 
     def modelled_refit(self, xj: float) -> Fit:
         """The others refitted from the fit's values with the parameter at ``xj`` (held by the caller) under
-        the modelled correction c(xj) (:class:`StrengthCorrection`): the same function of the strength for
-        every point."""
-        self.point_correction = self.cm.at(xj)
-        old = self.problem.noise.shift_correction(self.point_correction)
-        try:
-            return self.refit(xj, np.delete(self.x_hat, self.j))
-        finally:
-            self.problem.noise.shift_correction(old)
+        the modelled correction (:class:`StrengthCorrection`), the same function for every point, evaluated at
+        each trial point of the refit (:meth:`NoiseModel.following`): c(xj) throughout when it follows the
+        strength alone, c(xj, others) at the trial others with ``correction_follows = "all"``, so the refit
+        sees the correction's derivative in the others.  ``point_correction``: c at the refit."""
+        with self.problem.noise.following(self.cm):
+            f = self.refit(xj, np.delete(self.x_hat, self.j))
+        self.point_correction = self.cm({**f.values(), self.p.name: self.p.from_x(xj)})
+        return f
 
     @contextmanager
     def holding(self, xj: float):
@@ -490,24 +571,30 @@ def _profile_minimum(problem: Problem, fit: Fit, j: int, ids, pr: dict, fine_for
 def settled_fit(problem: Problem, params: tuple, j: int, xj: float, x_free, ids, cm, em=None,
                 refit: bool = True) -> Fit:
     """The model at strength ``xj`` (fit coordinates, parameter ``j`` of ``params``) under the modelled
-    correction c(xj) for real runs (:meth:`StrengthCorrection.real_at`, left in use), as a Fit of real runs: the others from
+    correction for real runs (:meth:`StrengthCorrection.for_real_runs`; its value at the settled point left in
+    use as the correction vector), as a Fit of real runs: the others from
     ``x_free`` (an emulated refit's when ``em`` is given, then polished with ``[profile] emulator_polish``
     real least-squares evaluations at the held strength, so that the named model's residuals, held-out gap
     and residual test are those of a real conditional optimum, not of the emulator's), its residuals and
     Jacobian from real runs.  Without ``em`` the others are refitted from ``x_free`` by real least squares (from
     the fit's values that is the profile's own reference refit, its runs cached); ``refit = False``: ``x_free``
-    is that real refit already.  The polished point joins ``em``'s design."""
-    problem.noise.shift_correction(cm.real_at(xj))
-    p = params[j]
+    is that real refit already.  The others' refit evaluates the model at each of its trial points
+    (:meth:`NoiseModel.following`: with ``correction_follows = "all"`` it sees the correction's derivative in
+    them); the Fit's residuals and Jacobian are taken under the vector at the settled point, as every Fit's of
+    the workflow is under the correction vector in use.  The polished point joins ``em``'s design."""
+    model, p = cm.for_real_runs(), params[j]
     x_free = np.asarray(x_free, float)
     if x_free.size and (refit or em is not None):
         problem.fixed = {p.name: p.from_x(xj)}
         try:
-            x_free = np.asarray(problem.fit(params[:j] + params[j + 1:], [x_free], ids,
-                                            max_nfev=problem.spec.profile.emulator_polish if em else None).x, float)
+            with problem.noise.following(model):
+                x_free = np.asarray(problem.fit(params[:j] + params[j + 1:], [x_free], ids,
+                                                max_nfev=problem.spec.profile.emulator_polish if em else None).x,
+                                    float)
         finally:
             problem.fixed = {}
     x = np.insert(x_free, j, xj)
+    problem.noise.shift_correction(model({q.name: q.from_x(v) for q, v in zip(params, x)}))
     r = problem.residual_batch(params, [x], ids)[0]
     if em is not None and not em.has(x):
         em.add([x])                          # the minimum's own run (cached): the design grows by it
@@ -530,8 +617,8 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     (:func:`emulator_for`).
     With ``[profile] correction = "linear"`` the correction's model is built about ``fit`` and kept for every
     pass (common random numbers): a re-centring moves the reference, not the likelihood, and goes to the
-    profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' span has the model
-    rebuilt about it for the next pass.  Without a re-centring the fit is settled under that correction at its
+    profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' range in a modelled
+    parameter (:meth:`StrengthCorrection.covers`) has the model rebuilt about it for the next pass.  Without a re-centring the fit is settled under that correction at its
     own strength (:func:`settled_fit`): the model reported is always the one the profile measured from.
     Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima, and
     "_correction": the linear correction's model or None, to be popped before the dict is serialized)."""
@@ -548,7 +635,7 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
                         "at": best["value"]})
         if cm is not None:                   # the same correction function: the profile's own minimum
             fit, settled = _profile_minimum(problem, fit, j, ids, pr, fine_forward, em, cm), cm
-            if not cm.xs.min() <= fit.x[j] <= cm.xs.max():
+            if not cm.covers(fit.values()):
                 cm = None                    # outside the anchors: the next pass models it about the new fit
             pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
             continue

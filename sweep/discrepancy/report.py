@@ -445,9 +445,15 @@ def _profile_lines(report: dict) -> list[str]:
                       "crossings' as evaluated; it is not smoothed or re-centred away."]
         cm = pr.get("correction_model")
         if cm:
+            follows = cm.get("follows")
             L += ["", f"Discretization correction along the profile: linear in the strength (`[profile] correction = "
                       f"\"linear\"`), from the fine realizations at {_f(cm['anchors'])}; the same function for every point "
-                      f"and re-centring (common random numbers).  Its change over the anchors, RMS: "
+                      f"and re-centring (common random numbers).  "
+                      + (f"Also linear in {', '.join(n for n in follows if not n.startswith('effect:'))} "
+                         "(`correction_follows = \"all\"`, anchors "
+                         + "; ".join(f"{n} {_f(v)}" for n, v in cm["parameter_anchors"].items() if not n.startswith("effect:"))
+                         + "), evaluated at each refit's own parameters.  " if follows else "")
+                      + "Its change over the anchors, RMS: "
                       + ", ".join(f"{o} {v:.3g}" for o, v in (cm.get("change_over_anchors_rms") or {}).items())
                       + f"; the line's residual RMS {cm['line_residual_rms']:.3g}."
                       + (f"  The anchors after the first ran {cm['slope_realizations']} of the {cm['realizations']} "

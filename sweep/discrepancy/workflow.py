@@ -7,6 +7,17 @@ Entry point: :func:`run_workflow(data, spec, forward, out_dir)` -> report dict (
 modules: the fitting problem (problem.py), its noise model (noise.py), the evidence (evidence.py), the profile
 likelihood (profile.py) and the report (report.py).  Units: mm, s, kPa; residuals are standardized
 (dimensionless) by the measured uncertainties.
+
+The discretization correction (fine − coarse) is a vector during the search: taken at the initial baseline
+(``prepare``), re-estimated at the named model's fit by the refresh (:func:`refresh_correction`: a fixed point
+of "correct at the fit, then refit", which does not see how the correction moves with the parameters).  With
+``[profile] correction = "linear"`` the profile then models it as a linear function of the strength, or with
+``correction_follows = "all"`` of every fitted parameter, and its refits and the named model's settling
+evaluate that function at their own trial parameters (profile.py): the named model reported is then the
+optimum of the likelihood with the correction where the model is.  The refresh stays a vector fixed point
+also with "all": its only use there is to put the profile's anchors near the optimum (the model is built from
+anchors about the fit, and rebuilt when a re-centred fit leaves their span), and a model of its own would cost
+the anchors' fine runs twice.
 """
 from __future__ import annotations
 
