@@ -9,7 +9,7 @@ data from mesh realization 1000·draw (h = 2 mm) with the coverage study's noise
 three other realizations as its fine check; the library's settings but disc_error_fraction = 0 and the
 Gaussian profile likelihood with correction = "linear".  Per draw and mode: the named k̄ and β, β's interval.
 
-    python results/discrepancy/correction_follows/study.py --draws 8 --out results/discrepancy/correction_follows/summary.json
+    python results/archive/discrepancy/correction_follows/study.py --draws 8 --out results/discrepancy/correction_follows/summary.json
 """
 import argparse
 import json
