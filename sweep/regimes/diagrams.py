@@ -23,7 +23,8 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from .classify import REGIMES
-from .separatrix import SEPARATRIX_P_MAX, fit_exponential_separatrix, separatrix_p_value, unlocated_reason
+from .separatrix import (SEPARATRIX_P_MAX, fit_exponential_separatrix, separatrix_band, separatrix_p_value,
+                         unlocated_reason)
 
 __all__ = [
     "REGIME_STYLE",
@@ -193,8 +194,6 @@ def _draw_separatrix_band(ax, C, cs, fr, level: float = 0.95):
     """The separatrix's simultaneous ``level`` profile-likelihood band of ln Ca*_c over the sampled C
     (sweep.regimes.probability.separatrix_band: each run one Bernoulli observation), grey, clipped to half a
     decade beyond the sampled Ca*; returns the band, or None when it cannot be computed (then not drawn)."""
-    from .probability import separatrix_band
-
     try:
         band = separatrix_band(C, cs, fr, level=level)
     except ValueError:

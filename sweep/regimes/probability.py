@@ -23,11 +23,12 @@ Units: C in % (cement volume ratio), Ca* dimensionless (> 0); logarithms natural
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
-from typing import Any, NamedTuple, Sequence
+from typing import Any, Sequence
 
 import numpy as np
+
+from .separatrix import SeparatrixBand, separatrix_band, separatrix_significance, separatrix_summary
 
 __all__ = ["wilson_interval", "replicate_points", "SeparatrixBand", "separatrix_band", "separatrix_significance",
            "fit_probability_map", "plot_probability_diagram", "plot_nf_vs_nb_probabilities", "separatrix_summary"]
@@ -69,144 +70,6 @@ def replicate_points(x: Any, y: Any, label: Any, level: float = 0.95) -> dict[st
     lo, hi = wilson_interval(k, n, level)
     return {"x": uniq[:, 0], "y": uniq[:, 1], "n": n, "k": k, "p": k / np.maximum(n, 1), "lo": lo, "hi": hi,
             "mixed": (k > 0) & (k < n)}
-
-
-# --------------------------------------------------------------------------- the separatrix and its band
-class SeparatrixBand(NamedTuple):
-    """The separatrix Ca*_c(C) = A exp(B C) and its band.
-
-    ``C`` (m,) the cement ratios (%) where the band is evaluated; ``center``, ``lo``, ``hi`` (m,) ln Ca*_c and its
-    band (natural log); ``level``; ``simultaneous`` (band from the 2-parameter region: it covers the whole line at
-    ``level``); A (-), B (1/%), ``sharpness`` s per unit of ln Ca*; ``lr`` the penalized likelihood-ratio statistic
-    against a constant probability and ``p_value`` (chi2 with 2 degrees of freedom); ``significant`` = p_value <
-    ``alpha``; ``n`` labels."""
-
-    C: np.ndarray
-    center: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-    level: float
-    simultaneous: bool
-    A: float
-    B: float
-    sharpness: float
-    lr: float
-    p_value: float
-    significant: bool
-    n: int
-
-    @property
-    def half_width_decades(self) -> np.ndarray:
-        """Half the band's width at each C, in decades of Ca*."""
-        return 0.5 * (self.hi - self.lo) / math.log(10.0)
-
-    def covers(self, ln_ca_c: Any) -> bool:
-        """Whether the band holds the line ln Ca*_c (values at ``C``) at every C."""
-        v = np.asarray(ln_ca_c, float)
-        return bool(np.all((v >= self.lo) & (v <= self.hi)))
-
-
-def _design(C, ca_star, fracturing):
-    from .separatrix import _sep_min  # the Jeffreys-penalized optimizer of separatrix_profile_interval
-
-    Cc = np.asarray(C, float).ravel()
-    cs = np.asarray(ca_star, float).ravel()
-    y = np.asarray(fracturing).astype(bool).astype(float).ravel()
-    if not (Cc.size == cs.size == y.size) or Cc.size < 3:
-        raise ValueError(f"C, ca_star, fracturing lengths=({Cc.size}, {cs.size}, {y.size}): must be equal and >= 3")
-    if not (np.all(np.isfinite(Cc)) and np.all(np.isfinite(cs)) and np.all(cs > 0)):
-        raise ValueError("C, ca_star: must be finite, Ca* > 0")
-    return np.c_[np.log(cs), -Cc, -np.ones_like(Cc)], y, _sep_min
-
-
-def separatrix_significance(C: Any, ca_star: Any, fracturing: Any) -> tuple[float, float]:
-    """(LR, p-value) of the penalized likelihood-ratio test of P = expit(s (ln Ca* - ln A - B C)) against a
-    constant P (Jeffreys' prior in both, as the fit; chi2 with 2 degrees of freedom). One outcome only: (0, 1)."""
-    from scipy.stats import chi2
-
-    X, y, sep_min = _design(C, ca_star, fracturing)
-    if y.min() == y.max():
-        return 0.0, 1.0
-    full, _ = sep_min(X, y, np.eye(3))
-    null, _ = sep_min(X, y, np.array([[0.0], [0.0], [1.0]]))
-    lr = max(2.0 * (null - full), 0.0)
-    return float(lr), float(chi2.sf(lr, 2))
-
-
-def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95, simultaneous: bool = True,
-                    at: Any = None, n_grid: int = 13, alpha: float = 0.05) -> SeparatrixBand:
-    """Fit the separatrix and its profile-likelihood band of ln Ca*_c (see the module docstring).
-
-    C (%), ca_star (-, > 0), fracturing (bools, both outcomes). ``at``: the C values of the band (default
-    ``n_grid`` values over the sampled range). ``simultaneous``: threshold chi2_2(level)/2 (the whole line),
-    else chi2_1(level)/2 (each C alone). Raises ValueError when fracturing does not increase with Ca*.
-    """
-    from scipy.stats import chi2
-
-    from .separatrix import _profile_bounds
-
-    if not 0 < level < 1:
-        raise ValueError(f"level={level!r}: must be in (0, 1)")
-    X, y, sep_min = _design(C, ca_star, fracturing)
-    if y.min() == y.max():
-        raise ValueError("fracturing: needs both outcomes to locate a separatrix")
-    full, th = sep_min(X, y, np.eye(3))
-    if not th[0] > 0:
-        raise ValueError("fracturing: does not increase with Ca* (fitted sharpness <= 0); no separatrix")
-    lr, pv = separatrix_significance(C, ca_star, fracturing)
-    Cc = -X[:, 1]
-    grid = np.linspace(Cc.min(), Cc.max(), n_grid) if at is None else np.atleast_1d(np.asarray(at, float))
-    thr = chi2.ppf(level, 2 if simultaneous else 1) / 2.0
-    lnA, B = th[2] / th[0], th[1] / th[0]
-    center = lnA + B * grid
-    wald = _wald_half(X, th, grid, math.sqrt(2.0 * thr))
-    lo, hi = np.empty_like(grid), np.empty_like(grid)
-    for i, c0 in enumerate(grid):
-        step = max(0.5 * wald[i], 1e-3 * max(float(np.ptp(X[:, 0])), 1e-6))
-        def rise(v, c0=c0):  # the line through (c0, v): theta_3 = v theta_1 - c0 theta_2
-            return sep_min(X, y, np.array([[1.0, 0.0], [0.0, 1.0], [v, -c0]]))[0] - full - thr
-        lo[i], hi[i] = _profile_bounds(rise, float(center[i]), step)
-    return SeparatrixBand(grid, center, lo, hi, level, simultaneous, float(math.exp(lnA)), float(B), float(th[0]),
-                          lr, pv, bool(pv < alpha), int(y.size))
-
-
-def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95, alpha: float = 0.05) -> dict:
-    """What the labels say about the separatrix Ca*_c = A exp(B C), as a campaign report states it: the runs,
-    the penalized likelihood-ratio test against a constant probability (``lr``, ``p_value``, ``significant`` at
-    ``alpha``), and when it is significant A and B with their ``level`` profile-likelihood intervals
-    (:func:`~.separatrix.separatrix_profile_interval`), ``B_positive`` (the interval of B above 0: the paper's
-    increasing separatrix, Sec. 3.6) and the simultaneous band's half-width in decades at the two ends of the
-    sampled C (:func:`separatrix_band`); ``reason`` says why there is no separatrix otherwise.  C in %, Ca* -."""
-    from .separatrix import separatrix_profile_interval
-
-    Cc, cs = np.asarray(C, float).ravel(), np.asarray(ca_star, float).ravel()
-    fr = np.asarray(fracturing).astype(bool).ravel()
-    out: dict = {"runs": int(Cc.size), "fracturing": int(fr.sum()), "significant": False, "reason": None}
-    if Cc.size < 3 or fr.all() or not fr.any():
-        return {**out, "reason": "both regimes are needed to fit a separatrix"}
-    lr, pv = separatrix_significance(Cc, cs, fr)
-    out.update({"lr": lr, "p_value": pv, "significant": bool(pv < alpha)})
-    if not out["significant"]:
-        return {**out, "reason": f"not significant: p = {pv:.2g} >= {alpha:g} against a constant probability"}
-    try:
-        iv = separatrix_profile_interval(Cc, cs, fr, level=level)
-        band = separatrix_band(Cc, cs, fr, level=level, at=[Cc.min(), Cc.max()])
-    except ValueError as exc:
-        return {**out, "significant": False, "reason": str(exc)}
-    half = band.half_width_decades
-    return {**out, "A": iv.A, "A_interval": list(iv.A_interval), "B": iv.B, "B_interval": list(iv.B_interval),
-            "B_positive": bool(iv.B_interval[0] > 0), "separable": iv.separable, "level": level,
-            "band_C": [float(c) for c in band.C], "band_half_width_decades": [float(h) for h in half]}
-
-
-def _wald_half(X, th, grid, z):
-    """Delta-method half-widths z sd(ln Ca*_c(C)) at ``grid`` from the Fisher information at theta: the profile
-    search's first step (its scale), not the band."""
-    p = 0.5 * (1.0 + np.tanh(0.5 * (X @ th)))
-    cov = np.linalg.pinv((X * (p * (1.0 - p))[:, None]).T @ X)
-    # v = (theta_3 + C theta_2) / theta_1
-    J = np.stack([-(th[2] + grid * th[1]) / th[0] ** 2, grid / th[0], np.full_like(grid, 1.0 / th[0])], axis=1)
-    return z * np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", J, cov, J), 0.0))
 
 
 # --------------------------------------------------------------------------- the smooth classifier
