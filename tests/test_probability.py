@@ -160,5 +160,24 @@ def test_a_campaign_report_with_a_ca_star_diagram_states_the_separatrix():
     table = pd.DataFrame({"status": "ok", "cement": C, "Ca_star": cs, "fracturing": y})
     text = "\n".join(_separatrix_lines(SimpleNamespace(diagrams=[{"kind": "ca_star_vs_cement"}]), table))
     assert "## The separatrix" in text and "200 finished runs" in text and "B > 0 at 95 %" in text
-    assert "simultaneous 95 % band" in text
+    assert "simultaneous 95 % band of Ca*_c: [10^" in text and "decades) at C" in text
     assert _separatrix_lines(SimpleNamespace(diagrams=[{"kind": "nf_vs_nb"}]), table) == []
+
+
+def test_a_band_the_labels_do_not_bound_is_unbounded_never_the_searchs_reach():
+    """Few, weakly ordered labels (20 runs, sharpness 0.7, seed 2): the separatrix is significant, but at the ends
+    of C the profile never reaches its threshold on one side.  That side is unbounded: the half-width is inf, the
+    summary's edge is infinite, any line beyond it is covered; the finite lo/hi there are only the search's reach
+    (reach_half_width_decades, for a sampler's ranking)."""
+    from sweep.regimes.probability import separatrix_summary
+
+    C, cs, y = draw(2, n=20, s=0.7)
+    band = separatrix_band(C, cs, y, at=[C.min(), C.max()])
+    assert band.significant and not band.bounded.all()
+    assert np.all(np.isinf(band.half_width_decades[~band.bounded]))
+    assert np.all(np.isfinite(band.reach_half_width_decades))
+    far = np.where(band.lo_bounded, band.center, band.lo - 50.0)       # 50 e-folds below the reach where unbounded
+    assert band.covers(far)
+    s = separatrix_summary(C, cs, y)
+    assert any(math.isinf(h) for h in s["band_half_width_decades"])
+    assert all((lo == -math.inf) == (not lb) for (lo, _), lb in zip(s["band_log10"], band.lo_bounded))

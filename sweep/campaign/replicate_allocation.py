@@ -142,7 +142,7 @@ def _new_points(axes, counts, band, n: int, seed: int, round_no: int) -> list[tu
     if band is not None:
         coords = np.stack([a.from_u(U[:, j]) for j, a in enumerate(axes)], axis=1)
         x, y = _plane(axes, coords)
-        hw = np.interp(x, [axes[0].t_lo, axes[0].t_hi], band.half_width_decades)
+        hw = np.interp(x, [axes[0].t_lo, axes[0].t_hi], band.reach_half_width_decades)   # finite where unbounded
         dist = np.abs(np.log10(y) - (math.log10(band.A) + band.B * x / math.log(10.0)))
         tol = axes[1].tolerance
         score, half = (hw - dist) / tol, hw / tol

@@ -4,6 +4,7 @@
 """
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -104,9 +105,18 @@ def _separatrix_lines(spec, table) -> list[str]:
                 f"B = {s['B']:.3g} [{lo:.3g}, {hi:.3g}] /% ({lvl} profile-likelihood intervals"
                 + (", separable labels" if s["separable"] else "") + "); "
                 + ("B > 0" if s["B_positive"] else "B > 0 is not established") + f" at {lvl}.",
-                f"The simultaneous {lvl} band of ln Ca*_c is ±{s['band_half_width_decades'][0]:.2g} decades "
-                f"at C = {s['band_C'][0]:.3g} % and ±{s['band_half_width_decades'][1]:.2g} at C = {s['band_C'][1]:.3g} %.",
+                f"The simultaneous {lvl} band of Ca*_c: " + "; ".join(
+                    f"{_band_text(b, h)} at C = {c:.3g} %" for c, b, h in
+                    zip(s["band_C"], s["band_log10"], s["band_half_width_decades"])) + ".",
                 ""]
+
+
+def _band_text(log10_band: list, half: float) -> str:
+    """A band's edges as powers of ten and its half-width in decades; an edge the labels do not bound is
+    infinite (the profile never reaches its threshold on that side)."""
+    lo, hi = (("10^" + format(v, ".3g")) if math.isfinite(v) else ("0" if v < 0 else "∞") for v in log10_band)
+    return f"[{lo}, {hi}] (" + (f"±{half:.2g} decades)" if math.isfinite(half) else "unbounded on one side)")
+
 
 
 def _figure_lines(figs, folder: Path) -> list[str]:

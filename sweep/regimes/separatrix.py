@@ -148,17 +148,26 @@ def _sep_min(X, y, M):
     return float(res.fun), M @ res.x
 
 
-def _profile_bounds(rise, v0: float, step: float) -> tuple[float, float]:
-    """Where rise(v) (< 0 at v0) crosses 0 on each side: doubling steps, then Brent."""
+def _profile_search(rise, v0: float, step: float) -> tuple[tuple[float, float], tuple[bool, bool]]:
+    """Where rise(v) (< 0 at v0) crosses 0 on each side: doubling steps, then Brent.  Returns ((lower, upper),
+    (lower found, upper found)): a side where the profile stays below the threshold over 1024 steps is not
+    bounded by the labels, and its value is the search's reach, no bound."""
     from scipy.optimize import brentq
 
-    out = []
+    out, found = [], []
     for sgn in (-1.0, 1.0):
         inner, d = v0, step
         while (r := rise(v0 + sgn * d)) < 0 and d < 1e3 * step:
             inner, d = v0 + sgn * d, 2.0 * d
         out.append(brentq(rise, inner, v0 + sgn * d, xtol=0.01 * step) if r >= 0 else v0 + sgn * d)
-    return min(out), max(out)
+        found.append(bool(r >= 0))
+    return (out[0], out[1]), (found[0], found[1])
+
+
+def _profile_bounds(rise, v0: float, step: float) -> tuple[float, float]:
+    """The profile interval of :func:`_profile_search`, a side the labels do not bound as -inf or +inf."""
+    (lo, hi), (lo_ok, hi_ok) = _profile_search(rise, v0, step)
+    return (lo if lo_ok else -math.inf), (hi if hi_ok else math.inf)
 
 
 def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: float = 0.95) -> SeparatrixInterval:
@@ -255,7 +264,9 @@ class SeparatrixBand(NamedTuple):
     band (natural log); ``level``; ``simultaneous`` (band from the 2-parameter region: it covers the whole line at
     ``level``); A (-), B (1/%), ``sharpness`` s per unit of ln Ca*; ``lr`` the penalized likelihood-ratio statistic
     against a constant probability and ``p_value`` (chi2 with 2 degrees of freedom); ``significant`` = p_value <
-    ``alpha``; ``n`` labels."""
+    ``alpha``; ``n`` labels; ``lo_bounded``, ``hi_bounded`` (m,) whether the labels bound the band below and above
+    at each C (where they do not, ``lo`` / ``hi`` hold the profile search's reach, no bound: see
+    ``half_width_decades``)."""
 
     C: np.ndarray
     center: np.ndarray
@@ -270,16 +281,33 @@ class SeparatrixBand(NamedTuple):
     p_value: float
     significant: bool
     n: int
+    lo_bounded: np.ndarray | None = None
+    hi_bounded: np.ndarray | None = None
+
+    @property
+    def bounded(self) -> np.ndarray:
+        """(m,) whether the labels bound the band on both sides at each C."""
+        ok = np.ones(np.shape(self.C), bool)
+        return ok & (True if self.lo_bounded is None else self.lo_bounded) & (True if self.hi_bounded is None else self.hi_bounded)
 
     @property
     def half_width_decades(self) -> np.ndarray:
-        """Half the band's width at each C, in decades of Ca*."""
+        """Half the band's width at each C, in decades of Ca*: inf where the labels do not bound it."""
+        half = 0.5 * (self.hi - self.lo) / math.log(10.0)
+        return np.where(self.bounded, half, np.inf)
+
+    @property
+    def reach_half_width_decades(self) -> np.ndarray:
+        """Half the band's width at each C in decades, the search's reach where it is unbounded: a finite
+        ranking scale for a sampler's straddle score, never a width to report."""
         return 0.5 * (self.hi - self.lo) / math.log(10.0)
 
     def covers(self, ln_ca_c: Any) -> bool:
         """Whether the band holds the line ln Ca*_c (values at ``C``) at every C."""
         v = np.asarray(ln_ca_c, float)
-        return bool(np.all((v >= self.lo) & (v <= self.hi)))
+        above = (v >= self.lo) if self.lo_bounded is None else (v >= self.lo) | ~self.lo_bounded
+        below = (v <= self.hi) if self.hi_bounded is None else (v <= self.hi) | ~self.hi_bounded
+        return bool(np.all(above & below))
 
 
 def _design(C, ca_star, fracturing):
@@ -333,13 +361,14 @@ def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.9
     center = lnA + B * grid
     wald = _wald_half(X, th, grid, math.sqrt(2.0 * thr))
     lo, hi = np.empty_like(grid), np.empty_like(grid)
+    lo_ok, hi_ok = np.ones(grid.size, bool), np.ones(grid.size, bool)
     for i, c0 in enumerate(grid):
         step = max(0.5 * wald[i], 1e-3 * max(float(np.ptp(X[:, 0])), 1e-6))
         def rise(v, c0=c0):  # the line through (c0, v): theta_3 = v theta_1 - c0 theta_2
             return sep_min(X, y, np.array([[1.0, 0.0], [0.0, 1.0], [v, -c0]]))[0] - full - thr
-        lo[i], hi[i] = _profile_bounds(rise, float(center[i]), step)
+        (lo[i], hi[i]), (lo_ok[i], hi_ok[i]) = _profile_search(rise, float(center[i]), step)
     return SeparatrixBand(grid, center, lo, hi, level, simultaneous, float(math.exp(lnA)), float(B), float(th[0]),
-                          lr, pv, bool(pv < alpha), int(y.size))
+                          lr, pv, bool(pv < alpha), int(y.size), lo_ok, hi_ok)
 
 
 def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95, alpha: float = 0.05) -> dict:
@@ -366,7 +395,9 @@ def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 
     half = band.half_width_decades
     return {**out, "A": iv.A, "A_interval": list(iv.A_interval), "B": iv.B, "B_interval": list(iv.B_interval),
             "B_positive": bool(iv.B_interval[0] > 0), "separable": iv.separable, "level": level,
-            "band_C": [float(c) for c in band.C], "band_half_width_decades": [float(h) for h in half]}
+            "band_C": [float(c) for c in band.C], "band_half_width_decades": [float(h) for h in half],
+            "band_log10": [[float(lo / math.log(10.0)) if lok else -math.inf, float(hi / math.log(10.0)) if hok else math.inf]
+                           for lo, hi, lok, hok in zip(band.lo, band.hi, band.lo_bounded, band.hi_bounded)]}
 
 
 def _wald_half(X, th, grid, z):
