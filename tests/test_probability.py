@@ -181,3 +181,21 @@ def test_a_band_the_labels_do_not_bound_is_unbounded_never_the_searchs_reach():
     s = separatrix_summary(C, cs, y)
     assert any(math.isinf(h) for h in s["band_half_width_decades"])
     assert all((lo == -math.inf) == (not lb) for (lo, _), lb in zip(s["band_log10"], band.lo_bounded))
+
+
+def test_a_replicated_campaigns_report_counts_its_points_replicates_and_disagreements():
+    from types import SimpleNamespace
+
+    from sweep.campaign.report import _replicate_lines
+
+    rows = [(1.0, 0.1, "invasive_fracturing", True), (1.0, 0.1, "viscous_fingering", False),
+            (1.0, 0.1, "invasive_fracturing", True), (2.0, 0.3, "viscous_fingering", False),
+            (3.0, 1.0, "fracturing_fingering", True), (3.0, 1.0, "invasive_fracturing", True)]
+    table = pd.DataFrame([{"status": "ok", "cement": c, "eta_o": e, "regime": r, "fracturing": f} for c, e, r, f in rows])
+    spec = SimpleNamespace(replicates={"porosity_seed": 3}, axis_names=("cement", "eta_o"), diagrams=[])
+    text = "\n".join(_replicate_lines(spec, table))
+    assert "3 points (1 with 1 run, 1 with 2 runs, 1 with 3 runs;" in text
+    # regimes differ at both replicated points; the fracturing label only at the first
+    assert "regimes disagree at 2 of the 2 points with two or more; their fracturing labels at 1." in text
+    assert "67 % of the finished runs fracture." in text
+    assert _replicate_lines(SimpleNamespace(replicates={}, axis_names=("cement", "eta_o"), diagrams=[]), table) == []

@@ -30,8 +30,11 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
     table = build_table(spec, root, plan=plan)
     check_not_emptier(store, table)
     figs = plot_campaign(spec, root, table=table) if plot else sorted(store.figures_dir.glob("*.png"))
-    if not table.empty:
+    if not table.empty:   # the table and, with [replicates], its per-point table from the same rows
+        from sweep.campaign.replicates import write_points
+
         store.write_table(table, swept=spec.axis_names)
+        write_points(spec, table, store)
     L = [f"# Campaign `{spec.name}`", ""]
     if spec.description:
         L += [spec.description.strip(), ""]
@@ -68,6 +71,7 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
             reason = str(reason).replace("|", "\\|").replace("\n", " ")
             L.append(f"| `{k}` | {reason} |")
         L.append("")
+    L += _replicate_lines(spec, table)
     L += _separatrix_lines(spec, table)
     L += _figure_lines(figs, store.dir)
     if not table.empty:
@@ -77,6 +81,31 @@ def write_report(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plot:
           f"`sweep.load_campaign` / `sweep.load_timeseries`.", ""]
     write_text_atomic(store.report_md, "\n".join(L))
     return store.report_md
+
+
+def _replicate_lines(spec, table) -> list[str]:
+    """With ``[replicates]``: the points, their replicate counts and where the replicates disagree
+    (sweep.campaign.replicates.point_table, the same table as ``points.csv``)."""
+    from sweep.campaign.replicates import point_table, replicate_count
+
+    if replicate_count(spec) == 1 or table.empty:
+        return []
+    pts = point_table(table, list(spec.axis_names))
+    n = pts["n_ok"].astype(int)
+    rep = n > 1
+    counts = ", ".join(f"{c} with {k} run{'s' if k != 1 else ''}" for k, c in sorted(n.value_counts().items()))
+    L = ["## Replicates", "", f"{len(pts)} points ({counts}; finished runs with a label).",
+         f"The replicates' regimes disagree at {int(pts.loc[rep, 'mixed'].sum())} of the {int(rep.sum())} points "
+         "with two or more"]
+    if "p_fracturing" in pts.columns:
+        p = pts["p_fracturing"]
+        L[-1] += f"; their fracturing labels at {int((rep & (p > 0) & (p < 1)).sum())}"
+    L[-1] += "."
+    if "fracturing" in table.columns:
+        ok = table[table["status"] == "ok"] if "status" in table.columns else table
+        L.append(f"{100 * ok['fracturing'].astype(bool).mean():.0f} % of the finished runs fracture.")
+    return L + ["Per point: `points.csv` (label probabilities with Wilson 95 % intervals, the continuous measures' "
+                "mean and spread).", ""]
 
 
 def _separatrix_lines(spec, table) -> list[str]:
