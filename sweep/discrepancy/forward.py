@@ -93,23 +93,22 @@ def finished(run_dir, code_hash: str | None = None) -> bool:
     from sweep.campaign.store import current_code_hash
 
     rd = Path(run_dir)
-    try:
-        summ = json.loads((rd / "summary.json").read_text())
-    except (OSError, ValueError):
-        return False
-    if not isinstance(summ, dict) or summ.get("code_hash") != (code_hash or current_code_hash()):
+    summ = _summary(rd)
+    if summ is None or summ.get("code_hash") != (code_hash or current_code_hash()):
         return False
     if summ.get("status") == "failed":
         return True
     return summ.get("status") == "ok" and _timeseries(rd) is not None
 
 
-def _status(rd: Path) -> str | None:
-    """The status of a cache entry's summary.json ("ok", "failed", ...), None when missing or unreadable."""
+def _summary(rd: Path) -> dict | None:
+    """A cache entry's summary.json (status "ok", "failed" or "running", code_hash, ...), None when missing or
+    unreadable."""
     try:
-        return json.loads((rd / "summary.json").read_text()).get("status")
+        summ = json.loads((rd / "summary.json").read_text())
     except (OSError, ValueError):
         return None
+    return summ if isinstance(summ, dict) else None
 
 
 def _timeseries(rd: Path):
@@ -243,7 +242,7 @@ class SolverForward(ForwardModel):
         else:
             for rd, p in todo.items():
                 _run_one(p, od, rd, code)
-        failed = sum(1 for rd in todo if _status(Path(rd)) != "ok")
+        failed = sum(1 for rd in todo if (_summary(Path(rd)) or {}).get("status") != "ok")
         log.info("forward: %d run(s) at h = %g mm done in %.0f s%s", len(todo), self.options.h,
                  time.perf_counter() - t0, f", {failed} failed" if failed else "")
 
@@ -318,10 +317,12 @@ def cache_status(cache_dir) -> list[dict]:
     code = current_code_hash()
     rows = []
     for rd in sorted(p for p in Path(cache_dir).iterdir() if p.is_dir()):
+        summ = _summary(rd)
         try:
-            summ = json.loads((rd / "summary.json").read_text())
             opts = tomllib.loads((rd / "options.toml").read_text())
         except (OSError, ValueError):
+            summ = None
+        if summ is None:
             rows.append({"key": rd.name, "h": None, "mesh_seed": None, "status": "unreadable", "t": None,
                          "wall_s": None, "current_code": False})
             continue

@@ -12,7 +12,7 @@ coarse model's jitter (jitter.py) when those are modelled.  :class:`NoiseModel` 
 owned by the fitting problem; every change to it bumps ``version``, which the problem's residual cache is
 keyed on.  The correction is a vector (``err``: :meth:`NoiseModel.set_discretization`,
 :meth:`NoiseModel.shift_correction`) or, inside :meth:`NoiseModel.following`, a function of the parameter values
-each model is evaluated at (the profile's linear model, profile.StrengthCorrection): the data a model at θ is
+each model is evaluated at (the profile's linear model, linear_correction.StrengthCorrection): the data a model at θ is
 compared with are then y − err(θ) (:meth:`NoiseModel.data_for`), so a fit under it sees the correction's own
 derivative.  The functions below compute its pieces from forward runs.  Units: kPa, mm (observables), s.
 """
