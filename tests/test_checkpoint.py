@@ -247,6 +247,36 @@ def test_a_campaign_killed_mid_run_resumes_the_run_from_its_checkpoint(tmp_path,
                                   pd.read_csv(tmp_path / "full" / "ck" / "runs" / key / "timeseries.csv"))
 
 
+def test_a_resumed_campaign_run_records_the_wall_time_of_all_its_pieces(tmp_path, monkeypatch):
+    """The record's (and so the table's) wall time of a resumed run is the earlier pieces' wall time (the
+    checkpoint's, set here to 1,000 s so that no clock can make the test pass) plus this execution's."""
+    import io
+
+    from sweep.campaign.run import run_campaign
+    from sweep.campaign.scheduler import checkpoint_elapsed
+
+    root = tmp_path / "killed"
+    with monkeypatch.context() as m:
+        _interrupt(m)
+        with pytest.raises(Killed):
+            run_campaign(_campaign_spec(), root, jobs=1, isolate="none", progress=None)
+    (tmp,) = [d for d in (root / "ck" / "runs").iterdir() if d.name.startswith(".tmp-")]
+    with np.load(tmp / checkpoint.NAME) as z:
+        arrays = {k: z[k] for k in z.files}
+    state = json.loads(str(arrays["state"]))
+    arrays["state"] = np.array(json.dumps({**state, "elapsed": 1000.0}))
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    (tmp / checkpoint.NAME).write_bytes(buf.getvalue())
+    assert checkpoint_elapsed(tmp) == 1000.0 and checkpoint_elapsed(tmp_path) == 0.0
+    run_campaign(_campaign_spec(), root, jobs=1, isolate="none", progress=None)
+    (run,) = [d for d in (root / "ck" / "runs").iterdir()]
+    rec = json.loads((run / "record.json").read_text())
+    assert rec["resumed_wall_s"] == 1000.0
+    assert 1000.0 < rec["metrics"]["solver_wall_time_s"] <= rec["wall_time_s"] <= rec["total_wall_time_s"]
+    assert rec["wall_time_s"] < 1000.0 + 600.0  # this piece: a 12-step run on a 12 mm mesh, not another 1,000 s
+
+
 def test_clean_tmp_keeps_only_the_folders_with_a_checkpoint_of_this_code(tmp_path, monkeypatch):
     from sweep.campaign.store import ResultsStore
 

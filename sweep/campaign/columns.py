@@ -69,7 +69,8 @@ TABLE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "t_reached": ("s", "Float64", "last simulated time"),
     "n_steps": ("", "Int64", "accepted time steps"),
     "solver_wall_time_s": ("s", "Float64", "wall time of the simulation"),
-    "wall_time_s": ("s", "Float64", "wall time of the run (simulation, classification, bookkeeping)"),
+    "wall_time_s": ("s", "Float64", "wall time of the run (simulation, classification, bookkeeping), summed over the "
+                    "pieces of a run resumed from its checkpoint"),
     "attempts": ("", "Int64", "attempts made (1 + retries used)"),
     "solver_version": ("", "string", "solver version in the run key"),
     "host": ("", "string", "machine that ran it"),

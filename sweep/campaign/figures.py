@@ -61,17 +61,12 @@ def swept_label(row, names: Iterable[str]) -> str:
 
 
 def save_figure(fig, path, formats: Sequence[str] = ("png", VECTOR_FORMAT)) -> list[Path]:
-    """Save ``fig`` as ``path`` with each suffix of ``formats`` (PNG at ``DPI``), atomically; returns the paths."""
-    from solver.output import atomic_path
+    """Save ``fig`` as ``path`` with each suffix of ``formats`` (PNG at ``DPI``), atomically and without a date
+    (``sweep.figio``); returns the paths."""
+    from sweep.figio import write_figure
 
     path = Path(path)
-    out = []
-    for fmt in formats:
-        p = path.with_suffix(f".{fmt}")
-        with atomic_path(p) as tmp:
-            fig.savefig(tmp, dpi=DPI, bbox_inches="tight", format=fmt)
-        out.append(p)
-    return out
+    return [write_figure(fig, path.with_suffix(f".{fmt}"), dpi=DPI, bbox_inches="tight") for fmt in formats]
 
 
 def colour_scale(field: str, arrays: Iterable[np.ndarray], fixed: tuple[float, float] | None = None):

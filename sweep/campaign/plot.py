@@ -24,7 +24,7 @@ __all__ = ["plot_campaign"]
 def _scatter(df, x, y, ax, *, by="regime", logx=False, logy=False):
     import numpy as np
 
-    from sweep.regimes.diagrams import regime_style
+    from sweep.regimes.diagrams import marker_outline, regime_style
 
     if by not in df.columns:
         ax.plot(df[x], df[y], "o")
@@ -33,7 +33,7 @@ def _scatter(df, x, y, ax, *, by="regime", logx=False, logy=False):
             sub = df[df[by].isna()] if g is None else df[df[by] == g]
             st = regime_style(g) if by in ("regime", "fracturing") else dict(marker="o", color=None, label=str(g))
             ax.scatter(sub[x], sub[y], marker=st["marker"], color=st["color"], label=st["label"], s=45,
-                       edgecolor="k", linewidth=0.4)
+                       linewidth=0.4, **marker_outline(st["marker"]))
         ax.legend(fontsize=8)
     if logx:
         ax.set_xscale("log")

@@ -292,6 +292,16 @@ def _run_child(cfg: ExecConfig, params, options, run_dir: Path) -> dict:
         return _failed(f"the run's child process exited with code {rc}{sig} without a result: " + " | ".join(tail))
 
 
+def checkpoint_elapsed(run_dir) -> float:
+    """Wall time (s) of the earlier pieces of the run whose checkpoint ``run_dir`` holds (``solver.checkpoint``),
+    which a resumed run adds to its own; 0 when it holds none or it cannot be read.  The time between the last
+    checkpoint and the kill is lost work, not counted."""
+    from solver import checkpoint
+
+    ck, _ = checkpoint.load(run_dir)
+    return float(ck.get("elapsed", 0.0)) if ck is not None else 0.0
+
+
 def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
     """Execute one run (with retries), write its record atomically in the store, return the record.
 
@@ -308,6 +318,7 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
     for attempt in range(1, cfg.retries + 2):
         # an execution killed part-way left a checkpoint: the first attempt resumes it (solver.checkpoint)
         tmp = (attempt == 1 and store.resumable_tmp_dir(task.key)) or store.new_tmp_dir(task.key)
+        earlier = checkpoint_elapsed(tmp)  # a resumed run's wall time is its pieces' sum (s)
         t0 = time.perf_counter()
         if isolate == "process":
             try:
@@ -317,7 +328,7 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
                               traceback.format_exc())
         else:
             out = _run_inprocess(cfg.runner, task.params, task.options, tmp)
-        wall = time.perf_counter() - t0
+        wall = time.perf_counter() - t0 + earlier
         if out["status"] == "ok" or attempt == cfg.retries + 1:
             break
         reasons.append(out.get("reason"))
@@ -335,7 +346,8 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         "metrics": out.get("metrics", {}),
         "classification": out.get("classification", {}),
         "wall_time_s": wall,
-        "total_wall_time_s": time.time() - started,
+        "resumed_wall_s": earlier,
+        "total_wall_time_s": time.time() - started + earlier,
         "attempts": attempt,
         "previous_failures": reasons,
         "started_at": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(started)),

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sweep.figio import write_figure
+
 from . import stats
 from .observables import CURVES as CURVE_OBSERVABLES
 from .observables import UNITS
@@ -175,7 +177,7 @@ def _fig_curves(problem, fit_before, fit_after, path):
             ax.tick_params(labelsize=6)
     axes[0, 0].legend(fontsize=6)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    write_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -200,7 +202,7 @@ def _fig_profile(eff: str, pr: dict, path, ind: dict | None = None) -> None:
     ax.set_title(title, fontsize=8, color="C3")
     ax.legend(fontsize=6)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    write_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -255,7 +257,7 @@ def _fig_residuals(problem, fit, path, title):
     a2.set_title("mean p_inj residual; ✗ = regime misclassified", fontsize=9)
     fig.colorbar(sc, ax=a2)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    write_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

@@ -22,6 +22,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from sweep.figio import FIGURE_FORMATS, write_figure
+
 from .classify import REGIMES
 from .separatrix import (SEPARATRIX_P_MAX, fit_exponential_separatrix, separatrix_band, separatrix_p_value,
                          unlocated_reason)
@@ -95,19 +97,22 @@ def _new_figure(size: tuple[float, float]):
     return fig
 
 
+def marker_outline(marker: str) -> dict:
+    """A black outline for a filled marker; an unfilled one (x, +) has no edge to draw."""
+    from matplotlib.markers import MarkerStyle
+
+    return {"edgecolor": "k"} if MarkerStyle(marker).is_filled() else {}
+
+
 def _save(fig, out_path: str | Path, formats: Iterable[str]) -> list[Path]:
     out = Path(out_path)
     stem = out.with_suffix("") if out.suffix.lower() in (".png", ".svg", ".pdf") else out
     stem.parent.mkdir(parents=True, exist_ok=True)
     fmts = ["png"] + [f for f in formats if f != "png"]
-    written = []
-    for f in fmts:
-        if f not in ("png", "svg", "pdf"):
-            raise ValueError(f"formats: {f!r} not allowed; use 'png', 'svg' or 'pdf'")
-        p = stem.parent / f"{stem.name}.{f}"
-        fig.savefig(p, format=f, bbox_inches="tight")
-        written.append(p)
-    return written
+    bad = [f for f in fmts if f not in FIGURE_FORMATS]
+    if bad:
+        raise ValueError(f"formats: {bad[0]!r} not allowed; use one of {', '.join(FIGURE_FORMATS)}")
+    return [write_figure(fig, stem.parent / f"{stem.name}.{f}", bbox_inches="tight") for f in fmts]
 
 
 def _fmt_pm(v: float, s: float) -> str:
@@ -317,9 +322,10 @@ def plot_boundary_sampling(model, points: Any, out_path: str | Path, *, band: Ma
     for lab in list(model.labels) + [None]:
         m = np.array([(v is None or v != v) if lab is None else v == lab for v in labels])
         if m.any():
+            mk = markers.get(lab, "x")
             sc = ax.scatter(x[m], y[m], c=order[m], cmap="viridis", vmin=0, vmax=max(order.max(), 1),
-                            marker=markers.get(lab, "x"), s=28, edgecolor="k", linewidth=0.4, zorder=3,
-                            label=regime_style(lab)["label"])
+                            marker=mk, s=28, linewidth=0.4, zorder=3, label=regime_style(lab)["label"],
+                            **marker_outline(mk))
     for xv, yv, o in zip(x, y, order):
         ax.annotate(str(int(o)), (xv, yv), xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=4)
     fig.colorbar(sc, ax=ax, label="order of the run", fraction=0.046, pad=0.04)

@@ -28,6 +28,7 @@ import pandas as pd
 
 from sweep.regimes.separatrix import separatrix_profile_interval
 from sweep.campaign.store import write_json_atomic
+from sweep.figio import write_figure
 
 __all__ = ["fracturing", "agreement", "separatrix", "judge", "figure", "report", "longest", "crack_summary",
            "rank_correlations"]
@@ -148,7 +149,7 @@ def figure(df: pd.DataFrame, out: dict, by: str, l_min: float, path: Path, title
     axes[0].legend(fontsize=8, loc="lower right")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    write_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 import pandas as pd
 
 from sweep.campaign.load import load_campaign
+from sweep.figio import write_figure
 from sweep.studies import label_agreement as la
 from sweep.studies.commands import PROTOCOL_NAMES
 
@@ -109,7 +110,7 @@ def crack_map(df: pd.DataFrame, path: Path) -> None:
     axes[0][0].set_ylabel("modified capillary number Ca* (-)")
     fig.colorbar(sc, ax=axes[0].tolist(), label="crack length at the judged time (mm)")
     fig.suptitle("Crack length, three-pocket field (h = 2 mm)", fontsize=10)
-    fig.savefig(path, dpi=110)
+    write_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
