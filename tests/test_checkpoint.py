@@ -275,6 +275,14 @@ def test_a_resumed_campaign_run_records_the_wall_time_of_all_its_pieces(tmp_path
     assert rec["resumed_wall_s"] == 1000.0
     assert 1000.0 < rec["metrics"]["solver_wall_time_s"] <= rec["wall_time_s"] <= rec["total_wall_time_s"]
     assert rec["wall_time_s"] < 1000.0 + 600.0  # this piece: a 12-step run on a 12 mm mesh, not another 1,000 s
+    from sweep.campaign.table import build_table, record_wall_time
+
+    assert build_table(_campaign_spec(), root)["wall_time_s"].tolist() == [rec["wall_time_s"]]
+    # a record written before the scheduler summed the pieces: its last piece, with the solver's total beside it
+    old = {k: v for k, v in rec.items() if k != "resumed_wall_s"}
+    assert record_wall_time({**old, "wall_time_s": 421.0}) == rec["metrics"]["solver_wall_time_s"]
+    assert record_wall_time({**old, "wall_time_s": 5000.0}) == 5000.0
+    assert record_wall_time({**rec, "wall_time_s": 421.0}) == 421.0  # a new record is taken as it is
 
 
 def test_clean_tmp_keeps_only_the_folders_with_a_checkpoint_of_this_code(tmp_path, monkeypatch):

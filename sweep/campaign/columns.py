@@ -35,6 +35,9 @@ TABLE_COLUMNS: dict[str, tuple[str, str, str]] = {
     "regime": ("", "string", "flow regime of the classifier (README: Flow regimes)"),
     "blocks": ("", "list<string>", "spec blocks that contain the run"),
     "run_dir": ("", "string", "run folder, relative to the campaign folder"),
+    "stale": ("", "boolean", "made by other solver code than the current (used; --rerun-stale reruns it)"),
+    "code_hash": ("", "string", "hash of the solver code that made the run (python -m solver.codehash)"),
+    "classifier_hash": ("", "string", "hash of the classifier code that labelled the run"),
     "classify_error": ("", "string", "why the classifier failed on an ok run"),
     # sweep.regimes.numbers.dimensionless_numbers
     "k0": ("mm²", "Float64", "reference permeability: expectation of k(phi0) over the initial porosity"),

@@ -95,9 +95,22 @@ def _row(point: Point, key: str, rec: Mapping[str, Any], with_numbers: bool, pla
         put(k, v, "param_")
     for k, v in (rec.get("options") or point.options).items():
         put(k, v, "opt_")
-    for k in ("wall_time_s", "attempts", "code_hash", "classifier_hash", "host", "finished_at"):
+    put("wall_time_s", record_wall_time(rec), "rec_")
+    for k in ("attempts", "code_hash", "classifier_hash", "host", "finished_at"):
         put(k, rec.get(k), "rec_")
     return row
+
+
+def record_wall_time(rec: dict) -> float | None:
+    """A run's wall time (s) over all its pieces.  A record with ``resumed_wall_s`` already sums them
+    (``sweep.campaign.scheduler``); an older record of a run resumed from its checkpoint holds its last piece only,
+    and the solver's own wall time (``metrics.solver_wall_time_s``, which carries the earlier pieces) is the
+    better lower bound, so the larger of the two is taken."""
+    wall = rec.get("wall_time_s")
+    if wall is None or "resumed_wall_s" in rec:
+        return wall
+    solver = (rec.get("metrics") or {}).get("solver_wall_time_s")
+    return max(wall, solver) if isinstance(solver, (int, float)) and solver == solver else wall
 
 
 def build_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None,
