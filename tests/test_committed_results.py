@@ -161,3 +161,20 @@ def test_a_command_line_run_writes_frames_for_an_animation(tmp_path):
     assert _run_inputs(args)[1].frames == CLI_FRAMES >= 10
     args.set = ["frames=3"]
     assert _run_inputs(args)[1].frames == 3
+
+
+def test_an_archived_row_of_a_resumed_run_takes_the_solvers_whole_wall_time(demo):
+    """A committed row written from an older record of a run resumed from its checkpoint holds the last piece's
+    wall time only; the solver's own wall time (which carries the earlier pieces) raises it, other rows stay."""
+    import pandas as pd
+
+    from sweep.campaign.spec import load_spec
+    from sweep.campaign.table import build_table
+
+    spec, folder = demo
+    t = pd.read_parquet(folder / "table.parquet")
+    t.loc[0, "solver_wall_time_s"] = t.loc[0, "wall_time_s"] + 1000.0  # the earlier pieces' 1,000 s
+    t.to_parquet(folder / "table.parquet")
+    out = build_table(load_spec(spec), folder.parent)
+    assert out["wall_time_s"].iloc[0] == pytest.approx(t.loc[0, "wall_time_s"] + 1000.0)
+    assert out["wall_time_s"].iloc[1:].tolist() == pytest.approx(t["wall_time_s"].iloc[1:].tolist())

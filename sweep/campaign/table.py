@@ -106,11 +106,17 @@ def record_wall_time(rec: dict) -> float | None:
     (``sweep.campaign.scheduler``); an older record of a run resumed from its checkpoint holds its last piece only,
     and the solver's own wall time (``metrics.solver_wall_time_s``, which carries the earlier pieces) is the
     better lower bound, so the larger of the two is taken."""
-    wall = rec.get("wall_time_s")
-    if wall is None or "resumed_wall_s" in rec:
-        return wall
     solver = (rec.get("metrics") or {}).get("solver_wall_time_s")
-    return max(wall, solver) if isinstance(solver, (int, float)) and solver == solver else wall
+    return rec.get("wall_time_s") if "resumed_wall_s" in rec else _at_least_solver(rec.get("wall_time_s"), solver)
+
+
+def _at_least_solver(wall, solver):
+    """``wall`` (s), raised to the solver's own wall time ``solver`` (s) when that is larger (a run's wall time
+    covers its simulation); missing or NaN values leave ``wall`` as it is."""
+    def known(v):
+        return isinstance(v, (int, float)) and v == v
+
+    return max(wall, solver) if known(wall) and known(solver) else wall
 
 
 def build_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None,
@@ -150,6 +156,8 @@ def _archived_row(index: int, row: Mapping[str, Any], plan: Plan) -> dict:
     out = {k: v for k, v in row.items() if k not in ("run_dir", "N_f", "dp_cri")}
     out["index"] = index
     out["stale"] = row.get("code_hash") != plan.code_hash
+    if "wall_time_s" in row:  # a row written from an older record of a resumed run (record_wall_time)
+        out["wall_time_s"] = _at_least_solver(row["wall_time_s"], row.get("solver_wall_time_s"))
     return out
 
 
