@@ -62,3 +62,18 @@ def test_runs_shorter_than_the_time_resolution_still_occupy_a_slot():
     acc = campaign_throughput(recs)
     assert (acc.runs, acc.slots, acc.busy_s, acc.active_s) == (3, 1, 0.0, 2.0)
     assert acc.utilization == 0.0 and "3 runs" in acc.text()
+
+
+def test_the_earlier_pieces_of_a_resumed_run_count_as_busy_time_on_one_slot():
+    # one slot: a run in one piece (100 s), a run resumed after 7,000 s in earlier pieces whose record keeps them
+    # (resumed_wall_s), and an older record whose solver wall time carries 2,000 s more than its own
+    from sweep.campaign.accounting import earlier_pieces_s
+
+    new = {**_rec(100, 500), "wall_time_s": 7400.0, "resumed_wall_s": 7000.0}
+    old = {**_rec(500, 900), "wall_time_s": 400.0, "metrics": {"solver_wall_time_s": 2390.0}}
+    assert (earlier_pieces_s(new), earlier_pieces_s(old), earlier_pieces_s(_rec(0, 100))) == (7000.0, 1990.0, 0.0)
+    acc = campaign_throughput({"a": _rec(0, 100), "b": new, "c": old})
+    assert acc.slots == 1 and acc.resumed_s == 8990.0
+    assert acc.active_s == 900.0 + 8990.0 and acc.busy_s == 900.0 + 8990.0 and acc.waiting_s == 0.0
+    assert acc.runs_per_hour == pytest.approx(3 * 3600.0 / 9890.0, rel=1e-12)
+    assert "2.50 h of it in earlier pieces" in acc.text()

@@ -8,7 +8,10 @@ them alone (no log, no clock of the campaign process):
   break (the process was not running) when long;
 * the *slots* are the most runs seen in flight at once (the campaign's ``--jobs``);
 * busy core time is the sum of the runs' wall times; the slots' time during activity, less that, is *waiting*:
-  cores a round leaves idle while its slowest run finishes, and the sampler's pauses between rounds.
+  cores a round leaves idle while its slowest run finishes, and the sampler's pauses between rounds;
+* a run resumed from its checkpoint records the times of its last piece only; its earlier pieces
+  (:func:`earlier_pieces_s`) count as busy time, and as activity of one slot (``earlier / slots``), since when they
+  ran is not recorded.
 
 Units: seconds and hours as named; utilization dimensionless.
 """
@@ -18,7 +21,7 @@ from dataclasses import dataclass
 from datetime import datetime
 from typing import Iterable, Mapping
 
-__all__ = ["Throughput", "campaign_throughput", "run_intervals"]
+__all__ = ["Throughput", "campaign_throughput", "run_intervals", "earlier_pieces_s"]
 
 _RESOLUTION_S = 1.0  # s: the records' times are written to the second
 BREAK_S = 600.0  # s: a gap with no run in flight longer than this is a break, not waiting
@@ -35,6 +38,7 @@ class Throughput:
     busy_s: float
     waiting_s: float
     breaks_s: float
+    resumed_s: float = 0.0  # wall time of the earlier pieces of resumed runs (in busy_s and active_s)
 
     @property
     def utilization(self) -> float:
@@ -53,7 +57,9 @@ class Throughput:
         return (f"throughput: {self.runs} runs in {self.active_s / 3600:.2f} h of activity "
                 f"({self.periods} period(s); breaks {self.breaks_s / 3600:.2f} h not counted): "
                 f"{self.runs_per_hour:.1f} runs/h on {self.slots} slot(s); cores busy {100 * self.utilization:.1f} %, "
-                f"{self.waiting_s / 3600:.2f} core-h waiting (rounds ending on their slowest run, sampler pauses)")
+                f"{self.waiting_s / 3600:.2f} core-h waiting (rounds ending on their slowest run, sampler pauses)"
+                + (f"; {self.resumed_s / 3600:.2f} h of it in earlier pieces of runs resumed from their checkpoints "
+                   "(when they ran is not recorded: counted busy on one slot)" if self.resumed_s > 0 else ""))
 
 
 def _time(v: str, key: str, field: str) -> float:
@@ -61,6 +67,18 @@ def _time(v: str, key: str, field: str) -> float:
         return datetime.fromisoformat(v).timestamp()
     except (TypeError, ValueError):
         raise ValueError(f"run {key}: {field}={v!r} is not an ISO 8601 time") from None
+
+
+def earlier_pieces_s(rec: Mapping) -> float:
+    """Wall time (s) that a run resumed from its checkpoint spent in its pieces before the last: the record's
+    ``resumed_wall_s`` (``sweep.campaign.scheduler``); for a record written before the scheduler kept it, the excess
+    of the solver's own wall time (``metrics.solver_wall_time_s``, which carries the earlier pieces) over the
+    record's; 0 for a run made in one piece."""
+    if "resumed_wall_s" in rec:
+        return float(rec["resumed_wall_s"] or 0.0)
+    wall, solver = rec.get("wall_time_s"), (rec.get("metrics") or {}).get("solver_wall_time_s")
+    known = all(isinstance(v, (int, float)) and v == v for v in (wall, solver))
+    return max(0.0, solver - wall) if known else 0.0
 
 
 def run_intervals(records: Mapping[str, Mapping]) -> list[tuple[float, float]]:
@@ -116,5 +134,7 @@ def campaign_throughput(records: Mapping[str, Mapping], *, break_s: float = BREA
         return Throughput(0, 0, 0, 0.0, 0.0, 0.0, 0.0)
     slots = max(1, _max_in_flight(iv))  # runs shorter than the records' 1 s resolution overlap nothing
     active, breaks, periods = _activity(iv, break_s)
-    busy = sum(t1 - t0 for t0, t1 in iv)
-    return Throughput(len(iv), slots, periods, active, busy, max(0.0, slots * active - busy), breaks)
+    earlier = sum(earlier_pieces_s(r) for r in records.values() if r.get("started_at") and r.get("finished_at"))
+    active += earlier / slots
+    busy = sum(t1 - t0 for t0, t1 in iv) + earlier
+    return Throughput(len(iv), slots, periods, active, busy, max(0.0, slots * active - busy), breaks, earlier)

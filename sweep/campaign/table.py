@@ -101,22 +101,17 @@ def _row(point: Point, key: str, rec: Mapping[str, Any], with_numbers: bool, pla
     return row
 
 
-def record_wall_time(rec: dict) -> float | None:
+def record_wall_time(rec: Mapping[str, Any]) -> float | None:
     """A run's wall time (s) over all its pieces.  A record with ``resumed_wall_s`` already sums them
     (``sweep.campaign.scheduler``); an older record of a run resumed from its checkpoint holds its last piece only,
-    and the solver's own wall time (``metrics.solver_wall_time_s``, which carries the earlier pieces) is the
-    better lower bound, so the larger of the two is taken."""
-    solver = (rec.get("metrics") or {}).get("solver_wall_time_s")
-    return rec.get("wall_time_s") if "resumed_wall_s" in rec else _at_least_solver(rec.get("wall_time_s"), solver)
+    and gets its earlier pieces added (``sweep.campaign.accounting.earlier_pieces_s``: the solver's own wall time
+    carries them)."""
+    from sweep.campaign.accounting import earlier_pieces_s
 
-
-def _at_least_solver(wall, solver):
-    """``wall`` (s), raised to the solver's own wall time ``solver`` (s) when that is larger (a run's wall time
-    covers its simulation); missing or NaN values leave ``wall`` as it is."""
-    def known(v):
-        return isinstance(v, (int, float)) and v == v
-
-    return max(wall, solver) if known(wall) and known(solver) else wall
+    wall = rec.get("wall_time_s")
+    if wall is None or wall != wall or "resumed_wall_s" in rec:
+        return wall
+    return wall + earlier_pieces_s(rec)
 
 
 def build_table(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, plan: Plan | None = None,
@@ -157,7 +152,8 @@ def _archived_row(index: int, row: Mapping[str, Any], plan: Plan) -> dict:
     out["index"] = index
     out["stale"] = row.get("code_hash") != plan.code_hash
     if "wall_time_s" in row:  # a row written from an older record of a resumed run (record_wall_time)
-        out["wall_time_s"] = _at_least_solver(row["wall_time_s"], row.get("solver_wall_time_s"))
+        out["wall_time_s"] = record_wall_time({"wall_time_s": row["wall_time_s"],
+                                               "metrics": {"solver_wall_time_s": row.get("solver_wall_time_s")}})
     return out
 
 
