@@ -80,6 +80,15 @@ class NoiseModel:
         self.realization_spread = spread
         self._attach()
 
+    def correction_mean_of(self, m: int) -> None:
+        """The correction in use is the mean of the first m of the k realizations (m >= 2; 0: all):
+        the realization covariance carries that mean's error (:meth:`RealizationCovariance.for_mean_of`).
+        Nothing to do without a realization covariance (k < 2)."""
+        if self.real_cov is None or self.real_cov.k < 2:
+            return
+        self.real_cov = self.real_cov.for_mean_of(m)
+        self._attach()
+
     def set_jitter(self, jitter: ModelJitter | None) -> None:
         """Use ``jitter``'s covariance (None: no jitter term) beside the realization covariance."""
         self.jitter = jitter

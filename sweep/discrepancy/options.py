@@ -58,6 +58,11 @@ class FitOptions(_Checked):
     nan_residual: float = _rule(50.0, "float", 0.0, lo_open=True,
                                 doc="standardized residual of a point the model could not compute (failed run)")
     n_jobs: int = _rule(1, "int", 1, 256, doc="parallel solver runs")
+    prefetch_jacobian: bool = _rule(False, "bool",
+                                    doc="run the forward-difference Jacobian's points in the batch of each residual "
+                                        "evaluation of a real least-squares fit (the same points and numbers: with "
+                                        "n_jobs >= 2 the runs fill the parallel slots a batch of one run per "
+                                        "condition leaves idle; a rejected step's Jacobian runs are wasted)")
 
 
 @dataclass(frozen=True)
@@ -139,6 +144,12 @@ class ProfileOptions(_Checked):
                              "them all at the first anchor and the first m at the others, whose correction is the "
                              "first's plus the mean change of those m realizations between the two (common random "
                              "numbers: a realization's own deviation cancels in its change)")
+    correction_realizations: int = _rule(
+        0, "int", 0, 50, doc="with correction = linear: 0 runs every fine realization at every anchor; m >= 2 runs the "
+                             "first m at every anchor (common random numbers), and the realization covariance's term "
+                             "for the error of the mean correction becomes 1/m of the realization variance instead "
+                             "of 1/k (the covariance scaled by (1 + 1/m)/(1 + 1/k)): fewer fine runs, a wider "
+                             "interval")
     smoothing: str = _rule("none", "choice", choices=("none", "quadratic"),
                            doc="quadratic: the interval from a quadratic through noisy profile points (MCAP)")
     grid: int = _rule(4, "int", 2, 20, doc="with quadratic smoothing: extra profile points per side")
@@ -177,6 +188,17 @@ class ProfileOptions(_Checked):
             raise ValueError(f"discrepancy spec: profile.correction_follows=\"{self.correction_follows}\" is not allowed "
                              f"with profile.correction=\"{self.correction}\" (only the linear correction is a function "
                              "of the parameters): set correction = \"linear\" or correction_follows = \"strength\"")
+        if self.correction_realizations and self.correction != "linear":
+            raise ValueError(f"discrepancy spec: profile.correction_realizations={self.correction_realizations} is not "
+                             f"allowed with profile.correction=\"{self.correction}\": set correction = \"linear\" or "
+                             "correction_realizations = 0")
+        if self.correction_realizations == 1:
+            raise ValueError("discrepancy spec: profile.correction_realizations=1 is not allowed: a mean and its error "
+                             "need at least 2 realizations (0: all of them)")
+        if self.correction_realizations and self.correction_slope_realizations:
+            raise ValueError(f"discrepancy spec: profile.correction_realizations={self.correction_realizations} is not "
+                             f"allowed with profile.correction_slope_realizations={self.correction_slope_realizations}"
+                             ": set one of them to 0")
         if self.emulate_refits and self.emulator == "none":
             raise ValueError("discrepancy spec: profile.emulate_refits=true is not allowed with "
                              "profile.emulator=\"none\": set emulator = \"gp\" or emulate_refits = false")

@@ -218,8 +218,10 @@ class Problem:
         self.residual_batch(params, [x], ids)
         return self._cache[self._key(params, x, ids)][1]
 
-    def jacobian(self, params, x, ids) -> np.ndarray:
-        """Forward-difference ∂r/∂x (steps toward the interior of the bounds), one batch of runs."""
+    @staticmethod
+    def jacobian_points(params, x) -> tuple[list, list]:
+        """The points of the forward-difference Jacobian at x and their steps (each parameter's step toward
+        the interior of its bounds; internal coordinates)."""
         xs, steps = [], []
         for j, p in enumerate(params):
             h = p.inward_step(x[j])
@@ -227,6 +229,11 @@ class Problem:
             xp[j] += h
             xs.append(xp)
             steps.append(h)
+        return xs, steps
+
+    def jacobian(self, params, x, ids) -> np.ndarray:
+        """Forward-difference ∂r/∂x (steps toward the interior of the bounds), one batch of runs."""
+        xs, steps = self.jacobian_points(params, x)
         rs = self.residual_batch(params, [np.asarray(x, float)] + xs, ids)
         r0 = rs[0]
         return np.column_stack([(ri - r0) / h for ri, h in zip(rs[1:], steps)]) if params else np.zeros((r0.size, 0))
@@ -243,9 +250,14 @@ class Problem:
         lb = np.array([p.x_bounds[0] for p in params])
         ub = np.array([p.x_bounds[1] for p in params])
         fo = self.spec.fit
+
+        def fun(x):        # with [fit] prefetch_jacobian the Jacobian's points run in the same batch
+            ahead = self.jacobian_points(params, x)[0] if fo.prefetch_jacobian else []
+            return self.residual_batch(params, [x] + ahead, ids)[0]
+
         for x0 in x0s:
             x0 = np.clip(np.asarray(x0, float), lb, ub)
-            res = least_squares(lambda x: self.residual_batch(params, [x], ids)[0], x0,
+            res = least_squares(fun, x0,
                                 jac=lambda x: self.jacobian(params, x, ids), bounds=(lb, ub),
                                 loss=fo.loss, f_scale=fo.f_scale, max_nfev=max_nfev or fo.max_nfev, x_scale=ub - lb,
                                 method="trf")

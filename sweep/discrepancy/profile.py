@@ -85,15 +85,24 @@ class _Profile:
         anchors (:meth:`anchors`); on the emulator each taken against the emulator's mean
         (:meth:`model_correction`).  With ``correction_slope_realizations`` = m > 0 the anchors after the first
         run the first m realizations only (:func:`~.noise.correction_from` with the first anchor's as
-        reference)."""
+        reference).  With ``correction_realizations`` = m (2 <= m < k) every anchor runs the first m
+        realizations, and from there on (the profile's points, its re-centring, the named model after it) the
+        noise model's covariance carries the m-mean's error (:meth:`~.noise.NoiseModel.correction_mean_of`);
+        the anchors are placed under the fit's noise model, as under the fit's correction."""
         follows_all = self.po.correction_follows == "all"
+        mean_of = self.po.correction_realizations
+        fines_used = self.fines[:mean_of] if 2 <= mean_of < len(self.fines) else self.fines
+        if len(fines_used) < len(self.fines):
+            self.problem.noise.correction_mean_of(0)       # a rebuilt model's anchors too: the k-mean's
         anchors, n_strength = self.anchors()
+        if len(fines_used) < len(self.fines):
+            self.problem.noise.correction_mean_of(len(fines_used))
         corrs, real, first = [], [], None
         m = self.po.correction_slope_realizations
         for full, at in anchors:
             vals = {q.name: q.from_x(float(v)) for q, v in zip(self.fit.params, full)}
             if first is None or not 0 < m < len(self.fines):
-                coarse, fines = coarse_and_fines(self.problem, self.fines, vals)
+                coarse, fines = coarse_and_fines(self.problem, fines_used, vals)
                 real.append(correction_from(coarse, fines))
                 first = fines if first is None else first
             else:                            # the first anchor's mean carried here by m realizations' change
@@ -105,7 +114,8 @@ class _Profile:
         kw = {"params": self.fit.params if follows_all else (self.p,), "strength": self.j if follows_all else 0}
         cm = StrengthCorrection(X, corrs, values, real=StrengthCorrection(X, real, values, **kw) if self.em else None,
                                 **kw)
-        cm.realizations, cm.slope_realizations = len(self.fines), (m if 0 < m < len(self.fines) else len(self.fines))
+        cm.realizations = len(fines_used)
+        cm.slope_realizations = m if 0 < m < len(self.fines) else len(fines_used)
         return cm
 
     def anchors(self) -> tuple[list, int]:

@@ -52,6 +52,8 @@ class RealizationCovariance:
     # the coarse model's jitter in its parameters (sweep/discrepancy/jitter.py), series -> (rows, C_j): a known
     # covariance added to the realizations' (not scaled by their estimate's uncertainty); None: not modelled
     jitter: dict | None = None
+    # the realizations the mean correction in use is taken over (0: all k; [profile] correction_realizations)
+    mean_of: int = 0
 
     @classmethod
     def empty(cls, layout: CurveLayout) -> "RealizationCovariance":
@@ -65,6 +67,21 @@ class RealizationCovariance:
             if s not in self.blocks or not np.array_equal(self.blocks[s][0], rows):
                 raise ValueError(f"with_jitter: series {s} rows differ from the realization covariance's")
         return replace(self, jitter=jitter_blocks)
+
+    def for_mean_of(self, m: int) -> "RealizationCovariance":
+        """This covariance for a correction that is the mean of m of the k realizations (m >= 2; 0: all k):
+        the realization term is (1 + 1/k) s² for a k-mean, (1 + 1/m) s² for an m-mean (one more realization
+        about an m-sample mean), so every block is scaled by (1 + 1/m)/(1 + 1/k') with k' the mean it was
+        made for (calling it twice with the same m changes nothing); the jitter term is kept as is.  Points
+        with fewer finite realizations than k take the same factor."""
+        if self.k < 2:
+            return self
+        cur, new = self.mean_of or self.k, m or self.k
+        if new < 2 or new > self.k:
+            raise ValueError(f"RealizationCovariance.for_mean_of: m={m} is not allowed: 0 or 2..{self.k} (the "
+                             "realizations the covariance was estimated from)")
+        f = (1.0 + 1.0 / new) / (1.0 + 1.0 / cur)
+        return replace(self, blocks={s: (rows, C * f) for s, (rows, C) in self.blocks.items()}, mean_of=m)
 
     def total(self, s) -> np.ndarray:
         """The covariance of series ``s``: realization term plus jitter term (kPa², mm²)."""
