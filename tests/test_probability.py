@@ -199,3 +199,13 @@ def test_a_replicated_campaigns_report_counts_its_points_replicates_and_disagree
     assert "regimes disagree at 2 of the 2 points with two or more; their fracturing labels at 1." in text
     assert "67 % of the finished runs fracture." in text
     assert _replicate_lines(SimpleNamespace(replicates={}, axis_names=("cement", "eta_o"), diagrams=[]), table) == []
+
+
+def test_a_band_edge_the_labels_do_not_bound_is_named_open_on_its_sides():
+    from sweep.campaign.report import _band_text
+
+    inf = float("inf")
+    assert _band_text([6.5, 7.5], 0.5) == "[10^6.5, 10^7.5] (±0.5 decades)"
+    assert _band_text([-inf, 7.24], inf) == "[0, 10^7.24] (unbounded on one side)"
+    assert _band_text([6.0, inf], inf) == "[10^6, ∞] (unbounded on one side)"
+    assert _band_text([-inf, inf], inf) == "[0, ∞] (unbounded on both sides)"

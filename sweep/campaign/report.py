@@ -144,7 +144,10 @@ def _band_text(log10_band: list, half: float) -> str:
     """A band's edges as powers of ten and its half-width in decades; an edge the labels do not bound is
     infinite (the profile never reaches its threshold on that side)."""
     lo, hi = (("10^" + format(v, ".3g")) if math.isfinite(v) else ("0" if v < 0 else "∞") for v in log10_band)
-    return f"[{lo}, {hi}] (" + (f"±{half:.2g} decades)" if math.isfinite(half) else "unbounded on one side)")
+    open_sides = sum(not math.isfinite(v) for v in log10_band)
+    width = f"±{half:.2g} decades" if math.isfinite(half) else ("unbounded on both sides" if open_sides == 2
+                                                                 else "unbounded on one side")
+    return f"[{lo}, {hi}] ({width})"
 
 
 
