@@ -34,7 +34,7 @@ from sweep.campaign.boundary_picks import BoundaryState, axis_column, coord_key
 from sweep.campaign.replicate_allocation import ReplicateSettings, decide_round
 from sweep.campaign.spec_model import SpecError
 
-__all__ = ["REPLICATE_SAMPLER_KEYS", "split_settings", "initial", "refine", "state", "replay"]
+__all__ = ["REPLICATE_SAMPLER_KEYS", "split_settings", "initial", "refine", "state", "replay", "majority_label"]
 
 # [sampler] keys of the replicate allocation: key -> (test, what is allowed)
 REPLICATE_SAMPLER_KEYS: dict[str, tuple] = {
@@ -162,10 +162,16 @@ def state(sampler, spec, table) -> dict:
             "points": [{**dict(zip(names, c)), "replicates": n} for c, n in counts.items()]}
 
 
+def majority_label(votes: list) -> str:
+    """The label most of a point's runs give; a tie goes to the label of its first run in ``votes`` (the table's
+    order: replicate 0 first), so that a point's label never depends on the interpreter's string hashing."""
+    return max(votes, key=votes.count)
+
+
 def replay(sampler, spec, table):
     """A ``BoundaryState`` for the boundary figure: the rounds' points (a point once per replicate), each point's
-    majority label, and the boundary sampler's classifier fitted to every labelled run (replicates as repeated
-    rows)."""
+    majority label (:func:`majority_label`), and the boundary sampler's classifier fitted to every labelled run
+    (replicates as repeated rows)."""
     st = _replay(sampler, spec, table)
     cfg = st["cfg"]
     out = BoundaryState([[c for c, _ in rr] for rr in st["rounds"]], {}, cfg.settings.budget,
@@ -180,7 +186,7 @@ def replay(sampler, spec, table):
     votes: dict = {}
     for x, v in zip(X, y):
         votes.setdefault(coord_key(x), []).append(v)
-    out.labels = {k: max(set(v), key=v.count) for k, v in votes.items()}
+    out.labels = {k: majority_label(v) for k, v in votes.items()}
     if len(set(y)) >= 2:
         out.model = sampler._fit(cfg, X, y)
     if st["decision"] is not None and math.isfinite(st["decision"]["half"]):
