@@ -2,8 +2,8 @@
 
 The measured data are one realization of mesh and porosity field that the workflow cannot know.  The fine
 check realizations give the discretization correction (their mean) and the uncertainty of which
-realization the data are: per point (:func:`realization_mean_spread`) or as a covariance per series
-correlated in time (:class:`RealizationCovariance`).  Units those of the observables (kPa, mm), times s.
+realization the data are: per point (:func:`realization_mean_spread`) or as a covariance correlated in time,
+per series or per observable over its conditions (:class:`RealizationCovariance`, realization_blocks.py).  Units those of the observables (kPa, mm), times s.
 """
 from __future__ import annotations
 

@@ -43,7 +43,8 @@ Example (units mm, s, kPa)::
                                      # (mesh_seed = s: perturbed mesh and its element-wise porosity field),
                                      # distinct integers >= 0, at least 2.  The data are one realization the
                                      # model cannot know: the mean over realizations is the correction and
-                                     # their deviations a covariance per series correlated in time
+                                     # their deviations a covariance correlated in time (per series, or
+                                     # per observable over its conditions: [noise] realization_blocks)
 
     [fit]                            # optional tables of settings, defaults shown (sweep/discrepancy/options.py)
     loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; starts = 1; seed = 0; n_jobs = 1
