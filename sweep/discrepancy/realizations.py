@@ -3,7 +3,8 @@
 The measured data are one realization of mesh and porosity field that the workflow cannot know.  The fine
 check realizations give the discretization correction (their mean) and the uncertainty of which
 realization the data are: per point (:func:`realization_mean_spread`) or as a covariance correlated in time,
-per series or per observable over its conditions (:class:`RealizationCovariance`, realization_blocks.py).  Units those of the observables (kPa, mm), times s.
+per series or per observable over its conditions (:class:`RealizationCovariance`, realization_blocks.py).
+Units those of the observables (kPa, mm), times s.
 """
 from __future__ import annotations
 
@@ -175,7 +176,7 @@ class RealizationCovariance:
         return out
 
     def whiteners(self, mask: np.ndarray, sig_diag: np.ndarray) -> list:
-        """[(positions in the masked vector, W)] per series with rows in ``mask``: W = R^(−1/2),
+        """[(positions in the masked vector, W)] per block with rows in ``mask``: W = R^(−1/2),
         R = I + D^(−1/2) C D^(−1/2) (D = σ_diag²) on those rows (a subset's marginal covariance is the
         sub-block)."""
         rows_m = np.flatnonzero(mask)
@@ -204,11 +205,12 @@ class RealizationCovariance:
             yield s, rows, r, C[np.ix_(keep, keep)] / dd, (J[np.ix_(keep, keep)] / dd if J is not None else None)
 
     def mixture_members(self, mask: np.ndarray, sig_diag: np.ndarray, n_nodes: int = 32) -> list:
-        """The whitening's covariance and its scale mixture's members per series with rows in ``mask``.
+        """The whitening's covariance and its scale mixture's members per block (series or observable) with
+        rows in ``mask``.
 
         The realization covariance is estimated from k realizations: the data's true one is λ C with
-        λ = v_true/v_est ~ ν/χ²_ν per series (ν from :meth:`scale_dof`, as :meth:`null_calibration`); the
-        jitter term is known.  Over σ_diag² (D^(−1/2) · D^(−1/2), dimensionless) the series' covariance is
+        λ = v_true/v_est ~ ν/χ²_ν per block (ν from :meth:`scale_dof`, as :meth:`null_calibration`); the
+        jitter term is known.  Over σ_diag² (D^(−1/2) · D^(−1/2), dimensionless) the block's covariance is
         R = I + A + J and the m-th member's R(λ_m) = I + λ_m A + J, λ_m the mid quantiles of ``n_nodes``
         equal-probability nodes.  Returns [(positions in the masked vector, R (m, m), R(λ) (n_nodes, m, m))];
         [] when k < 2 (no estimated scale)."""
@@ -231,7 +233,7 @@ class RealizationCovariance:
 
         With the members R(λ) of :meth:`mixture_members`, a whitened residual r = R^(−1/2) e has
         −2 ln p(r) = −2 ln E_λ[exp(−(eᵀ R(λ)⁻¹ e + ln det R(λ))/2)] + const, e = R^(1/2) r.  The expectation is a
-        mean over the ``n_nodes`` equal-probability nodes of λ.  Returns, per series with rows in ``mask``,
+        mean over the ``n_nodes`` equal-probability nodes of λ.  Returns, per block with rows in ``mask``,
         (positions in the masked vector, Q (n_nodes, m, m) with eᵀR(λ)⁻¹e = rᵀ Q r,
         ln det R(λ) − ln det R (n_nodes,)); [] when k < 2 (no estimated scale)."""
         out = []
@@ -263,17 +265,18 @@ class RealizationCovariance:
         """Null distributions of the per-series residual statistics when the whitening covariance is estimated.
 
         The realization covariance is estimated from k realizations: its scale is a sample variance, with
-        ν degrees of freedom per series (:meth:`scale_dof`: k − 1 to (k − 1) n).  Under the null (the model
+        ν degrees of freedom per block (:meth:`scale_dof`: k − 1 to (k − 1) n).  Under the null (the model
         right, the data one more realization plus noise) the data's true realization covariance is λ C with
         λ = v_true / v_est ~ ν/χ²_ν (mean ν/(ν − 2): a sample variance underestimates 1/v), so the whitened
-        residuals are not N(0, I) but a scale mixture with heavier tails, common to the whole series.
+        residuals are not N(0, I) but a scale mixture with heavier tails, common to the whole block.
         Treated as known, a series whose realization variance came out too small reads as systematic
         (χ² excess z > 3) more often than z_crit says.
 
-        For each series with rows in ``mask``: R = I + D^(−1/2) C D^(−1/2) = U diag(1 + a) Uᵀ (D = σ_diag²),
+        For each block with rows in ``mask``: R = I + D^(−1/2) C D^(−1/2) = U diag(1 + a) Uᵀ (D = σ_diag²),
         the whitened residuals under the null are r = U diag(√((1 + λ a)/(1 + a))) Uᵀ ξ, ξ ~ N(0, I) (λ = 1:
-        r = ξ, the known-covariance null).  ``n_draws`` common draws of ξ (and of λ) give both distributions
-        of (χ² excess z, mean z) (:func:`stats.series_statistics`); returns {str(series): SeriesNull} whose
+        r = ξ, the known-covariance null).  ``n_draws`` common draws of ξ (and of λ) over the block give both
+        distributions of each of its series' (χ² excess z, mean z) (:func:`stats.series_statistics` on the
+        series' rows); returns {str(series): SeriesNull} whose
         ``adjust`` maps an observed statistic to the known-covariance value of the same tail probability.
         Deterministic (``seed``).  Empty when k < 2."""
         if self.k < 2:
