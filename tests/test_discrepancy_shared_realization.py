@@ -150,6 +150,37 @@ def test_rho_o_zero_gives_the_series_likelihood():
     assert list(split) == [0, 1] and all(np.array_equal(split[s], r) for s, r in lay.series_rows().items())
 
 
+def test_marginal_deviance_of_an_observable_block_is_the_dense_two_member_mixture():
+    """One observable block over two conditions with a jitter term per series, a two-member scale mixture (λ
+    at the mid quantiles 1/4 and 3/4 of ν/χ²_ν, ν the block's): the deviance is
+    −2 ln(½ Σ_m N(diff; 0, D + λ_m C + C_j)) − ln det(2π(D + C + C_j)), C the joint block, computed densely."""
+    from scipy.stats import chi2, multivariate_normal
+
+    from sweep.discrepancy.noise import ScaledMixture
+
+    lay = _layout(n_cond=2, n=6, t_end=0.6)
+    rng = np.random.default_rng(9)
+    fines = 2.0 * _shared_deviations(rng, 6, 2, lay.t[:6], 0.8, tau=0.2)
+    nm = NoiseModel(np.zeros(lay.n), np.ones(lay.n), lay)
+    nm.set_discretization(np.zeros(lay.n), fines, 0.0, "observable")
+    jit = {s: (rows, 0.3 * np.exp(-np.abs(lay.t[rows][:, None] - lay.t[rows][None, :]) / 0.1))
+           for s, rows in lay.series_rows().items()}
+    nm.real_cov = nm.real_cov.with_jitter(jit)
+    rows, C = nm.real_cov.blocks[OBS]
+    assert np.array_equal(rows, np.arange(lay.n))            # the rows in their natural order here
+    Cj = nm.real_cov.total(OBS) - C
+    lam = (nu := nm.real_cov.scale_dof(rows)) / chi2.ppf([0.75, 0.25], nu)
+    mask = np.ones(lay.n, bool)
+    mix = ScaledMixture(nm.with_scaled(mask, np.zeros((lay.n, lay.n))),
+                        nm.real_cov.mixture_members(mask, nm.sig_diag, n_nodes=2), np.zeros((lay.n, lay.n)))
+    D = np.eye(lay.n)
+    for _ in range(3):
+        diff = rng.normal(size=lay.n) * 3.0
+        dens = [multivariate_normal(np.zeros(lay.n), D + lm * C + Cj).logpdf(diff) for lm in lam]
+        brute = -2.0 * (np.logaddexp(*dens) - np.log(2.0)) - np.linalg.slogdet(2 * np.pi * (D + C + Cj))[1]
+        assert mix.deviance(diff, 0.0) == pytest.approx(brute, rel=1e-9)
+
+
 # ----------------------------------------------------------------------------- the point of it: coverage
 def _gls(nm: NoiseModel, y: np.ndarray, g: np.ndarray) -> tuple[float, float]:
     """The generalized-least-squares fit of θ in y = θ g (+ deviation) and its sd (whitened with nm)."""
