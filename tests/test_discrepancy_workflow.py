@@ -507,6 +507,23 @@ def test_workflow_reports_the_realization_spread(tmp_path):
     assert rep["realization_covariance"] == "correlated"
 
 
+
+def test_workflow_reports_the_correlation_between_conditions_with_observable_blocks(tmp_path):
+    """[noise] realization_blocks = "observable" reaches the covariance: realizations offset by a constant in
+    p_inj deviate identically in every condition (ρ_o = 1, clipped to 0.99, one p_inj block); the other
+    observables do not deviate (ρ_o = 0: their series stay separate)."""
+    from dataclasses import replace
+
+    fines = [_Offset({"p_inj": v}) for v in (0.2, 0.5, 1.1)]
+    spec = _spec()
+    spec = replace(spec, noise=replace(spec.noise, realization_blocks="observable"))
+    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), spec, ToyForward({}, h=8.0), fine_forward=fines,
+                       figures=False)
+    assert rep["realization_blocks"] == "observable"
+    corr = rep["realization_condition_correlation"]
+    assert corr["p_inj"][0] == 0.99 and corr["front_radius_mean"][0] == 0.0
+
+
 _DISC_SPEC = {"baseline": {"effects_off": OFF}, "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0}}
 
 

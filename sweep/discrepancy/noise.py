@@ -7,7 +7,8 @@ with
 
     Σ_s = diag(σ_diag²) + C_s,     σ_diag² = σ_measured² + (disc_error_fraction · err)²,
 
-per series s (condition × observable), C_s the mesh-realization covariance (realizations.py) plus the
+per series s (condition × observable) or per observable over its conditions ([noise] realization_blocks), C_s
+the mesh-realization covariance (realizations.py) plus the
 coarse model's jitter (jitter.py) when those are modelled.  :class:`NoiseModel` holds this state and is
 owned by the fitting problem; every change to it bumps ``version``, which the problem's residual cache is
 keyed on.  The correction is a vector (``err``: :meth:`NoiseModel.set_discretization`,
@@ -61,10 +62,12 @@ class NoiseModel:
             self.cov_version += 1
             self._whiteners.clear()
 
-    def set_discretization(self, err: np.ndarray, fines: np.ndarray, fraction: float) -> None:
+    def set_discretization(self, err: np.ndarray, fines: np.ndarray, fraction: float,
+                           blocks: str = "series") -> None:
         """Compare with y_measured − ``err`` (0 where not finite) and widen σ by ``fraction``·err; ``fines``
-        (k, n): the realizations' predictions.  With k >= 2 their deviations enter as a covariance per series
-        correlated in time (:meth:`RealizationCovariance.estimate`), else their per-point spread (0 for one
+        (k, n): the realizations' predictions.  With k >= 2 their deviations enter as a covariance correlated
+        in time, in blocks per series or per observable over its conditions (``blocks``, [noise]
+        realization_blocks; :meth:`RealizationCovariance.estimate`), else their per-point spread (0 for one
         model) in quadrature.  Replaces any earlier correction; keeps the jitter term."""
         fines = np.atleast_2d(np.asarray(fines, float))
         err = np.where(np.isfinite(err), err, 0.0)
@@ -72,7 +75,7 @@ class NoiseModel:
         self._y = self.y_measured - err
         sig_diag = np.sqrt(self.sig_measured**2 + (fraction * err) ** 2)
         if fines.shape[0] >= 2:
-            self.real_cov = RealizationCovariance.estimate(fines, self.layout)
+            self.real_cov = RealizationCovariance.estimate(fines, self.layout, mode=blocks)
             self.sig_diag = sig_diag
         else:
             self.real_cov = None
@@ -348,7 +351,8 @@ def add_discretization_error(problem, fine_forward, values: dict | None = None) 
     coarse, fines = coarse_and_fines(problem, fines_fw, vals)
     err = realization_mean_spread(fines)[0] - coarse
     err = np.where(np.isfinite(err), err, 0.0)
-    problem.noise.set_discretization(err, fines, problem.spec.noise.disc_error_fraction)
+    problem.noise.set_discretization(err, fines, problem.spec.noise.disc_error_fraction,
+                                     problem.spec.noise.realization_blocks)
     return rms_per_observable(problem.layout, err)
 
 

@@ -100,6 +100,12 @@ class NoiseOptions(_Checked):
     disc_refresh_tol_sd: float = _rule(0.0, "float", 0.0, 10.0,
                                        doc="refresh also stops once every named strength moves by <= this times "
                                            "its Wald standard error at the pass's fit (0: off)")
+    realization_blocks: str = _rule(
+        "series", "choice", choices=("series", "observable"),
+        doc="blocks of the mesh-realization covariance: series (one per condition x observable, independent) or "
+            "observable (one per observable over all its conditions, correlated between conditions at the pooled "
+            "correlation rho_o of the realizations' deviation curves: the data are one realization for every "
+            "condition)")
     model_jitter: str = _rule("none", "choice", choices=("none", "estimated"),
                               doc="the coarse model's jitter in its parameters as an error term")
     model_jitter_steps: int = _rule(7, "int", 5, 21, odd=True, doc="runs per stepped parameter (odd)")

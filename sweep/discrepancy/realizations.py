@@ -2,8 +2,9 @@
 
 The measured data are one realization of mesh and porosity field that the workflow cannot know.  The fine
 check realizations give the discretization correction (their mean) and the uncertainty of which
-realization the data are: per point (:func:`realization_mean_spread`) or as a covariance per series
-correlated in time (:class:`RealizationCovariance`).  Units those of the observables (kPa, mm), times s.
+realization the data are: per point (:func:`realization_mean_spread`) or as a covariance correlated in time,
+per series or per observable over its conditions (:class:`RealizationCovariance`, realization_blocks.py).
+Units those of the observables (kPa, mm), times s.
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 
 from . import stats
 from .layout import CurveLayout, correlation_time
+from .realization_blocks import block_kernel, block_rows, cross_condition_correlation, series_labels
 
 __all__ = ["realizations", "realization_mean_spread", "RealizationCovariance", "SeriesNull"]
 
@@ -26,7 +28,8 @@ def realizations(fine_forward) -> list:
 
 @dataclass
 class RealizationCovariance:
-    """Covariance of the data's mesh-realization deviation, one block per series (condition × observable).
+    """Covariance of the data's mesh-realization deviation, in blocks per series (condition × observable) or
+    per observable over its conditions (``mode``, realization_blocks.py).
 
     The data are one realization of mesh and porosity field; its deviation from the k check realizations'
     mean is a random curve that wanders over stretches of several observation times, which per-point
@@ -40,10 +43,13 @@ class RealizationCovariance:
     the realizations at that point; 1 + 1/k: one more realization about a k-sample mean), τ_o per
     observable from the lag-1 autocorrelation ρ of the realizations' deviation curves pooled over
     conditions, τ = −Δt/ln ρ (Δt the median time step; ρ clipped to [0, 0.99]; ρ = 0: C diagonal).
-    Series are taken as independent of one another.  Units: v in kPa², mm²; τ in s.
+    ``mode`` "series": series are independent of one another.  ``mode`` "observable": an observable's series
+    (its conditions) are one block, correlated between conditions at ρ_o, the pooled correlation between
+    conditions of the deviation curves (realization_blocks.py); the jitter term stays per series, embedded
+    in its block.  Units: v in kPa², mm²; τ in s.
     """
 
-    blocks: dict        # series -> (rows in time order, C (n_s, n_s))
+    blocks: dict        # block key (series, or observable) -> (rows, each series in time order, C (n_b, n_b))
     tau: dict           # observable -> correlation time, s
     rho: dict           # observable -> pooled lag-1 autocorrelation of the deviations
     k: int = 0          # number of realizations the covariance was estimated from
@@ -54,6 +60,9 @@ class RealizationCovariance:
     jitter: dict | None = None
     # the realizations the mean correction in use is taken over (0: all k; [profile] correction_realizations)
     mean_of: int = 0
+    mode: str = "series"            # [noise] realization_blocks
+    rho_cond: dict | None = None    # observable -> pooled correlation between conditions of the deviations
+    rho_cond_dof: dict | None = None    # observable -> its degrees of freedom
 
     @classmethod
     def empty(cls, layout: CurveLayout) -> "RealizationCovariance":
@@ -61,12 +70,39 @@ class RealizationCovariance:
         blocks = {s: (rows, np.zeros((rows.size, rows.size))) for s, rows in layout.series_rows().items()}
         return cls(blocks, {}, {}, 0, layout)
 
+    def _series_slots(self) -> dict:
+        """{series: (block key, its positions in the block's rows)}."""
+        out = {}
+        for g, (rows, _) in self.blocks.items():
+            lab = series_labels(self.layout, g, rows)
+            for s in np.unique(lab):
+                out[s.item() if hasattr(s, "item") else s] = (g, np.flatnonzero(lab == s))
+        return out
+
     def with_jitter(self, jitter_blocks: dict | None) -> "RealizationCovariance":
-        """This covariance plus the jitter term ``jitter_blocks`` (series -> (rows, C_j), the same rows)."""
+        """This covariance plus the jitter term ``jitter_blocks`` (series -> (rows, C_j), the series' rows in
+        its block)."""
+        slots = self._series_slots()
         for s, (rows, C) in (jitter_blocks or {}).items():
-            if s not in self.blocks or not np.array_equal(self.blocks[s][0], rows):
+            g, pos = slots.get(s, (None, None))
+            if g is None or not np.array_equal(self.blocks[g][0][pos], rows):
                 raise ValueError(f"with_jitter: series {s} rows differ from the realization covariance's")
         return replace(self, jitter=jitter_blocks)
+
+    def _jitter_block(self, g) -> np.ndarray | None:
+        """The jitter term on block ``g``'s rows (its series' C_j on the diagonal), None without one."""
+        if not self.jitter:
+            return None
+        rows = self.blocks[g][0]
+        parts = [(s, pos) for s, (gs, pos) in self._series_slots().items() if gs == g and s in self.jitter]
+        if len(parts) == 1 and parts[0][1].size == rows.size:
+            return self.jitter[parts[0][0]][1]
+        if not parts:
+            return None
+        J = np.zeros((rows.size, rows.size))
+        for s, pos in parts:
+            J[np.ix_(pos, pos)] = self.jitter[s][1]
+        return J
 
     def for_mean_of(self, m: int) -> "RealizationCovariance":
         """This covariance for a correction that is the mean of m of the k realizations (m >= 2; 0: all k):
@@ -83,14 +119,16 @@ class RealizationCovariance:
         f = (1.0 + 1.0 / new) / (1.0 + 1.0 / cur)
         return replace(self, blocks={s: (rows, C * f) for s, (rows, C) in self.blocks.items()}, mean_of=m)
 
-    def total(self, s) -> np.ndarray:
-        """The covariance of series ``s``: realization term plus jitter term (kPa², mm²)."""
-        rows, C = self.blocks[s]
-        return C + self.jitter[s][1] if self.jitter and s in self.jitter else C
+    def total(self, g) -> np.ndarray:
+        """The covariance of block ``g``: realization term plus jitter term (kPa², mm²)."""
+        J = self._jitter_block(g)
+        return self.blocks[g][1] + J if J is not None else self.blocks[g][1]
 
     @classmethod
-    def estimate(cls, fines: np.ndarray, layout: CurveLayout, window: int = 5) -> "RealizationCovariance":
-        """From the realizations' predictions ``fines`` (k, n) on the rows of ``layout``."""
+    def estimate(cls, fines: np.ndarray, layout: CurveLayout, window: int = 5,
+                 mode: str = "series") -> "RealizationCovariance":
+        """From the realizations' predictions ``fines`` (k, n) on the rows of ``layout``, in blocks of ``mode``
+        (realization_blocks.py).  ρ_o (``rho_cond``) is estimated in either mode; "series" does not use it."""
         fines = np.atleast_2d(np.asarray(fines, float))
         ok = np.isfinite(fines)
         cnt = ok.sum(axis=0)
@@ -102,12 +140,22 @@ class RealizationCovariance:
         rho = {str(o): stats.pooled_lag1([dev[:, r] for r in series_rows.values() if layout.obs[r[0]] == o])
                for o in np.unique(layout.obs)}
         tau = {o: correlation_time(rho[o], layout, o) for o in rho}
+        cross = {o: cross_condition_correlation(dev, layout, o, tau[o]) for o in rho}
+        rho_c = {o: c[0] for o, c in cross.items()}
         blocks = {}
-        for s, rows in series_rows.items():
-            v = stats.moving_average(var[rows], window)
-            corr = layout.exp_correlation(rows, tau[str(layout.obs[rows[0]])])
-            blocks[s] = (rows, np.sqrt(np.outer(v, v)) * corr)
-        return cls(blocks, tau, rho, int(fines.shape[0]), layout, window)
+        for g, rows in block_rows(layout, mode, rho_c).items():
+            o = str(layout.obs[rows[0]])
+            v = np.concatenate([stats.moving_average(var[r], window) for r in _series_runs(layout, rows)])
+            blocks[g] = (rows, np.sqrt(np.outer(v, v)) * block_kernel(layout, rows, tau[o], rho_c[o]))
+        return cls(blocks, tau, rho, int(fines.shape[0]), layout, window, mode=mode, rho_cond=rho_c,
+                   rho_cond_dof={o: c[1] for o, c in cross.items()})
+
+    def _kernel_squared(self, rows: np.ndarray) -> np.ndarray:
+        """ρ_ij² between the block's ``rows``: the kernel with τ/2 and ρ_o² (identity without a layout)."""
+        if self.layout is None:
+            return np.eye(rows.size)
+        o = str(self.layout.obs[rows[0]])
+        return block_kernel(self.layout, rows, self.tau.get(o, 0.0) / 2.0, (self.rho_cond or {}).get(o, 0.0) ** 2)
 
     def variance(self, n: int) -> np.ndarray:
         """Per-point realization variance (the blocks' diagonals) on n rows, kPa² / mm²."""
@@ -128,7 +176,7 @@ class RealizationCovariance:
         return out
 
     def whiteners(self, mask: np.ndarray, sig_diag: np.ndarray) -> list:
-        """[(positions in the masked vector, W)] per series with rows in ``mask``: W = R^(−1/2),
+        """[(positions in the masked vector, W)] per block with rows in ``mask``: W = R^(−1/2),
         R = I + D^(−1/2) C D^(−1/2) (D = σ_diag²) on those rows (a subset's marginal covariance is the
         sub-block)."""
         rows_m = np.flatnonzero(mask)
@@ -153,15 +201,16 @@ class RealizationCovariance:
                 continue
             r = rows[keep]
             dd = np.outer(sig_diag[r], sig_diag[r])
-            J = self.jitter[s][1][np.ix_(keep, keep)] / dd if self.jitter and s in self.jitter else None
-            yield s, rows, r, C[np.ix_(keep, keep)] / dd, J
+            J = self._jitter_block(s)
+            yield s, rows, r, C[np.ix_(keep, keep)] / dd, (J[np.ix_(keep, keep)] / dd if J is not None else None)
 
     def mixture_members(self, mask: np.ndarray, sig_diag: np.ndarray, n_nodes: int = 32) -> list:
-        """The whitening's covariance and its scale mixture's members per series with rows in ``mask``.
+        """The whitening's covariance and its scale mixture's members per block (series or observable) with
+        rows in ``mask``.
 
         The realization covariance is estimated from k realizations: the data's true one is λ C with
-        λ = v_true/v_est ~ ν/χ²_ν per series (ν from :meth:`scale_dof`, as :meth:`null_calibration`); the
-        jitter term is known.  Over σ_diag² (D^(−1/2) · D^(−1/2), dimensionless) the series' covariance is
+        λ = v_true/v_est ~ ν/χ²_ν per block (ν from :meth:`scale_dof`, as :meth:`null_calibration`); the
+        jitter term is known.  Over σ_diag² (D^(−1/2) · D^(−1/2), dimensionless) the block's covariance is
         R = I + A + J and the m-th member's R(λ_m) = I + λ_m A + J, λ_m the mid quantiles of ``n_nodes``
         equal-probability nodes.  Returns [(positions in the masked vector, R (m, m), R(λ) (n_nodes, m, m))];
         [] when k < 2 (no estimated scale)."""
@@ -184,7 +233,7 @@ class RealizationCovariance:
 
         With the members R(λ) of :meth:`mixture_members`, a whitened residual r = R^(−1/2) e has
         −2 ln p(r) = −2 ln E_λ[exp(−(eᵀ R(λ)⁻¹ e + ln det R(λ))/2)] + const, e = R^(1/2) r.  The expectation is a
-        mean over the ``n_nodes`` equal-probability nodes of λ.  Returns, per series with rows in ``mask``,
+        mean over the ``n_nodes`` equal-probability nodes of λ.  Returns, per block with rows in ``mask``,
         (positions in the masked vector, Q (n_nodes, m, m) with eᵀR(λ)⁻¹e = rᵀ Q r,
         ln det R(λ) − ln det R (n_nodes,)); [] when k < 2 (no estimated scale)."""
         out = []
@@ -197,36 +246,37 @@ class RealizationCovariance:
         return out
 
     def scale_dof(self, rows: np.ndarray) -> float:
-        """Degrees of freedom ν of the series' realization-variance scale (the mean of its smoothed v).
+        """Degrees of freedom ν of the block's realization-variance scale (the mean of its smoothed v).
 
         Each point's v is a sample variance over the k realizations (k − 1 degrees of freedom), averaged
-        over ``window`` neighbours (the estimate's); neighbours are correlated (ρ_ij = exp(−|t_i − t_j|/τ)), so the series'
-        mean v̄ = Σ c_j s_j² (c_j the share of point j in it) has Var(v̄)/E(v̄)² = 2 Σ c_i c_j ρ_ij² / (k − 1)
-        (Isserlis), i.e. ν = (k − 1) / Σ c_i c_j ρ_ij² (Satterthwaite): k − 1 for a fully correlated series,
-        up to (k − 1) n for independent points.  ``rows``: the series' rows in time order."""
-        n = rows.size
-        # the share of each point in the series' mean of the smoothed variances: column sums of the
+        over ``window`` neighbours of its series (the estimate's); points are correlated (ρ_ij = exp(−|t_i −
+        t_j|/τ), times ρ_o between conditions in an observable's block), so the block's mean v̄ = Σ c_j s_j²
+        (c_j the share of point j in it) has Var(v̄)/E(v̄)² = 2 Σ c_i c_j ρ_ij² / (k − 1) (Isserlis), i.e.
+        ν = (k − 1) / Σ c_i c_j ρ_ij² (Satterthwaite): k − 1 for a fully correlated block, up to (k − 1) n for
+        independent points.  ``rows``: the block's rows, each series in time order."""
+        # the share of each point in the block's mean of the smoothed variances: column sums of each series'
         # moving-average matrix (stats.moving_average applied to the unit vectors)
-        c = np.apply_along_axis(stats.moving_average, 0, np.eye(n), self.window).sum(axis=0) / n
-        ta = self.tau.get(str(self.layout.obs[rows[0]]), 0.0) if self.layout is not None else 0.0
-        rho2 = self.layout.exp_correlation(rows, ta / 2.0) if self.layout is not None else np.eye(n)
-        return float((self.k - 1) / (c @ rho2 @ c))
+        runs = _series_runs(self.layout, rows) if self.layout is not None else [rows]
+        c = np.concatenate([np.apply_along_axis(stats.moving_average, 0, np.eye(r.size), self.window).sum(axis=0)
+                            for r in runs]) / rows.size
+        return float((self.k - 1) / (c @ self._kernel_squared(rows) @ c))
 
     def null_calibration(self, mask: np.ndarray, sig_diag: np.ndarray, n_draws: int = 4000, seed: int = 0) -> dict:
         """Null distributions of the per-series residual statistics when the whitening covariance is estimated.
 
         The realization covariance is estimated from k realizations: its scale is a sample variance, with
-        ν degrees of freedom per series (:meth:`scale_dof`: k − 1 to (k − 1) n).  Under the null (the model
+        ν degrees of freedom per block (:meth:`scale_dof`: k − 1 to (k − 1) n).  Under the null (the model
         right, the data one more realization plus noise) the data's true realization covariance is λ C with
         λ = v_true / v_est ~ ν/χ²_ν (mean ν/(ν − 2): a sample variance underestimates 1/v), so the whitened
-        residuals are not N(0, I) but a scale mixture with heavier tails, common to the whole series.
+        residuals are not N(0, I) but a scale mixture with heavier tails, common to the whole block.
         Treated as known, a series whose realization variance came out too small reads as systematic
         (χ² excess z > 3) more often than z_crit says.
 
-        For each series with rows in ``mask``: R = I + D^(−1/2) C D^(−1/2) = U diag(1 + a) Uᵀ (D = σ_diag²),
+        For each block with rows in ``mask``: R = I + D^(−1/2) C D^(−1/2) = U diag(1 + a) Uᵀ (D = σ_diag²),
         the whitened residuals under the null are r = U diag(√((1 + λ a)/(1 + a))) Uᵀ ξ, ξ ~ N(0, I) (λ = 1:
-        r = ξ, the known-covariance null).  ``n_draws`` common draws of ξ (and of λ) give both distributions
-        of (χ² excess z, mean z) (:func:`stats.series_statistics`); returns {str(series): SeriesNull} whose
+        r = ξ, the known-covariance null).  ``n_draws`` common draws of ξ (and of λ) over the block give both
+        distributions of each of its series' (χ² excess z, mean z) (:func:`stats.series_statistics` on the
+        series' rows); returns {str(series): SeriesNull} whose
         ``adjust`` maps an observed statistic to the known-covariance value of the same tail probability.
         Deterministic (``seed``).  Empty when k < 2."""
         if self.k < 2:
@@ -245,10 +295,20 @@ class RealizationCovariance:
                 mix = _mixture_with_jitter(xi, lam, A, J)
             else:
                 mix = ((xi @ U) * np.sqrt((1.0 + lam[:, None] * a) / (1.0 + a))) @ U.T
-            _, z0, m0 = stats.series_statistics(xi[:, order])
-            _, z1, m1 = stats.series_statistics(mix[:, order])
-            out[str(s)] = SeriesNull(np.sort(z0), np.sort(z1), np.sort(m0), np.sort(m1))
+            lab = series_labels(self.layout, s, r[order])
+            for ser in np.unique(lab):
+                cols = order[lab == ser]
+                _, z0, m0 = stats.series_statistics(xi[:, cols])
+                _, z1, m1 = stats.series_statistics(mix[:, cols])
+                out[str(ser)] = SeriesNull(np.sort(z0), np.sort(z1), np.sort(m0), np.sort(m1))
         return out
+
+
+def _series_runs(layout, rows: np.ndarray) -> list:
+    """``rows`` split into their series' runs (consecutive rows of one series), in order."""
+    ser = np.asarray(layout.series)[rows]
+    cut = np.flatnonzero(ser[1:] != ser[:-1]) + 1
+    return np.split(rows, cut)
 
 
 def _mixture_with_jitter(xi: np.ndarray, lam: np.ndarray, A: np.ndarray, J: np.ndarray, n_bins: int = 64) -> np.ndarray:

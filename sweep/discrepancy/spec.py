@@ -43,7 +43,8 @@ Example (units mm, s, kPa)::
                                      # (mesh_seed = s: perturbed mesh and its element-wise porosity field),
                                      # distinct integers >= 0, at least 2.  The data are one realization the
                                      # model cannot know: the mean over realizations is the correction and
-                                     # their deviations a covariance per series correlated in time
+                                     # their deviations a covariance correlated in time (per series, or
+                                     # per observable over its conditions: [noise] realization_blocks)
 
     [fit]                            # optional tables of settings, defaults shown (sweep/discrepancy/options.py)
     loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; starts = 1; seed = 0; n_jobs = 1
@@ -55,6 +56,8 @@ Example (units mm, s, kPa)::
     disc_refresh = 1                 # the model refitted, at most disc_refresh passes, until every named
     disc_refresh_tol = 0.05          # strength moves by <= disc_refresh_tol (relative) in a pass, or (when > 0)
     disc_refresh_tol_sd = 0.0        # by <= disc_refresh_tol_sd times its Wald standard error
+    realization_blocks = "series"    # "observable": one realization covariance block per observable over its
+                                     # conditions, correlated between them (the data: one realization for all)
     model_jitter = "none"            # "estimated": the coarse model's jitter in its parameters is an error term
     model_jitter_steps = 7; model_jitter_rel_step = 0.05    # (sweep/discrepancy/jitter.py)
     [profile]                        # the named strength's profile-likelihood interval
