@@ -103,6 +103,9 @@ def test_written_model_is_the_workflows_forward_run_model(toy_named, tmp_path):
         assert {**written, **cond} == _workflow_overrides(spec, values, cond)
     assert "w_i" not in written and written["outer_compliance"] == values["effect:compliant_boundary"] > 0
     assert written["kbar"] == values["kbar"] and written["beta"] == 0.0 and written["porosity_floor"] == 0.1
+    assert json.loads(report.read_text())["condition_columns"] == ["w_i"]      # recorded by the workflow:
+    bare = write_named_model(report, spec_path, None, tmp_path / "bare.toml")[0]   # --measured not needed
+    assert read_toml(bare) == written
     text = out.read_text()
     assert f"Report: {report}" in text and "verdict: named" in text and "#   w_i: a condition column" in text
     assert json.loads(report.read_text())["code"]["solver"] in text and "units mm, s, kPa" in text
@@ -145,6 +148,7 @@ def test_no_effect_named_writes_the_calibrated_baseline_and_says_so(tmp_path):
     ("unknown_effect", "effect 'bogus' is not in the catalogue"),
     ("not_candidate", "not a candidate of the model SPEC"),
     ("unknown_param", "'kbarr' is not a solver.Parameters field"),
+    ("no_columns", "does not record its condition columns .*: give --measured DIR"),
 ])
 def test_bad_reports_are_refused_with_a_clear_error(tmp_path, edit, msg):
     rep = _report(tmp_path)
@@ -157,13 +161,14 @@ def test_bad_reports_are_refused_with_a_clear_error(tmp_path, edit, msg):
         d["final_values"]["effect:bogus"] = 1.0
     elif edit == "not_candidate":
         d["final_values"]["effect:elastic_cell"] = 1e-4
-    else:
+    elif edit == "unknown_param":
         d["final_values"]["kbarr"] = 1.0
     if edit != "missing":
         rep.write_text(json.dumps(d))
     out = tmp_path / "m.toml"
-    with pytest.raises(ValueError, match=msg.replace("[", r"\[").replace("]", r"\]").replace("(", r"\(")):
-        write_named_model(rep, _spec_file(tmp_path), _measured(tmp_path), out)
+    pattern = msg if edit == "no_columns" else msg.replace("[", r"\[").replace("]", r"\]").replace("(", r"\(")
+    with pytest.raises(ValueError, match=pattern):
+        write_named_model(rep, _spec_file(tmp_path), None if edit == "no_columns" else _measured(tmp_path), out)
     assert not out.exists()
 
 

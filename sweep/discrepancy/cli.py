@@ -1,5 +1,5 @@
 """``dchfrac discrepancy run --measured DIR --model SPEC --out DIR``, ``dchfrac discrepancy init --measured DIR``,
-``status --cache DIR`` and ``model --report OUT/report.json --model SPEC --measured DIR --out FILE`` (argparse),
+``status --cache DIR`` and ``model --report OUT/report.json --model SPEC --out FILE`` (argparse),
 added by the main CLI."""
 from __future__ import annotations
 
@@ -58,8 +58,9 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     m = sub.add_parser("model", help="write the named model of a report as a campaign [base] model file")
     m.add_argument("--report", required=True, help="a discrepancy run's OUT/report.json")
     m.add_argument("--model", required=True, help="the model SPEC (TOML) of that run")
-    m.add_argument("--measured", required=True,
-                   help="the run's measured-data folder: its condition columns are left out of the model")
+    m.add_argument("--measured", default=None,
+                   help="the run's measured-data folder, whose condition columns are left out of the model "
+                        "(default: the columns the report records; needed for a report that does not)")
     m.add_argument("--out", default="named_model.toml", help="parameter file to write (default: %(default)s)")
     m.set_defaults(func=cmd_model)
     return d

@@ -1,12 +1,13 @@
 """The named model of a discrepancy run as a parameter file a campaign's ``[base] model = ...`` takes.
 
-``dchfrac discrepancy model --report OUT/report.json --model SPEC --measured DIR --out named_model.toml`` writes
+``dchfrac discrepancy model --report OUT/report.json --model SPEC --out named_model.toml`` writes
 the model the workflow names, condition-independent: the SPEC's baseline (its off effects at their off values),
 each calibrated parameter at its final value and the named effect at its fitted strength, mapped to
 solver.Parameters fields by :func:`.problem.values_to_overrides` (the mapping of the workflow's own forward
-runs).  Parameters set per condition (the measured data's condition columns, and an effect scaled by a condition
-column, e.g. β = c √C with C a column) are left out and listed in the header.  A verdict that names nothing
-writes the calibrated baseline; a tie or an inconclusive run is refused.  Units mm, s, kPa.
+runs).  Parameters set per condition (the condition columns the report records, or those of ``--measured DIR``
+for a report that does not, and an effect scaled by a condition column, e.g. β = c √C with C a column) are left
+out and listed in the header.  A verdict that names nothing writes the calibrated baseline; a tie or an
+inconclusive run is refused.  Units mm, s, kPa.
 """
 from __future__ import annotations
 
@@ -123,17 +124,30 @@ def named_model_text(rep: dict, spec: DiscrepancySpec, columns, report_path="rep
     return "\n".join(lines) + "\n"
 
 
+def _condition_columns(rep: dict, report, measured) -> list:
+    """The condition columns: the measured-data folder's (``measured``), else those the report records."""
+    from .data import load_measured
+
+    if measured is not None:
+        return list(load_measured(measured).conditions.columns)
+    cols = rep.get("condition_columns")
+    if not isinstance(cols, list):
+        raise ValueError(f"--report {str(report)!r} does not record its condition columns (a report written before "
+                         "they were recorded): give --measured DIR, the run's measured-data folder")
+    return cols
+
+
 def write_named_model(report, model, measured, out) -> tuple[Path, str]:
-    """Read the report, the SPEC and the measured data's condition columns, write the named model to ``out``
-    atomically; (path, verdict).  ValueError (one line) on bad input, before anything is written."""
+    """Read the report, the SPEC and the condition columns (of the measured-data folder ``measured``, or when
+    None of the report), write the named model to ``out`` atomically; (path, verdict).  ValueError (one line)
+    on bad input, before anything is written."""
     from solver.output import atomic_write_text
 
-    from .data import load_measured
     from .spec import load_spec
 
     rep = read_report(report)
     spec = load_spec(model)
-    columns = list(load_measured(measured).conditions.columns)
+    columns = _condition_columns(rep, report, measured)
     text = named_model_text(rep, spec, columns, report_path=report, spec_path=model)
     atomic_write_text(out, text)
     return Path(out), rep["verdict"]
