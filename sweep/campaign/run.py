@@ -302,8 +302,10 @@ def sampler_status(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, tab
 def _save_spec(spec: CampaignSpec, store: ResultsStore) -> None:
     store.dir.mkdir(parents=True, exist_ok=True)
     src = Path(spec.source)
-    if src.is_file():
-        write_text_atomic(store.dir / "spec.toml", src.read_text())
+    if src.is_file():     # with its [base] model files beside it (sweep.campaign.base_model)
+        from sweep.campaign.base_model import spec_copy_text
+
+        write_text_atomic(store.dir / "spec.toml", spec_copy_text(src, store.dir))
 
 
 def reclassify(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, allow_damaged: bool = False) -> int:

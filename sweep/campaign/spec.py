@@ -18,6 +18,8 @@ Format (all tables optional except ``name``)::
 
     [base]                              # Parameters fields (kPa, kPa*s, mm, mm^2, ...)
     preset = "experiment"               # optional: a named model (solver.presets), the keys below on top
+    model = "named_model.toml"          # optional: a parameter file (dchfrac discrepancy model), relative to
+                                        # this file's folder; the keys below on top (sweep.campaign.base_model)
     eta_w = 1e-6
 
     [derived]                           # parameters computed from the others, per run
@@ -354,10 +356,13 @@ def spec_from_dict(d: Mapping[str, Any], source: str = "<dict>", max_runs: int |
     and validated). Raises :class:`SpecError` naming the key.
 
     max_runs : the largest grid allowed (default: ``[run] max_runs``, else DEFAULT_MAX_RUNS); a larger one
-    is refused from the axes' lengths, before any grid point is built.
+    is refused from the axes' lengths, before any grid point is built.  A ``[base] model`` path is relative to
+    the folder of ``source`` when it is a file, else to the working folder.
     """
+    from sweep.campaign.base_model import expand_base_models, spec_folder
+
     try:
-        return _spec_from_dict(d, source, max_runs)
+        return _spec_from_dict(expand_base_models(d, spec_folder(source)), source, max_runs)
     except SpecError as e:
         if str(e).startswith(source):
             raise

@@ -3,6 +3,7 @@
 Layout under a configurable root (default ``results/``)::
 
     <root>/<campaign>/spec.toml            copy of the spec last run
+    <root>/<campaign>/base_models/*.toml   copies of its [base] model files, which the copy names (base_model.py)
     <root>/<campaign>/runs/<key>/          one run: record.json + the solver's run folder
     <root>/<campaign>/table.csv            one row per run, typed (sweep.campaign.columns); also table.parquet
     <root>/<campaign>/columns.csv          column dictionary of the table: name, unit, dtype, meaning

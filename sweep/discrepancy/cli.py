@@ -1,5 +1,6 @@
-"""``dchfrac discrepancy run --measured DIR --model SPEC --out DIR`` and ``dchfrac discrepancy init --measured DIR``
-(argparse), added by the main CLI."""
+"""``dchfrac discrepancy run --measured DIR --model SPEC --out DIR``, ``dchfrac discrepancy init --measured DIR``,
+``status --cache DIR`` and ``model --report OUT/report.json --model SPEC --out FILE`` (argparse),
+added by the main CLI."""
 from __future__ import annotations
 
 import argparse
@@ -27,11 +28,11 @@ def show_progress(quiet: bool = False) -> None:
 
 
 def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
-    """Add ``discrepancy run`` and ``discrepancy init`` to an argparse subparsers object; each leaf sets
-    ``func(args) -> int``."""
+    """Add ``discrepancy run``, ``init``, ``status`` and ``model`` to an argparse subparsers object; each leaf
+    sets ``func(args) -> int``."""
     d = subparsers.add_parser("discrepancy", help="name the missing effect between simulation and measured data",
                               description="Discrepancy workflow (see sweep/discrepancy).")
-    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init,status}")
+    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init,status,model}")
     sub.required = True
     r = sub.add_parser("run", help="calibrate, localize, screen, refit, report")
     r.add_argument("--measured", required=True, help="measured-data folder (conditions.csv, observations.csv)")
@@ -54,7 +55,33 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     st = sub.add_parser("status", help="the forward runs of a discrepancy run's cache: done, failed, in flight")
     st.add_argument("--cache", required=True, help="forward-run cache folder (a run's --cache, default OUT/cache)")
     st.set_defaults(func=cmd_status)
+    m = sub.add_parser("model", help="write the named model of a report as a campaign [base] model file")
+    m.add_argument("--report", required=True, help="a discrepancy run's OUT/report.json")
+    m.add_argument("--model", required=True, help="the model SPEC (TOML) of that run")
+    m.add_argument("--measured", default=None,
+                   help="the run's measured-data folder, whose condition columns are left out of the model "
+                        "(default: the columns the report records; needed for a report that does not)")
+    m.add_argument("--out", default="named_model.toml", help="parameter file to write (default: %(default)s)")
+    m.set_defaults(func=cmd_model)
     return d
+
+
+def cmd_model(args) -> int:
+    """Write the named model's condition-independent parameters (sweep.discrepancy.named_model) for a campaign's
+    ``[base] model = ...``; exit 2 with one line on bad input (a tie, a missing file, an unknown parameter)."""
+    from solver.output import check_writable_dir
+
+    from .named_model import write_named_model
+
+    try:
+        check_writable_dir(Path(args.out).parent, "--out folder")
+        path, verdict = write_named_model(args.report, args.model, args.measured, args.out)
+    except ValueError as exc:
+        print(f"dchfrac discrepancy: {exc}", file=sys.stderr)
+        return 2
+    what = "the named model" if verdict == "named" else f"the calibrated baseline (verdict {verdict}: no effect named)"
+    print(f"wrote {path}: {what}; a campaign takes it as [base] model = \"{path}\" (relative to the spec's folder)")
+    return 0
 
 
 def cmd_status(args) -> int:

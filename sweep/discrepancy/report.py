@@ -79,6 +79,7 @@ def build_report(run, forward) -> dict:
               "calibrated_at_bound": {p.name: side for p, side in zip(run.fit0.params, bound_sides(run.fit0)) if side},
               "final_values": run.current.values() if named_ok else run.fit0.values(),
               "train": run.train, "holdout": run.holdout,
+              "condition_columns": list(run.problem.data.conditions.columns),   # set per condition (named_model.py)
               "localization_before": run.loc0, "localization_after": run.loc if named_ok else None,
               "residuals_systematic_after": bool(run.loc["systematic"] if named_ok else run.loc0["systematic"]),
               "rounds": run.rounds, "forward_runs": int(getattr(forward, "n_runs", 0)),
