@@ -6,7 +6,7 @@ block's scale dof; at a1 and a2 the residual test of the training series (as the
 realizations' mean there) under either covariance, and the Gaussian χ² of the training residuals; a diagnostic
 beside them (not an option): the correlation between conditions per pair of conditions instead of the pooled ρ_o
 (the mean over common times of the pointwise sample correlation matrices, PSD), and the residual test with it.
-Run: PYTHONPATH=/work/wt/xcov python results/discrepancy/shared_realization/cache_blocks.py > .../cache_blocks.txt"""
+Run: PYTHONPATH=/work/wt/xcov python results/archive/discrepancy/shared_realization/cache_blocks.py > .../cache_blocks.txt"""
 import json
 from pathlib import Path
 
