@@ -43,3 +43,17 @@ def test_preset_reaches_the_run_command_and_campaign_specs(tmp_path):
     assert Parameters(**spec.params) == preset_parameters("experiment", kbar=0.01)
     with pytest.raises(SpecError, match="base.preset"):
         spec_from_dict({"name": "c", "base": {"preset": "lab"}, "axes": {"seed": [0]}})
+
+
+def test_a_campaign_sweeps_a_parameter_its_preset_sets_and_the_axis_wins():
+    """A preset's parameters are defaults of the [base] layer, as a model file's: an axis over one of them (the
+    experiment preset's measured w_i) replaces it, a [base] key on top of it still may not be swept."""
+    from sweep.campaign.spec import spec_from_dict
+    from sweep.campaign.spec_model import SpecError
+    from sweep.campaign.sampler import grid_points
+
+    spec = spec_from_dict({"name": "x", "base": {"preset": "experiment"}, "axes": {"w_i": [10.0, 20.0]}})
+    assert "w_i" not in spec.params and spec.params["outer_saturation_bc"] == "outflow"
+    assert sorted(p.params["w_i"] for p in grid_points(spec)) == [10.0, 20.0]
+    with pytest.raises(SpecError, match="'w_i' is both swept and set in base"):
+        spec_from_dict({"name": "x", "base": {"preset": "experiment", "w_i": 5.0}, "axes": {"w_i": [10.0]}})

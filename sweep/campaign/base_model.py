@@ -2,9 +2,9 @@
 ``dchfrac discrepancy model``) taken as if its parameters were written in ``[base]``.
 
 The path is relative to the spec file's folder (or absolute).  The file is a flat TOML table of
-solver.Parameters fields (units mm, s, kPa); the other keys of the same ``[base]`` override it, a parameter the
-grid sets (an axis or a ``[derived]`` expression, e.g. k̄ swept in an N_f–N_b grid) replaces the file's value, and a
-``preset`` lies below all of them (as ``preset`` works alone).  A missing file, a file that is not TOML or a key that is not a
+solver.Parameters fields (units mm, s, kPa).  It is read into the same layer as a ``preset`` (above it):
+defaults that the other keys of the same ``[base]``, the axes and ``[derived]`` replace (e.g. k̄ swept in an
+N_f–N_b grid; ``sweep.campaign.spec._base_defaults``).  A missing file, a file that is not TOML or a key that is not a
 parameter is refused naming the spec key, the path and what is allowed, before any run.  The copy of the spec a
 campaign keeps in its results folder points to copies of its model files there (:func:`spec_copy_text`).
 """
@@ -17,7 +17,7 @@ from typing import Any, Mapping
 
 from sweep.campaign.spec_model import SpecError, parameter_fields
 
-__all__ = ["expand_base_models", "read_base_model", "spec_folder", "spec_copy_text"]
+__all__ = ["read_base_model", "spec_folder", "spec_copy_text"]
 
 _ALLOWED = "a flat TOML table of solver.Parameters fields (as written by dchfrac discrepancy model)"
 
@@ -51,54 +51,8 @@ def read_base_model(where: str, value: Any, folder: Path) -> dict:
     return d
 
 
-_AXIS_FORMS = ("values", "linear", "log", "range")
-
-
-def _swept(tbl: Mapping) -> set:
-    """The parameter names the ``[axes]`` of table ``tbl`` sweep (bare names and ``params.NAME``)."""
-    axes = tbl.get("axes")
-    names: set = set()
-    for k, v in (axes.items() if isinstance(axes, Mapping) else ()):
-        if k == "params" and isinstance(v, Mapping) and not (len(v) == 1 and next(iter(v)) in _AXIS_FORMS):
-            names |= set(v)
-        elif k not in ("mode", "zip", "options"):
-            names.add(k)
-    return names
-
-
-def _merged(tbl: Mapping, where: str, folder: Path, free: set) -> dict:
-    """The ``[base]`` of ``tbl`` with its ``model`` replaced by the file's parameters less those in ``free``
-    (swept in ``tbl`` or derived: the grid sets them), its other keys on top."""
-    base = tbl["base"]
-    rest = {k: v for k, v in base.items() if k != "model"}
-    model = read_base_model(f"{where}.model", base["model"], folder)
-    return {**{k: v for k, v in model.items() if k not in free | _swept(tbl)}, **rest}
-
-
 def _has_model(tbl) -> bool:
     return isinstance(tbl, Mapping) and isinstance(tbl.get("base"), Mapping) and "model" in tbl["base"]
-
-
-def expand_base_models(d: Mapping, folder: Path) -> Mapping:
-    """The parsed spec ``d`` with each ``[base] model`` (top level and ``[[blocks]]``) expanded into its
-    ``[base]``: the other keys there win, and a parameter the grid sets (an axis of the same table, of a block
-    for the top-level model, or a ``[derived]`` one) is left to the grid.  ``d`` itself when none is used."""
-    if not isinstance(d, Mapping):
-        return d
-    blocks = d.get("blocks")
-    in_blocks = isinstance(blocks, list) and any(_has_model(b) for b in blocks)
-    if not _has_model(d) and not in_blocks:
-        return d
-    out = dict(d)
-    derived = set(d["derived"]) if isinstance(d.get("derived"), Mapping) else set()
-    if _has_model(d):
-        free = derived.union(*(_swept(b) for b in blocks if isinstance(b, Mapping))) \
-            if isinstance(blocks, list) else derived
-        out["base"] = _merged(d, "base", folder, free)
-    if in_blocks:
-        out["blocks"] = [{**b, "base": _merged(b, f"blocks[{i}].base", folder, derived)} if _has_model(b) else b
-                         for i, b in enumerate(blocks)]
-    return out
 
 
 # a ``model = "..."`` entry (a line of a [base] table or a key of an inline table) and its string literal

@@ -19,7 +19,8 @@ Format (all tables optional except ``name``)::
     [base]                              # Parameters fields (kPa, kPa*s, mm, mm^2, ...)
     preset = "experiment"               # optional: a named model (solver.presets), the keys below on top
     model = "named_model.toml"          # optional: a parameter file (dchfrac discrepancy model), relative to
-                                        # this file's folder; the keys below on top (sweep.campaign.base_model)
+                                        # this file's folder, over the preset (sweep.campaign.base_model); the
+                                        # keys below, the axes and [derived] replace the values of both
     eta_w = 1e-6
 
     [derived]                           # parameters computed from the others, per run
@@ -272,7 +273,29 @@ def _parse_axes(where: str, axes_tbl, pfields, ofields, limit: int) -> list[Axis
     return out
 
 
-def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int) -> Block:
+def _base_defaults(w: str, base: dict, folder: Path) -> tuple[dict, dict]:
+    """(defaults, rest) of a ``[base]`` table: the parameters of its ``preset`` (solver.presets) and then of its
+    ``model`` file (sweep.campaign.base_model), which the base's own keys, the axes and ``[derived]`` replace, and
+    the base without those two keys."""
+    defaults = {}
+    if "preset" in base:
+        from solver.presets import preset_changes
+
+        try:
+            defaults.update(preset_changes(base["preset"]))
+        except ValueError as exc:
+            _fail(f"{w}base.preset", str(exc))
+    if "model" in base:
+        from sweep.campaign.base_model import read_base_model
+
+        defaults.update(read_base_model(f"{w}base.model", base["model"], folder))
+    return defaults, {k: v for k, v in base.items() if k not in ("preset", "model")}
+
+
+def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int, folder: Path = Path("."),
+                 free: frozenset = frozenset()) -> Block:
+    """One grid block.  ``folder``: where a ``[base] model`` path starts; ``free``: the ``[derived]`` parameters,
+    which replace a preset's or model file's value as the block's own axes do."""
     unknown = sorted(set(tbl) - _BLOCK_KEYS - ({"name", "description", "paper", "derived", "blocks", "sampler",
                                                 "classify", "diagrams", "run"} if where == "<top>" else set()))
     if unknown:
@@ -282,14 +305,7 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int
     if not isinstance(base, dict):
         _fail(f"{w}base", f"expected a table, got {base!r}")
     params, options = {}, {}
-    if "preset" in base:  # a named model (solver.presets), the other base keys on top
-        from solver.presets import preset_changes
-
-        try:
-            params.update(preset_changes(base["preset"]))
-        except ValueError as exc:
-            _fail(f"{w}base.preset", str(exc))
-        base = {k: v for k, v in base.items() if k != "preset"}
+    defaults, base = _base_defaults(w, base, folder)
     for k, v in base.items():
         if k not in pfields:
             _fail(f"{w}base.{k}", f"unknown parameter {k!r}; allowed: {sorted(pfields)}")
@@ -338,6 +354,8 @@ def _parse_block(where: str, tbl: dict, pfields, ofields, label: str, limit: int
             _fail(f"{w}axes.{a.name}", f"{a.name!r} is both swept and set in base")
         if a.target == "options" and a.name in options:
             _fail(f"{w}axes.{a.name}", f"{a.name!r} is both swept and set in options")
+    grid_set = free | {a.name for a in axes if a.target == "params"}
+    params = {**{k: v for k, v in defaults.items() if k not in grid_set}, **params}
     return Block(label=str(tbl.get("label", label)), params=params, options=options, axes=tuple(axes),
                  mode=mode, zip_groups=zip_groups)
 
@@ -359,10 +377,8 @@ def spec_from_dict(d: Mapping[str, Any], source: str = "<dict>", max_runs: int |
     is refused from the axes' lengths, before any grid point is built.  A ``[base] model`` path is relative to
     the folder of ``source`` when it is a file, else to the working folder.
     """
-    from sweep.campaign.base_model import expand_base_models, spec_folder
-
     try:
-        return _spec_from_dict(expand_base_models(d, spec_folder(source)), source, max_runs)
+        return _spec_from_dict(d, source, max_runs)
     except SpecError as e:
         if str(e).startswith(source):
             raise
@@ -383,9 +399,13 @@ def _spec_from_dict(d, source, max_runs) -> CampaignSpec:
     run = _table(d, "run", {})
     _check_run(run)
     limit = run.get("max_runs", DEFAULT_MAX_RUNS) if max_runs is None else _check_max_runs("--max-runs", max_runs)
+    from sweep.campaign.base_model import spec_folder
+
+    folder = spec_folder(source)
+    free = frozenset(d["derived"]) if isinstance(d.get("derived"), Mapping) else frozenset()
     top = _parse_block("<top>", {k: d[k] for k in ("base", "options", "axes", "mode", "zip") if k in d},
-                       pfields, ofields, label="", limit=limit)
-    blocks = _parse_blocks(d.get("blocks"), top, pfields, ofields, limit)
+                       pfields, ofields, label="", limit=limit, folder=folder, free=free)
+    blocks = _parse_blocks(d.get("blocks"), top, pfields, ofields, limit, folder, free)
     derived = _table(d, "derived", {})
     _check_derived(derived, top, blocks, pfields)
     sampler = _sampler(d)
@@ -418,7 +438,8 @@ def _table(d: Mapping, key: str, default: dict) -> dict:
     return t
 
 
-def _parse_blocks(blocks_raw, top, pfields, ofields, limit: int) -> tuple:
+def _parse_blocks(blocks_raw, top, pfields, ofields, limit: int, folder: Path = Path("."),
+                  free: frozenset = frozenset()) -> tuple:
     """The ``[[blocks]]`` of the spec, or the top-level block alone; labels distinct, no top-level axes beside them."""
     if blocks_raw is None:
         return (top,)
@@ -427,7 +448,8 @@ def _parse_blocks(blocks_raw, top, pfields, ofields, limit: int) -> tuple:
     if top.axes:
         _fail("axes", "top-level axes and [[blocks]] cannot be combined: put the axes in the blocks")
     blocks = tuple(_parse_block(f"blocks[{i}]", b if isinstance(b, dict) else _fail(f"blocks[{i}]", "expected a table"),
-                                pfields, ofields, label=str(i), limit=limit) for i, b in enumerate(blocks_raw))
+                                pfields, ofields, label=str(i), limit=limit, folder=folder, free=free)
+                   for i, b in enumerate(blocks_raw))
     labels = [b.label for b in blocks]
     if len(set(labels)) != len(labels):
         _fail("blocks", f"block labels must be distinct, got {labels}")
