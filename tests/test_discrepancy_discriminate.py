@@ -104,3 +104,44 @@ def test_the_water_outflow_is_read_from_the_solvers_time_series():
     assert np.allclose(out["water_outflow_volume"], [0.0, 20.0, 40.0])
     with pytest.raises(ObservableUnavailable, match="water_outflow_volume"):
         observables_from_timeseries(ts.drop(columns="water_outflow_volume"), {"water_outflow_volume": [1.0]}, 5.0)
+
+
+def test_a_candidate_confounded_with_an_alternative_is_paired_with_its_mimic_and_told_apart_by_the_front(tmp_path):
+    """The truth is k̄ 10 % high with k̄ declared uncertain ([[alternative]]): the compliance is confounded with
+    k̄ on pressure data (P0/(1 + 2c) against P0 ∝ 1/k̄), so nothing is refitted and there is no tie.  Its mimic
+    is the baseline with k̄ × (1 + 2c) at the probe c = 0.02 (to first order), which reproduces the compliance's
+    pressure where the data are, and the front tells them apart by 15 t (w_i/50) 20 c mm (largest at t = 1 s and
+    the highest rate, w_i = 70: 8.4 mm)."""
+    d = {"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
+         "alternative": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3}],
+         "candidates": {"effects": ["compliant_boundary", "damage_viscosity"]},
+         "holdout": {"ids": ["d"]}, "options": {"h": 8.0, "t_end": 1.0}}
+    rep = run_workflow(_pressure_twin(tmp_path, {"kbar": 0.00165}), spec_from_dict(d), ToyForward({}, h=8.0),
+                       out_dir=tmp_path / "out", figures=False)
+    assert rep["verdict"] == "unexplained_discrepancy" and not rep["tie"]
+    assert list(rep["confounded_measurements"]) == ["compliant_boundary"]
+    e = rep["confounded_measurements"]["compliant_boundary"]
+    assert e["probe"] == pytest.approx(0.02) and e["clipped"] == []
+    # the first-order move: k̄ by the secant through its finite-difference step, so 1 + 2c to second order in c
+    assert e["mimic"]["kbar"] == pytest.approx(0.0015 * 1.04, rel=2e-3)
+    assert e["linear_misfit"] < 0.05
+    assert e["training_rms"] < 0.1          # the pressures agree to a tenth of their noise (second order in c)
+    best = e["measurements"][0]
+    assert (best["observable"], best["condition"], best["measured"]) == ("front_radius_mean", "c", False)
+    a, b = best["predictions"].values()
+    assert abs(a - b) == pytest.approx(15 * 1.0 * 1.4 * 20 * 0.02, rel=0.01)
+    assert best["separation"] == pytest.approx(abs(a - b) / REGISTRY["front_radius_mean"].default_noise)
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "## What would tell each confounded candidate from the alternatives" in md
+    assert "what would tell them apart is listed below" in md and "| front_radius_mean | c | 1 |" in md
+
+
+def test_the_confounded_measurements_can_be_turned_off(tmp_path):
+    d = {"baseline": {"effects_off": OFF}, "calibrate": [{"name": "E", "lower": 150.0, "upper": 700.0}],
+         "alternative": [{"name": "kbar", "lower": 5e-4, "upper": 5e-3}],
+         "candidates": {"effects": ["compliant_boundary"]}, "holdout": {"ids": ["d"]},
+         "options": {"h": 8.0, "t_end": 1.0}, "acceptance": {"confounded_measurements": False}}
+    rep = run_workflow(_pressure_twin(tmp_path, {"kbar": 0.00165}), spec_from_dict(d), ToyForward({}, h=8.0))
+    assert rep["candidates"][0]["confounded_with"] == ["kbar"] and rep["confounded_measurements"] == {}
+    with pytest.raises(ValueError, match="confounded_measurements"):
+        spec_from_dict({**d, "acceptance": {"confounded_measurements": "yes"}})

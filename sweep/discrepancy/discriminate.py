@@ -12,6 +12,12 @@ observable (the median over its rows), else the registry's default noise (one sd
 label separates outright (infinite separation).  The measurements are ranked by separation, each at the
 time it is largest.
 
+A candidate the screen finds inside the reach of the calibrated and ``[[alternative]]`` parameters is not
+refitted (nothing tells it from them), so there is no tie to predict; :func:`confounded_measurements` pairs
+it, at its probe strength, with its *mimic* (the baseline with those parameters moved to first order to
+reproduce its signature on the training data, :func:`.evidence.alternative_mimic`), checks how closely the
+mimic reproduces it where the data are, and ranks the measurements that would tell the two apart.
+
 The tied models were run at every condition by their fits, so on a cached forward model (the solver's)
 the curve observables cost no new run; any run missing is made and counted like any other.  Units: each
 observable's own (kPa, mm, mm², -); separations are dimensionless; times in s.
@@ -23,11 +29,12 @@ import math
 
 import numpy as np
 
+from .evidence import alternative_mimic, signatures
 from .observables import LABELS, REGISTRY, SNAPSHOT_CURVES, ObservableUnavailable
 
 log = logging.getLogger("dchfrac.discrepancy")
 
-__all__ = ["discriminating_measurements", "observable_noise"]
+__all__ = ["discriminating_measurements", "confounded_measurements", "observable_noise"]
 
 
 def observable_noise(problem, name: str) -> tuple[float, str]:
@@ -119,3 +126,33 @@ def discriminating_measurements(problem, models: dict, n_times: int = 8, top: in
                          "measured": name in problem.times[cid]})
     rows.sort(key=lambda r: -r["separation"])
     return rows[:top]
+
+
+def confounded_measurements(problem, fit, candidates: list, ids, top: int = 5) -> dict:
+    """For each of ``candidates`` (confounded with ``[[alternative]]`` parameters in the screen at ``fit`` on
+    the training conditions ``ids``): the candidate at its probe strength against its mimic
+    (:func:`.evidence.alternative_mimic`, one forward run per condition), and the ``top`` measurements that
+    tell the two apart (:func:`discriminating_measurements`).  Each entry: ``probe`` (strength in the effect's
+    unit), ``mimic`` (its values), ``linear_misfit`` and ``clipped`` (the first-order move's), ``training_rms``
+    (RMS of the two models' standardized difference on the training rows: how closely the mimic reproduces the
+    candidate where the data are) and ``measurements``."""
+    sig = signatures(problem, fit, candidates, ids)
+    alts = "+".join(a.name for a in problem.spec.alternatives)
+    out = {}
+    for c in candidates:
+        mimic, info = alternative_mimic(problem, fit, sig, c)
+        probe = problem.spec.probe_strength(c)
+        models = {c: {**fit.values(), "effect:" + c: probe}, f"{alts} mimic": mimic}
+        out[c] = {"probe": probe, "mimic": mimic, **info, "training_rms": _training_rms(problem, models, ids),
+                  "measurements": discriminating_measurements(problem, models, top=top)}
+    return out
+
+
+def _training_rms(problem, models: dict, ids) -> float:
+    """RMS over the rows of conditions ``ids`` of the standardized difference between two models' predictions."""
+    preds = problem.predict(list(models.values()), ids)
+    m = problem.mask(ids)
+    a, b = (problem.model_vector(p, m) for p in preds)
+    d = problem.standardize(a - b, m, math.nan)
+    d = d[np.isfinite(d)]
+    return float(np.sqrt(np.mean(d**2))) if d.size else math.nan

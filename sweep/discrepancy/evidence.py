@@ -15,7 +15,8 @@ from .problem import Fit, Problem, random_starts
 
 log = logging.getLogger("dchfrac.discrepancy")
 
-__all__ = ["gap", "regime_mismatch", "localize", "screen", "free_columns", "wald_bounds", "refit", "compare_passing"]
+__all__ = ["gap", "regime_mismatch", "localize", "screen", "signatures", "alternative_mimic", "free_columns",
+           "wald_bounds", "refit", "compare_passing"]
 
 
 def gap(problem: Problem, params, x, ids) -> dict:
@@ -82,6 +83,19 @@ def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
     theirs too; see :func:`stats.signature_table`."""
     if not candidates:
         return {}
+    sig = signatures(problem, fit, candidates, ids)
+    return stats.signature_table(fit.r, sig["w"], sig["J"], sig["signatures"],
+                                 min_ratio=problem.spec.acceptance.min_ratio,
+                                 tie_cos=problem.spec.acceptance.tie_cos, A=sig["A"],
+                                 alternatives=tuple(a.name for a in problem.spec.alternatives))
+
+
+def signatures(problem: Problem, fit: Fit, candidates, ids) -> dict:
+    """The screen's matrices at ``fit`` on the conditions ``ids``: each candidate's signature (the standardized
+    model change from off to its probe strength), ``A`` (one column per ``[[alternative]]``: the standardized
+    change for its finite-difference step, :func:`alternative_steps`; None without alternatives), ``J`` (the
+    model's standardized sensitivity to the free calibrated parameters, per unit of their fit coordinates),
+    ``free`` (which calibrated parameters are free, :func:`free_columns`) and ``w`` (the series weights)."""
     vals0 = fit.values()
     alts = problem.spec.alternatives
     vlist = ([vals0] + [{**vals0, "effect:" + c: problem.spec.probe_strength(c)} for c in candidates]
@@ -92,13 +106,40 @@ def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
     # the same standardization as the residuals (a signature is a difference of model curves; a point
     # where either run failed carries none)
     diffs = [problem.standardize(mi - ms[0], m, 0.0) for mi in ms[1:]]
-    sigs = dict(zip(candidates, diffs))
-    A = np.column_stack(diffs[len(candidates):]) if alts else None
-    w = stats.series_weights(fit.r, problem.series[m])
     free = free_columns(fit)
-    return stats.signature_table(fit.r, w, -fit.J[:, free], sigs, min_ratio=problem.spec.acceptance.min_ratio,
-                                 tie_cos=problem.spec.acceptance.tie_cos, A=A,
-                                 alternatives=tuple(a.name for a in alts))
+    return {"signatures": dict(zip(candidates, diffs[:len(candidates)])),
+            "A": np.column_stack(diffs[len(candidates):]) if alts else None,
+            "J": -fit.J[:, free], "free": free, "w": stats.series_weights(fit.r, problem.series[m])}
+
+
+def alternative_mimic(problem: Problem, fit: Fit, sig: dict, candidate: str) -> tuple[dict, dict]:
+    """The model ``candidate`` is confounded with: the baseline at ``fit`` with its free calibrated parameters
+    and its ``[[alternative]]`` parameters moved, to first order, so as to reproduce the candidate's screening
+    signature (``sig``: :func:`signatures`) on the conditions it was taken on.  The move is the weighted least
+    squares solution of [J, A] c = s in the screen's standardized space (the calibrated parameters by c_J in
+    their fit coordinates, each alternative by c_A of its finite-difference steps), clipped to each parameter's
+    range.  Returns (values, info): the values dict (calibrated parameters and alternatives by name, in their
+    units) and {"linear_misfit": ‖[J, A]c − s‖/‖s‖ (weighted), "clipped": the parameters clipped}."""
+    alts = problem.spec.alternatives
+    if not alts:
+        raise ValueError("alternative_mimic: the SPEC has no [[alternative]] parameter")
+    sw = np.sqrt(np.asarray(sig["w"], float))
+    s = np.asarray(sig["signatures"][candidate], float) * sw
+    M = np.column_stack([sig["J"], sig["A"]]) * sw[:, None]
+    c = np.linalg.lstsq(M, s, rcond=None)[0]
+    misfit = float(np.linalg.norm(M @ c - s) / max(np.linalg.norm(s), 1e-300))
+    values, clipped = fit.values(), []
+    n_cal = sig["J"].shape[1]
+    moves = [(p, float(fit.x[j])) for j, p in enumerate(fit.params) if sig["free"][j]]
+    moves += [(a, a.to_x(a.initial)) for a in alts]
+    steps = [1.0] * n_cal + [a.inward_step(a.to_x(a.initial)) for a in alts]   # c_A counts steps
+    for (p, x0), d, step in zip(moves, c, steps):
+        lo, hi = p.x_bounds
+        x = float(np.clip(x0 + d * step, lo, hi))
+        if x != x0 + d * step:
+            clipped.append(p.name)
+        values[p.name] = p.from_x(x)
+    return values, {"linear_misfit": misfit, "clipped": clipped}
 
 
 def alternative_steps(alts) -> list:

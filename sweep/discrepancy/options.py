@@ -83,6 +83,10 @@ class AcceptanceOptions(_Checked):
     rho_crit: float = _rule(0.3, "float", 0.0, 1.0, doc="residual test: lag-1 autocorrelation of a systematic series")
     max_rounds: int = _rule(3, "int", 1, 20, doc="effects named one after another at most")
     max_refits: int = _rule(2, "int", 1, 50, doc="best-screened candidates refitted per round (plus their ties)")
+    confounded_measurements: bool = _rule(
+        True, "bool", doc="for each candidate the screen finds inside the reach of the [[alternative]] parameters: "
+                          "run its mimic (one run per training condition) and name the measurements that would tell "
+                          "them apart (discriminate.confounded_measurements)")
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,9 @@ from .observables import CURVES as CURVE_OBSERVABLES
 from .observables import UNITS
 from .evidence import bound_sides
 from .problem import Fit
+from .report_measurements import confounded_lines as _confounded_lines
+from .report_measurements import discriminating_lines as _discriminating_lines
+from .report_measurements import fmt as _f
 
 __all__ = ["build_report", "write_report", "jsonable", "ROUGH_NOTE"]
 
@@ -85,7 +88,8 @@ def build_report(run, forward) -> dict:
               "rounds": run.rounds, "forward_runs": int(getattr(forward, "n_runs", 0)),
               "forward_runs_by_stage": run.ledger.stages, **_noise_fields(run),
               "profiles": run.profiles, "partial_explanation": run.partial, "rivals": run.rivals,
-              "failed_points": run.failed_points, "discriminating_measurements": run.discriminating}
+              "failed_points": run.failed_points, "discriminating_measurements": run.discriminating,
+              "confounded_measurements": run.confounded}
     report["independent_estimates"] = independent_comparison(run.accepted, run.spec.independent)
     if run.emulated is not None:
         report["emulated_refits"] = run.emulated.summary()
@@ -273,16 +277,6 @@ def _table(d: dict, cols) -> list[str]:
     return out
 
 
-def _f(v):
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    if isinstance(v, list):
-        return "[" + ", ".join(_f(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return ", ".join(f"{k}: {_f(x)}" for k, x in v.items())
-    return str(v)
-
-
 def _verdict_lines(report: dict) -> list[str]:
     """The title and the verdict line."""
     L = ["# Discrepancy report", "",
@@ -328,7 +322,9 @@ def _caveat_lines(report: dict) -> list[str]:
             L += [f"{c['effect']}: not identifiable against {c['confounded_with']} (held fixed but uncertain, "
                   f"[[alternative]]): only {c['alternative_ratio']:.3g} of its signature lies outside their and the "
                   f"calibrated parameters' directions; a change of {' or '.join(c['confounded_with'])} within its "
-                  f"range would explain what it explains.", ""]
+                  f"range would explain what it explains"
+                  + ("; what would tell them apart is listed below." if c["effect"] in
+                     (report.get("confounded_measurements") or {}) else "."), ""]
     for a in report.get("accepted") or []:
         if "refresh_converged" in a:
             traj = " → ".join(f"{v:.4g}" for v in a["refresh_trajectory"])
@@ -345,30 +341,6 @@ def _caveat_lines(report: dict) -> list[str]:
               + (": the measurements that would are listed below." if report.get("discriminating_measurements")
                  else "."), ""]
     return L
-
-
-def _discriminating_lines(report: dict) -> list[str]:
-    """The measurements that would tell apart the models the data cannot (sweep.discrepancy.discriminate)."""
-    rows = report.get("discriminating_measurements") or []
-    if not rows:
-        return []
-    models = list(rows[0]["predictions"])
-    L = ["", "## The measurements that would tell them apart", "",
-         "Each tied model predicted at every condition for every registered observable; the separation is the "
-         "smallest difference over pairs of models in noise sd (the data's own where they hold the observable, "
-         "else the registry's default), at the time it is largest; `measured`: the data already hold it there.", "",
-         "| observable | condition | t (s) | " + " | ".join(models) + " | separation (sd) | sd | measured |",
-         "|---|---|---|" + "---|" * len(models) + "---|---|---|"]
-    for r in rows:
-        vals = " | ".join(str(v) if isinstance(v, str) or v is None else f"{v:.4g}" for v in r["predictions"].values())
-        sd = "label" if r["noise_source"] == "label" else f"{r['noise_sd']:.3g} {r['unit']} ({r['noise_source']})"
-        sep = "labels differ" if r["separation"] is None else f"{r['separation']:.3g}"   # inf in JSON is None
-        L.append(f"| {r['observable']} | {r['condition']} | {r['time']:.3g} | {vals} | {sep} | {sd} "
-                 f"| {'yes' if r['measured'] else 'no'} |")
-    if rows[0]["separation"] is not None and rows[0]["separation"] < 2.0:
-        L += ["", "No registered observable at these conditions separates them by 2 sd: a discriminating condition "
-                  "(another injection rate, oil viscosity or a later time) is needed."]
-    return L + [""]
 
 
 def _noise_lines(report: dict) -> list[str]:
@@ -563,7 +535,7 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
         except Exception as exc:  # figures are optional; the verdict is not
             figs.append((f"figures failed: {type(exc).__name__}: {exc}", None))
     L = (_verdict_lines(report) + _caveat_lines(report) + _noise_lines(report) + _candidate_lines(report)
-         + _discriminating_lines(report) + _profile_lines(report) + _independent_lines(report)
+         + _discriminating_lines(report) + _confounded_lines(report) + _profile_lines(report) + _independent_lines(report)
          + _emulated_refit_lines(report.get("emulated_refits"))
          + _gap_and_localization_lines(report))
     for cap, f in figs:

@@ -32,7 +32,7 @@ from solver.effects import get_effect
 from . import stats
 from .checks import check_data_against_model
 from .data import MeasuredData
-from .discriminate import discriminating_measurements
+from .discriminate import confounded_measurements, discriminating_measurements
 from .emulated import EmulatedRefits
 from .heldout import heldout_data
 from .evidence import compare_passing, free_columns, gap, localize, refit, rival_refits, screen, wald_bounds
@@ -87,6 +87,7 @@ class WorkflowRun:
     correction_models: dict = field(default_factory=dict)   # effect -> the profile's linear correction or None
     undecided: dict = field(default_factory=dict)   # models the data cannot tell apart: {name: fitted values}
     discriminating: list = field(default_factory=list)   # the measurements that would (discriminate.py)
+    confounded: dict = field(default_factory=dict)       # candidate vs its [[alternative]] mimic (discriminate.py)
 
     @property
     def spec(self) -> DiscrepancySpec:
@@ -399,6 +400,18 @@ def name_discriminating_measurements(run: WorkflowRun) -> None:
     run.ledger.mark("discriminating_measurements")
 
 
+def name_confounded_measurements(run: WorkflowRun) -> None:
+    """For the candidates the first screen found confounded with ``[[alternative]]`` parameters, the
+    measurements that would tell each from its mimic (:func:`.discriminate.confounded_measurements`, at the
+    calibrated baseline the screen was taken at); off with ``[acceptance] confounded_measurements = false``."""
+    rows = run.first_candidates or []
+    confounded = [r["effect"] for r in rows if r.get("confounded_with")]
+    if not confounded or not run.spec.acceptance.confounded_measurements:
+        return
+    run.confounded = confounded_measurements(run.problem, run.fit0, confounded, run.train)
+    run.ledger.mark("confounded_measurements")
+
+
 def check_noise_level(run: WorkflowRun) -> None:
     """A named model that still misses systematically explains part of the discrepancy only: when the true
     cause is outside the catalogue, a catalogue effect sharing part of its signature can pass every
@@ -435,6 +448,7 @@ def run_workflow(data: MeasuredData, spec: DiscrepancySpec, forward, out_dir=Non
         search(run)
         finalize(run)
         name_discriminating_measurements(run)
+        name_confounded_measurements(run)
         if run.verdict == "named":
             check_reached(run, run.current, "named model")
     named = run.accepted[0] if run.accepted and run.verdict == "named" else None
