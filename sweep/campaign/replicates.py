@@ -139,7 +139,7 @@ def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
         vals = vals if isinstance(vals, tuple) else (vals,)
         row: dict[str, Any] = dict(zip(axis_names, vals))
         good = g[ok.loc[g.index]]
-        row["n_runs"], row["n_ok"] = len(g), len(good)
+        row["n_runs"], row["n_ok"] = len(g), int(_labelled(good).sum())
         for name, hit in _label_columns(good, regimes):
             k, n = int(np.sum(hit)), len(hit)
             lo, hi = wilson_interval(k, n, level)
@@ -151,6 +151,16 @@ def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
                 row[c] = g[c].iloc[0]
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _labelled(good):
+    """Which ok runs carry a label (a regime or the fracturing flag): a run whose classification failed has none."""
+    import pandas as pd
+
+    cols = [c for c in ("regime", "fracturing") if c in good.columns]
+    if not cols:
+        return pd.Series(True, index=good.index)
+    return good[cols].notna().any(axis=1)
 
 
 def _label_columns(good, regimes):
