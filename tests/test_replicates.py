@@ -124,3 +124,30 @@ def test_a_points_majority_label_is_its_first_runs_on_a_tie_whatever_the_string_
     outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**__import__("os").environ, "PYTHONHASHSEED": str(seed)}).stdout for seed in (1, 2, 3)}
     assert outs == {"True False b\n"}
+
+
+def test_an_archived_replicate_is_matched_to_its_own_draw_never_another(tmp_path):
+    """A committed table whose keys no longer match the spec (a parameter added to the model changes every key) is
+    matched to the points by their swept values; replicates share those, so the draw (seed) must match too.  Here
+    the committed rows of one point hold seeds 0 and 2 (seed 1 never finished): seed 1 is pending, seed 2's row
+    goes to the point of seed 2, and no draw is counted twice."""
+    import shutil
+
+    from sweep.campaign.plan import plan_campaign
+    from sweep.campaign.table import build_table
+
+    spec = _spec({"porosity_seed": 3})
+    run_campaign(spec, tmp_path, runner=seed_runner, jobs=1, code_hash=VERSION, progress=None)
+    d = tmp_path / "reps"
+    t = pd.read_csv(d / "table.csv")
+    gap = (t["cement"] == 2.0) & (t["eta_o"] == 0.1) & (t["seed"] == 1)
+    t = t[~gap].assign(key="old-" + t["key"])          # keys of an older model; the seed-1 run of one point absent
+    t.to_csv(d / "table.csv", index=False)
+    (d / "table.parquet").unlink()
+    shutil.rmtree(d / "runs")
+    plan = plan_campaign(spec, tmp_path, code_hash=VERSION)
+    assert len(plan.pending) == 1 and plan.pending[0][0].params["seed"] == 1
+    for p, k in plan.archived:
+        assert plan.archived_rows[k]["seed"] == p.params["seed"]
+    table = build_table(spec, tmp_path, plan=plan)
+    assert not table.duplicated(["cement", "eta_o", "seed"]).any()
