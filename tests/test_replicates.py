@@ -151,3 +151,21 @@ def test_an_archived_replicate_is_matched_to_its_own_draw_never_another(tmp_path
         assert plan.archived_rows[k]["seed"] == p.params["seed"]
     table = build_table(spec, tmp_path, plan=plan)
     assert not table.duplicated(["cement", "eta_o", "seed"]).any()
+
+
+def test_blocks_with_equal_axis_values_and_other_fixed_values_are_distinct_points(tmp_path):
+    """Two blocks sweep the same axes at another fixed parameter (w_i 10 and 20 mm/s): equal axis values are then
+    two points, not one point's replicates (the point table grouped by the axes alone pooled them)."""
+    def runner(params, options, run_dir):
+        fr = params["w_i"] > 15.0                       # the fixed parameter decides the label
+        return {"status": "ok", "regime": "fracturing" if fr else "porous_invasion",
+                "metrics": {"fracturing": fr, "crack_length": params["w_i"]}}
+
+    spec = spec_from_dict({"name": "blk", "options": {"h": 4.0}, "replicates": {"porosity_seed": 2},
+                           "blocks": [{"label": "slow", "base": {"w_i": 10.0}, "axes": {"cement": [1.0, 2.0]}},
+                                      {"label": "fast", "base": {"w_i": 20.0}, "axes": {"cement": [1.0, 2.0]}}]})
+    run_campaign(spec, tmp_path, runner=runner, jobs=1, code_hash=VERSION, progress=None)
+    pts = load_campaign(tmp_path / "blk", points=True)
+    assert len(pts) == 4 and pts["n_ok"].tolist() == [2] * 4 and not pts["mixed"].any()
+    assert sorted(pts["p_fracturing"]) == [0.0, 0.0, 1.0, 1.0] and sorted(pts["w_i"]) == [10.0, 10.0, 20.0, 20.0]
+    assert sorted(pts["crack_length_sd"]) == [0.0] * 4
