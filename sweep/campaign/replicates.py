@@ -29,7 +29,7 @@ import numpy as np
 from sweep.campaign.spec_model import SpecError
 
 __all__ = ["REPLICATE_KEYS", "check_replicates", "replicate_count", "expand_replicates", "point_table",
-           "write_points", "CONTINUOUS_MEASURES"]
+           "write_points", "fixed_columns", "CONTINUOUS_MEASURES"]
 
 # replicate key -> (namespace, field it varies)
 REPLICATE_KEYS: dict[str, tuple[str, str]] = {"porosity_seed": ("params", "seed"),
@@ -114,7 +114,7 @@ def _axis_columns(table, axis_names: Sequence[str]) -> list[str]:
     return cols
 
 
-def _fixed_columns(table, axis_cols: Sequence[str]) -> dict[str, str]:
+def fixed_columns(table, axis_cols: Sequence[str]) -> dict[str, str]:
     """{name: column} of the model parameters and run options other than the axes and the replicated seeds whose
     value differs between runs of the table (blocks that fix them at other values): they tell points apart too.
     Columns with a missing value (a row of an older table) or non-scalar values are left out."""
@@ -138,7 +138,7 @@ def _fixed_columns(table, axis_cols: Sequence[str]) -> dict[str, str]:
 def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
     """One row per point of a campaign table with one row per run (pandas DataFrame): the runs with equal axis
     values and equal values of every other parameter and run option but the replicated seeds (blocks may fix a
-    parameter at other values: ``_fixed_columns``).
+    parameter at other values: ``fixed_columns``).
 
     Columns: the axis values (then those other parameters that differ between points); ``n_runs`` (rows),
     ``n_ok`` (ok runs with a label: the replicates counted);
@@ -155,7 +155,7 @@ def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
     if table is None or len(table) == 0:
         return pd.DataFrame()
     cols = _axis_columns(table, axis_names)
-    fixed = _fixed_columns(table, cols)
+    fixed = fixed_columns(table, cols)
     names, cols = [*axis_names, *fixed], [*cols, *fixed.values()]
     ok = (table["status"] == "ok") if "status" in table.columns else pd.Series(True, index=table.index)
     regimes = sorted({str(v) for v in table.loc[ok, "regime"].dropna()}) if "regime" in table.columns else []
