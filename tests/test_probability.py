@@ -261,3 +261,28 @@ def test_a_finished_run_without_a_label_is_neither_a_replicate_nor_fracturing(mi
     assert "2 points (1 with 1 run, 1 with 2 runs;" in text
     p = point_table(table, ["cement", "eta_o"]).set_index("cement")
     assert p.loc[1.0, "n_ok"] == 2 and p.loc[1.0, "p_fracturing"] == 0.5 and p.loc[1.0, "n_runs"] == 3
+
+
+def test_a_band_side_the_labels_do_not_bound_is_drawn_to_the_plots_edge(tmp_path, monkeypatch):
+    """Where the labels do not bound the band, its lo / hi hold only the profile search's reach, which can lie
+    inside the plotted range: the figure draws such a side to the plot's edge (it drew a finite edge there)."""
+    from sweep.regimes import diagrams
+    from sweep.regimes import probability as pr
+
+    C, cs, _ = draw(3, n=20)
+    fr = np.log(cs) > math.log(A_TRUE) + B_TRUE * C
+    real = pr.separatrix_band
+
+    def reach_inside(*a, **kw):        # the true band, its lower side made unbounded with a reach inside the plot
+        b = real(*a, **kw)
+        return b._replace(lo=b.center - 0.5, lo_bounded=np.zeros(b.C.size, bool))
+
+    figs = {}
+    monkeypatch.setattr(pr, "separatrix_band", reach_inside)
+    monkeypatch.setattr(diagrams, "_save", lambda fig, path, formats: figs.setdefault("fig", fig) and [])
+    pr.plot_probability_diagram(pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": fr}), tmp_path / "d",
+                                smooth=False, formats=())
+    ax = figs["fig"].axes[0]
+    band = next(c for c in ax.collections if c.get_label().startswith("95% band"))
+    assert band.get_paths()[0].vertices[:, 1].min() == pytest.approx(ax.get_ylim()[0], rel=1e-9)
+    assert "beyond the plot" in band.get_label()

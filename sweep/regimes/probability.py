@@ -142,8 +142,9 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
     band, why = _band_or_reason(C, cs, fr, level, alpha)
     ylim = (cs.min() / 10**0.5, cs.max() * 10**0.5)   # the band may leave the sampled range: it is clipped
     if band is not None:
-        lo, hi = (np.exp(np.clip(v, *np.log(ylim))) for v in (band.lo, band.hi))
-        clipped = bool(np.any(band.lo < np.log(ylim[0])) or np.any(band.hi > np.log(ylim[1])))
+        edge_lo, edge_hi = band.edges          # an unbounded side reaches the plot's edge
+        lo, hi = (np.exp(np.clip(v, *np.log(ylim))) for v in (edge_lo, edge_hi))
+        clipped = bool(np.any(edge_lo < np.log(ylim[0])) or np.any(edge_hi > np.log(ylim[1])))
         ax.fill_between(band.C, lo, hi, color="0.5", alpha=0.35, lw=0, zorder=1,
                         label=f"{level:.0%} band of Ca*$_c$" + (" (whole line)" if band.simultaneous else "")
                         + (" (beyond the plot where clipped)" if clipped else ""))

@@ -291,6 +291,14 @@ class SeparatrixBand(NamedTuple):
         return ok & (True if self.lo_bounded is None else self.lo_bounded) & (True if self.hi_bounded is None else self.hi_bounded)
 
     @property
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) edges of the band (ln Ca*_c), -inf / +inf where the labels do not bound it: what a
+        figure draws (``lo`` / ``hi`` hold the search's reach there, which can lie inside the plotted range)."""
+        lo = self.lo if self.lo_bounded is None else np.where(self.lo_bounded, self.lo, -np.inf)
+        hi = self.hi if self.hi_bounded is None else np.where(self.hi_bounded, self.hi, np.inf)
+        return lo, hi
+
+    @property
     def half_width_decades(self) -> np.ndarray:
         """Half the band's width at each C, in decades of Ca*: inf where the labels do not bound it."""
         half = 0.5 * (self.hi - self.lo) / math.log(10.0)
