@@ -286,3 +286,21 @@ def test_a_band_side_the_labels_do_not_bound_is_drawn_to_the_plots_edge(tmp_path
     band = next(c for c in ax.collections if c.get_label().startswith("95% band"))
     assert band.get_paths()[0].vertices[:, 1].min() == pytest.approx(ax.get_ylim()[0], rel=1e-9)
     assert "beyond the plot" in band.get_label()
+
+
+@pytest.mark.parametrize("which", ["C", "Ca_star"])
+def test_a_design_that_cannot_locate_the_line_gives_no_separatrix_and_no_fake_significance(which):
+    """Every run at one C (an N_f-N_b campaign at C = 1.2 %) or at one Ca* (results/nucleation_length_h2): the
+    design cannot identify A exp(B C), yet the penalized likelihood ratio came out infinite (p = 0: 'significant')
+    and the band failed inside its root search.  Now a clear reason, no p-value."""
+    from sweep.regimes.probability import separatrix_summary
+
+    C, cs, y = draw(4, n=40)
+    C = np.full_like(C, 1.2) if which == "C" else C
+    cs = np.full_like(cs, 8.6e7) if which == "Ca_star" else cs
+    with pytest.raises(ValueError, match="not identifiable"):
+        separatrix_significance(C, cs, y)
+    with pytest.raises(ValueError, match="not identifiable"):
+        separatrix_band(C, cs, y)
+    s = separatrix_summary(C, cs, y)
+    assert not s["significant"] and "not identifiable" in s["reason"] and "p_value" not in s
