@@ -72,3 +72,19 @@ def test_sampler_matches_the_grid_band_with_at_most_half_its_runs(seed):
     assert s["reason"].startswith("converged") and s["half_max"] <= g["half_max"] + 1e-9
     assert s["runs"] <= 0.5 * g["runs"]
     assert s["covers"] and g["covers"]
+
+
+def test_a_band_of_unknown_width_never_stops_the_round(monkeypatch):
+    """The stopping rule compares the band's half-width with band_tolerance: a NaN width (a profile that did not
+    evaluate) or an unbounded side (inf) is not narrow, so the round goes on (a NaN must not read as converged)."""
+    from sweep.campaign import replicate_allocation as ra
+
+    axes, runs = _runs_about_line()
+    band = ra.fit_round(axes, runs, ReplicateSettings())
+    assert band is not None and band.significant
+    for bad in (np.nan, np.inf):
+        lo = band.lo.copy()
+        lo[0] = band.center[0] - bad
+        monkeypatch.setattr(ra, "fit_round", lambda *a, b=band._replace(lo=lo): b)
+        dec = decide_round(axes, runs, ReplicateSettings(band_tolerance=1e6), batch=4, budget=200, seed=0, round_no=1)
+        assert not dec["stop"] and len(dec["batch"]) == 4

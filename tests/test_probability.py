@@ -197,7 +197,7 @@ def test_a_replicated_campaigns_report_counts_its_points_replicates_and_disagree
     assert "3 points (1 with 1 run, 1 with 2 runs, 1 with 3 runs;" in text
     # regimes differ at both replicated points; the fracturing label only at the first
     assert "regimes disagree at 2 of the 2 points with two or more; their fracturing labels at 1." in text
-    assert "67 % of the finished runs fracture." in text
+    assert "67 % of the 6 finished runs with a label fracture." in text
     assert _replicate_lines(SimpleNamespace(replicates={}, axis_names=("cement", "eta_o"), diagrams=[]), table) == []
 
 
@@ -209,3 +209,98 @@ def test_a_band_edge_the_labels_do_not_bound_is_named_open_on_its_sides():
     assert _band_text([-inf, 7.24], inf) == "[0, 10^7.24] (unbounded on one side)"
     assert _band_text([6.0, inf], inf) == "[10^6, ∞] (unbounded on one side)"
     assert _band_text([-inf, inf], inf) == "[0, ∞] (unbounded on both sides)"
+
+
+def test_distinct_points_at_the_same_nf_nb_are_not_pooled_as_replicates(tmp_path, monkeypatch):
+    """N_f ~ eta_o / kbar and N_b ~ eta_w / (eta_o kbar): on decade grids of eta_o, eta_w and kbar (the campaign
+    nf_vs_nb_probabilities_h2) distinct points share (N_b, N_f) (there: 20 of its 80 points).  Their runs are not
+    replicates of one point: grouped by the campaign's axes, each point keeps its own n and its own regimes."""
+    from types import SimpleNamespace
+
+    from sweep.campaign.plot import _phase_diagram
+    from sweep.regimes import probability as pr
+
+    rows = [(1e-3, 1e-6, 1e-3, "invasive_fracturing")] * 3 + [(1e-2, 1e-4, 1e-2, "uniform_invasion")] * 3
+    df = pd.DataFrame([{"status": "ok", "eta_o": eo, "eta_w": ew, "kbar": kb, "regime": r, "N_b": 7.5, "N_f": 2.0,
+                        "dp_cri": 1e3} for eo, ew, kb, r in rows])
+    spec = SimpleNamespace(name="t", replicates={"porosity_seed": 3}, axis_names=("eta_o", "eta_w", "kbar"))
+    seen, real = {}, pr.plot_nf_vs_nb_probabilities
+    monkeypatch.setattr(pr, "plot_nf_vs_nb_probabilities", lambda *a, **kw: seen.setdefault("out", real(*a, **kw)))
+    _phase_diagram(spec, df, {"kind": "nf_vs_nb", "formats": []}, tmp_path / "nfnb.png")
+    pts = seen["out"]["points"]
+    assert sorted(pts["n"]) == [3, 3] and not pts["mixed"].any()
+    assert sorted(pts["top"]) == ["invasive_fracturing", "uniform_invasion"]
+
+
+def test_distinct_points_at_the_same_ca_star_and_cement_are_not_pooled(tmp_path):
+    """Ca* ~ eta_o w_i: a campaign over eta_o and w_i at one C has distinct points at one (C, Ca*); with ``by`` (the
+    campaign's axes) each keeps its own replicates."""
+    rows = [(1.0, 0.1, 20.0, True)] * 3 + [(1.0, 0.2, 10.0, False)] * 3 + [(2.0, 0.1, 10.0, False)] * 2
+    df = pd.DataFrame([{"cement": c, "eta_o": e, "w_i": w, "Ca_star": 1e7 * e * w, "fracturing": f}
+                       for c, e, w, f in rows])
+    out = plot_probability_diagram(df, tmp_path / "p", formats=(), smooth=False, by=["cement", "eta_o", "w_i"])
+    assert sorted(out["points"]["n"].tolist()) == [2, 3, 3] and not out["points"]["mixed"].any()
+
+
+@pytest.mark.parametrize("missing", [None, math.nan])
+def test_a_finished_run_without_a_label_is_neither_a_replicate_nor_fracturing(missing):
+    """A run whose solver finished but whose classification failed (status ok, no regime, no fracturing: the
+    campaign runner keeps it to reclassify later) carries no label: the report's share of fracturing runs and its
+    replicate counts leave it out (it was counted as fracturing: NaN is truthy), as do points.csv's n_ok and p_*."""
+    from types import SimpleNamespace
+
+    from sweep.campaign.replicates import point_table
+    from sweep.campaign.report import _replicate_lines
+
+    table = pd.DataFrame({"status": ["ok", "ok", "ok", "ok"], "cement": [1.0, 1.0, 1.0, 2.0], "eta_o": 0.1,
+                          "regime": ["invasive_fracturing", "uniform_invasion", None, "uniform_invasion"],
+                          "fracturing": [True, False, missing, False]})
+    spec = SimpleNamespace(replicates={"porosity_seed": 3}, axis_names=("cement", "eta_o"), diagrams=[])
+    text = "\n".join(_replicate_lines(spec, table))
+    assert "33 % of the 3 finished runs with a label fracture" in text           # 1 of the 3 labelled runs
+    assert "2 points (1 with 1 run, 1 with 2 runs;" in text
+    p = point_table(table, ["cement", "eta_o"]).set_index("cement")
+    assert p.loc[1.0, "n_ok"] == 2 and p.loc[1.0, "p_fracturing"] == 0.5 and p.loc[1.0, "n_runs"] == 3
+
+
+def test_a_band_side_the_labels_do_not_bound_is_drawn_to_the_plots_edge(tmp_path, monkeypatch):
+    """Where the labels do not bound the band, its lo / hi hold only the profile search's reach, which can lie
+    inside the plotted range: the figure draws such a side to the plot's edge (it drew a finite edge there)."""
+    from sweep.regimes import diagrams
+    from sweep.regimes import probability as pr
+
+    C, cs, _ = draw(3, n=20)
+    fr = np.log(cs) > math.log(A_TRUE) + B_TRUE * C
+    real = pr.separatrix_band
+
+    def reach_inside(*a, **kw):        # the true band, its lower side made unbounded with a reach inside the plot
+        b = real(*a, **kw)
+        return b._replace(lo=b.center - 0.5, lo_bounded=np.zeros(b.C.size, bool))
+
+    figs = {}
+    monkeypatch.setattr(pr, "separatrix_band", reach_inside)
+    monkeypatch.setattr(diagrams, "_save", lambda fig, path, formats: figs.setdefault("fig", fig) and [])
+    pr.plot_probability_diagram(pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": fr}), tmp_path / "d",
+                                smooth=False, formats=())
+    ax = figs["fig"].axes[0]
+    band = next(c for c in ax.collections if c.get_label().startswith("95% band"))
+    assert band.get_paths()[0].vertices[:, 1].min() == pytest.approx(ax.get_ylim()[0], rel=1e-9)
+    assert "beyond the plot" in band.get_label()
+
+
+@pytest.mark.parametrize("which", ["C", "Ca_star"])
+def test_a_design_that_cannot_locate_the_line_gives_no_separatrix_and_no_fake_significance(which):
+    """Every run at one C (an N_f-N_b campaign at C = 1.2 %) or at one Ca* (results/nucleation_length_h2): the
+    design cannot identify A exp(B C), yet the penalized likelihood ratio came out infinite (p = 0: 'significant')
+    and the band failed inside its root search.  Now a clear reason, no p-value."""
+    from sweep.regimes.probability import separatrix_summary
+
+    C, cs, y = draw(4, n=40)
+    C = np.full_like(C, 1.2) if which == "C" else C
+    cs = np.full_like(cs, 8.6e7) if which == "Ca_star" else cs
+    with pytest.raises(ValueError, match="not identifiable"):
+        separatrix_significance(C, cs, y)
+    with pytest.raises(ValueError, match="not identifiable"):
+        separatrix_band(C, cs, y)
+    s = separatrix_summary(C, cs, y)
+    assert not s["significant"] and "not identifiable" in s["reason"] and "p_value" not in s

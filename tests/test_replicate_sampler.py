@@ -96,3 +96,23 @@ def test_replicate_settings_need_replicates():
          "sampler": {"kind": "boundary", "budget": 20, "tolerance": 0.1, "band_tolerance": 0.3}}
     with pytest.raises(SpecError, match=r"sampler\.band_tolerance: a setting of the boundary sampler with replicates"):
         spec_from_dict(d)
+
+
+def test_a_label_outside_the_two_named_labels_is_ignored_never_a_negative():
+    """``labels = [negative, positive]`` of a text column: as for the boundary sampler without replicates, a run
+    with another label is left out (it counted as a negative, pulling the fitted probability down), and a text
+    column without ``labels`` is refused naming the setting (every run counted as a negative)."""
+    from sweep.campaign import replicate_sampler as rs
+
+    spec = _spec(label="regime", labels=["porous_invasion", "fracturing"])
+    s = BoundarySampler()
+    pts = s.initial(spec)
+    regimes = ["fracturing", "porous_invasion", "viscous_fingering"] * 3
+    table = pd.DataFrame([{"status": "ok", "cement": p.params["cement"], "eta_o": p.params["eta_o"],
+                           "seed": p.params["seed"], "regime": r} for p, r in zip(pts, regimes)])
+    cfg, _, positive = rs._setup(s, spec)
+    seen = rs._observed(table, cfg, positive, int(pts[0].params["seed"]))
+    assert sorted(seen.values(), key=str) == [False] * 3 + [None] * 3 + [True] * 3
+    bare = _spec(label="regime")
+    with pytest.raises(SpecError, match=r"sampler\.label='regime'.*labels = \[negative, positive\]"):
+        BoundarySampler().refine(bare, table)

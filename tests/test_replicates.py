@@ -124,3 +124,65 @@ def test_a_points_majority_label_is_its_first_runs_on_a_tie_whatever_the_string_
     outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env={**__import__("os").environ, "PYTHONHASHSEED": str(seed)}).stdout for seed in (1, 2, 3)}
     assert outs == {"True False b\n"}
+
+
+def test_an_archived_replicate_is_matched_to_its_own_draw_never_another(tmp_path):
+    """A committed table whose keys no longer match the spec (a parameter added to the model changes every key) is
+    matched to the points by their swept values; replicates share those, so the draw (seed) must match too.  Here
+    the committed rows of one point hold seeds 0 and 2 (seed 1 never finished): seed 1 is pending, seed 2's row
+    goes to the point of seed 2, and no draw is counted twice."""
+    import shutil
+
+    from sweep.campaign.plan import plan_campaign
+    from sweep.campaign.table import build_table
+
+    spec = _spec({"porosity_seed": 3})
+    run_campaign(spec, tmp_path, runner=seed_runner, jobs=1, code_hash=VERSION, progress=None)
+    d = tmp_path / "reps"
+    t = pd.read_csv(d / "table.csv")
+    gap = (t["cement"] == 2.0) & (t["eta_o"] == 0.1) & (t["seed"] == 1)
+    t = t[~gap].assign(key="old-" + t["key"])          # keys of an older model; the seed-1 run of one point absent
+    t.to_csv(d / "table.csv", index=False)
+    (d / "table.parquet").unlink()
+    shutil.rmtree(d / "runs")
+    plan = plan_campaign(spec, tmp_path, code_hash=VERSION)
+    assert len(plan.pending) == 1 and plan.pending[0][0].params["seed"] == 1
+    for p, k in plan.archived:
+        assert plan.archived_rows[k]["seed"] == p.params["seed"]
+    table = build_table(spec, tmp_path, plan=plan)
+    assert not table.duplicated(["cement", "eta_o", "seed"]).any()
+
+
+def test_blocks_with_equal_axis_values_and_other_fixed_values_are_distinct_points(tmp_path):
+    """Two blocks sweep the same axes at another fixed parameter (w_i 10 and 20 mm/s): equal axis values are then
+    two points, not one point's replicates (the point table grouped by the axes alone pooled them)."""
+    def runner(params, options, run_dir):
+        fr = params["w_i"] > 15.0                       # the fixed parameter decides the label
+        return {"status": "ok", "regime": "fracturing" if fr else "porous_invasion",
+                "metrics": {"fracturing": fr, "crack_length": params["w_i"]}}
+
+    spec = spec_from_dict({"name": "blk", "options": {"h": 4.0}, "replicates": {"porosity_seed": 2},
+                           "blocks": [{"label": "slow", "base": {"w_i": 10.0}, "axes": {"cement": [1.0, 2.0]}},
+                                      {"label": "fast", "base": {"w_i": 20.0}, "axes": {"cement": [1.0, 2.0]}}]})
+    run_campaign(spec, tmp_path, runner=runner, jobs=1, code_hash=VERSION, progress=None)
+    pts = load_campaign(tmp_path / "blk", points=True)
+    assert len(pts) == 4 and pts["n_ok"].tolist() == [2] * 4 and not pts["mixed"].any()
+    assert sorted(pts["p_fracturing"]) == [0.0, 0.0, 1.0, 1.0] and sorted(pts["w_i"]) == [10.0, 10.0, 20.0, 20.0]
+    assert sorted(pts["crack_length_sd"]) == [0.0] * 4
+
+
+def test_points_behind_their_table_are_rebuilt_from_it(tmp_path):
+    """A campaign killed after a periodic table write (table.* only) leaves points.* of an earlier write: the
+    loader checks that the points hold every run of the table (sum of n_runs) and rebuilds them from the table
+    when they do not, instead of returning the stale counts."""
+    import shutil
+
+    run_campaign(_spec({"porosity_seed": 2}), tmp_path, runner=seed_runner, jobs=1, code_hash=VERSION, progress=None)
+    d = tmp_path / "reps"
+    for f in ("points.csv", "points.parquet"):
+        shutil.copy(d / f, tmp_path / f)
+    run_campaign(_spec({"porosity_seed": 4}), tmp_path, runner=seed_runner, jobs=1, code_hash=VERSION, progress=None)
+    for f in ("points.csv", "points.parquet"):
+        shutil.copy(tmp_path / f, d / f)                  # the points of the 2-draw write beside the 4-draw table
+    pts = load_campaign(d, points=True)
+    assert pts["n_runs"].tolist() == [4] * 6 and pts["n_runs"].sum() == len(load_campaign(d))

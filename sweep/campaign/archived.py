@@ -88,10 +88,27 @@ def _row_blocks(row: Mapping[str, Any]):
     return ";".join(b) if isinstance(b, list) else b
 
 
-def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mapping[str, Any]]):
+def _row_identity(row: Mapping[str, Any], identity) -> tuple:
+    """The row's values of the replicated fields ``identity`` ((namespace, name) pairs): its column ``name``, else
+    ``param_name`` / ``opt_name``; None when absent."""
+    out = []
+    for target, name in identity:
+        col = next((c for c in (name, f"{'param' if target == 'params' else 'opt'}_{name}") if c in row), None)
+        out.append(_norm(row.get(col)) if col else None)
+    return tuple(out)
+
+
+def _point_identity(p, identity) -> tuple:
+    return tuple(_norm((p.params if target == "params" else p.options).get(name)) for target, name in identity)
+
+
+def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mapping[str, Any]], identity=()):
     """(matched, unmatched): ``matched`` {point key: committed row} for the points whose key is not in ``skip``
     (points with a record or a run folder), by run key first, then by swept values and blocks (rows in table
-    order); ``unmatched``: the rows no point took (runs a sampler added, or points the spec no longer asks for)."""
+    order); ``unmatched``: the rows no point took (runs a sampler added, or points the spec no longer asks for).
+    ``identity``: the (namespace, name) of the fields that the replicates of a point vary (``[replicates]``:
+    ("params", "seed"), ("options", "mesh_seed")); their values must match too, since a point's replicates share
+    its swept values."""
     by_key = {r.get("key"): i for i, r in enumerate(rows)}
     taken: set[int] = {by_key[k] for k in skip if k in by_key}
     matched: dict[str, dict] = {}
@@ -109,9 +126,11 @@ def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mappi
             for i, r in enumerate(rows):
                 sw = _row_swept(r, names)
                 if sw is not None:
-                    index[names].setdefault(_signature(sw, _row_blocks(r)), []).append(i)
-                    index[names].setdefault(_signature(sw, None), []).append(i)
-        for sig in (_signature(p.swept, ";".join(p.blocks)), _signature(p.swept, None)):
+                    rid = _row_identity(r, identity)
+                    index[names].setdefault(_signature(sw, _row_blocks(r)) + rid, []).append(i)
+                    index[names].setdefault(_signature(sw, None) + rid, []).append(i)
+        pid = _point_identity(p, identity)
+        for sig in (_signature(p.swept, ";".join(p.blocks)) + pid, _signature(p.swept, None) + pid):
             cand = [i for i in index[names].get(sig, []) if i not in taken]
             if cand:
                 matched[k] = rows[cand[0]]

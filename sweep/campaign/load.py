@@ -67,19 +67,22 @@ def load_campaign(source, root="results", *, points: bool = False):
 
 
 def load_points(source, root="results"):
-    """The per-point table of a campaign with replicates (``points.parquet``, else ``points.csv``; built from the
-    run table when neither is written). ``df.attrs["campaign_dir"]`` is the campaign folder."""
+    """The per-point table of a campaign with replicates (``points.parquet``, else ``points.csv``), built from the
+    run table when neither is written or when the written one does not hold every run of the table (its
+    ``n_runs`` do not sum to the table's rows: points of an earlier write, e.g. a campaign killed after a
+    periodic table write). ``df.attrs["campaign_dir"]`` is the campaign folder."""
     import pandas as pd
 
     from sweep.campaign.replicates import point_table
 
     d = campaign_dir(source, root)
+    df = None
     if (d / "points.parquet").is_file():
         df = pd.read_parquet(d / "points.parquet")
     elif (d / "points.csv").is_file():
         df = pd.read_csv(d / "points.csv")
-    else:
-        table = load_campaign(source, root)
+    table = load_campaign(source, root)
+    if df is None or "n_runs" not in df.columns or int(df["n_runs"].sum()) != len(table):
         df = point_table(table, [n for n in _swept_names(d, table) if n not in ("seed", "mesh_seed")])
     df.attrs["campaign_dir"] = str(d)
     return df

@@ -167,7 +167,11 @@ def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, poin
     if committed is not None:
         rows = [row_values(r) for r in committed.to_dict("records")]
         here = set(recs) | {r["key"] for r in rows if isinstance(r.get("key"), str) and store.run_dir(r["key"]).is_dir()}
-        plan.archived_rows, unmatched = match_committed(pts, keys, set(recs), [r for r in rows if r.get("key") not in here])
+        from sweep.campaign.replicates import REPLICATE_KEYS
+
+        identity = [REPLICATE_KEYS[k] for k in sorted(getattr(spec, "replicates", None) or {})]
+        plan.archived_rows, unmatched = match_committed(pts, keys, set(recs), [r for r in rows if r.get("key") not in here],
+                                                        identity)
         plan.unmatched_rows = unmatched
     return plan
 

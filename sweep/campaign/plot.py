@@ -190,6 +190,7 @@ def _fields_plot(spec, store, table, g, path) -> list[Path]:
 
 def _phase_diagram(spec, table, g, path) -> list[Path]:
     """The paper's diagrams through sweep.regimes.diagrams (ok runs only); PNG (+ the diagram's formats)."""
+    from sweep.campaign.replicates import fixed_columns, replicate_count
     from sweep.regimes import diagrams as dg
 
     ok = table[table["status"] == "ok"]
@@ -212,6 +213,9 @@ def _phase_diagram(spec, table, g, path) -> list[Path]:
     fn, kw = _replicated_diagram(spec, kind, fn, kw)
     if ok.empty or any(c not in ok.columns for c in need):
         return []
+    if replicate_count(spec) > 1:   # a point as in points.csv: distinct points can share (C, Ca*) or (N_b, N_f)
+        axes = [c for c in spec.axis_names if c in ok.columns]
+        kw["by"] = [*axes, *fixed_columns(ok, axes).values()]
     res = fn(ok.reset_index(drop=True), path, **kw)
     paths = res.get("paths") if isinstance(res, Mapping) else None
     return [Path(p) for p in paths] if paths else [path]

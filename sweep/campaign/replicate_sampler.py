@@ -71,12 +71,26 @@ def _setup(sampler, spec):
     _, own = split_settings({k: v for k, v in spec.sampler.items() if k != "kind"})
     rs = ReplicateSettings(max_replicates=spec.replicates["porosity_seed"], level=cfg.settings.confidence, **own)
     labels = cfg.settings.labels
-    positive = (lambda v: str(v) == labels[1]) if len(labels) == 2 else (lambda v: str(v) in ("True", "1", "fracturing"))
-    return cfg, rs, positive
+    if len(labels) == 2:   # labels = [negative, positive]; another label is left out, as by the boundary sampler
+        return cfg, rs, lambda v: {labels[0]: False, labels[1]: True}.get(str(v))
+    return cfg, rs, lambda v: _boolean(v, cfg.settings.label)
+
+
+_BOOLEAN = {"True": True, "1": True, "1.0": True, "fracturing": True,
+            "False": False, "0": False, "0.0": False, "porous_invasion": False}
+
+
+def _boolean(v, label: str) -> bool:
+    """A boolean label column's value; SpecError naming ``sampler.label`` for a text label without ``labels``."""
+    if str(v) not in _BOOLEAN:
+        raise SpecError(f"sampler.label={label!r}: value {v!r} is not a boolean; a text column needs "
+                        "labels = [negative, positive] (the others are left out)")
+    return _BOOLEAN[str(v)]
 
 
 def _observed(table, cfg, positive, base_seed: int) -> dict:
-    """{(coords key, replicate): label (bool) or None for a failed run} of the table's runs."""
+    """{(coords key, replicate): label (bool) or None for a failed run or a label outside ``labels``} of the
+    table's runs."""
     out: dict = {}
     if table is None or len(table) == 0:
         return out

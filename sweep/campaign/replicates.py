@@ -29,7 +29,7 @@ import numpy as np
 from sweep.campaign.spec_model import SpecError
 
 __all__ = ["REPLICATE_KEYS", "check_replicates", "replicate_count", "expand_replicates", "point_table",
-           "write_points", "CONTINUOUS_MEASURES"]
+           "write_points", "fixed_columns", "CONTINUOUS_MEASURES"]
 
 # replicate key -> (namespace, field it varies)
 REPLICATE_KEYS: dict[str, tuple[str, str]] = {"porosity_seed": ("params", "seed"),
@@ -114,10 +114,34 @@ def _axis_columns(table, axis_names: Sequence[str]) -> list[str]:
     return cols
 
 
-def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
-    """One row per point (equal axis values) of a campaign table with one row per run (pandas DataFrame).
+def fixed_columns(table, axis_cols: Sequence[str]) -> dict[str, str]:
+    """{name: column} of the model parameters and run options other than the axes and the replicated seeds whose
+    value differs between runs of the table (blocks that fix them at other values): they tell points apart too.
+    Columns with a missing value (a row of an older table) or non-scalar values are left out."""
+    from sweep.campaign.spec_model import option_fields, parameter_fields
 
-    Columns: the axis values; ``n_runs`` (rows), ``n_ok`` (ok runs with a label: the replicates counted);
+    seeds = {name for _, name in REPLICATE_KEYS.values()}
+    out = {}
+    for prefix, names in (("param_", parameter_fields()), ("opt_", option_fields())):
+        for n in names:
+            c = next((c for c in (n, prefix + n) if c in table.columns), None)
+            if c is None or n in seeds or c in axis_cols or n in out:
+                continue
+            v = table[c]
+            if v.isna().any() or not all(isinstance(x, (bool, int, float, str, np.generic)) for x in v):
+                continue
+            if v.nunique() > 1:
+                out[n] = c
+    return out
+
+
+def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
+    """One row per point of a campaign table with one row per run (pandas DataFrame): the runs with equal axis
+    values and equal values of every other parameter and run option but the replicated seeds (blocks may fix a
+    parameter at other values: ``fixed_columns``).
+
+    Columns: the axis values (then those other parameters that differ between points); ``n_runs`` (rows),
+    ``n_ok`` (ok runs with a label: the replicates counted);
     for the boolean ``fracturing`` and each regime r seen: ``p_fracturing`` / ``p_<r>`` the fraction of the
     ok replicates with that label and its Wilson interval ``..._lo``, ``..._hi`` at ``level``; ``mixed``
     (the replicates' regimes disagree); for each continuous measure of CONTINUOUS_MEASURES present:
@@ -131,15 +155,17 @@ def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
     if table is None or len(table) == 0:
         return pd.DataFrame()
     cols = _axis_columns(table, axis_names)
+    fixed = fixed_columns(table, cols)
+    names, cols = [*axis_names, *fixed], [*cols, *fixed.values()]
     ok = (table["status"] == "ok") if "status" in table.columns else pd.Series(True, index=table.index)
     regimes = sorted({str(v) for v in table.loc[ok, "regime"].dropna()}) if "regime" in table.columns else []
     rows = []
     groups = table.groupby(cols, sort=False, dropna=False) if cols else [((), table)]
     for vals, g in groups:
         vals = vals if isinstance(vals, tuple) else (vals,)
-        row: dict[str, Any] = dict(zip(axis_names, vals))
+        row: dict[str, Any] = dict(zip(names, vals))
         good = g[ok.loc[g.index]]
-        row["n_runs"], row["n_ok"] = len(g), len(good)
+        row["n_runs"], row["n_ok"] = len(g), int(_labelled(good).sum())
         for name, hit in _label_columns(good, regimes):
             k, n = int(np.sum(hit)), len(hit)
             lo, hi = wilson_interval(k, n, level)
@@ -151,6 +177,16 @@ def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
                 row[c] = g[c].iloc[0]
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+def _labelled(good):
+    """Which ok runs carry a label (a regime or the fracturing flag): a run whose classification failed has none."""
+    import pandas as pd
+
+    cols = [c for c in ("regime", "fracturing") if c in good.columns]
+    if not cols:
+        return pd.Series(True, index=good.index)
+    return good[cols].notna().any(axis=1)
 
 
 def _label_columns(good, regimes):

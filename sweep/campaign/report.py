@@ -103,7 +103,9 @@ def _replicate_lines(spec, table) -> list[str]:
     L[-1] += "."
     if "fracturing" in table.columns:
         ok = table[table["status"] == "ok"] if "status" in table.columns else table
-        L.append(f"{100 * ok['fracturing'].astype(bool).mean():.0f} % of the finished runs fracture.")
+        fr = ok["fracturing"].dropna().astype(bool)     # a finished run without a label (classification failed): out
+        L.append(f"{100 * fr.mean():.0f} % of the {len(fr)} finished runs with a label fracture." if len(fr) else
+                 "No finished run has a fracturing label.")
     return L + ["Per point: `points.csv` (label probabilities with Wilson 95 % intervals, the continuous measures' "
                 "mean and spread).", ""]
 

@@ -137,8 +137,11 @@ def write_html_report(spec, root="results", *, code_hash: str | None = None, plo
     check_not_emptier(store, table)
     figs = plot_campaign(spec, root, code_hash=code_hash, table=table) if plot else sorted(store.figures_dir.glob("*"))
     figs = [Path(f) for f in figs if Path(f).suffix == ".png"]
-    if not table.empty:
+    if not table.empty:   # the table and, with [replicates], its points from the same rows
+        from sweep.campaign.replicates import write_points
+
         store.write_table(table, swept=spec.axis_names)
+        write_points(spec, table, store)
     e = html.escape
     L = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
          f"<title>Campaign {e(spec.name)}</title><style>{_CSS}</style></head><body>",

@@ -25,6 +25,7 @@ from sweep.campaign.plan import Plan, _counts_text, _keys, _todo, as_spec, check
 from sweep.campaign.scheduler import DefaultRunner, ExecConfig, RunTask, classification_dict, iter_records
 from sweep.campaign.spec import CampaignSpec, resolve_runner, samplers
 from sweep.campaign.store import ResultsStore, current_code_hash, run_key, write_text_atomic
+from sweep.campaign.replicates import write_points
 from sweep.campaign.table import build_table, write_table
 
 __all__ = ["CampaignResult", "run_campaign", "reclassify", "sampler_status"]
@@ -269,8 +270,10 @@ def _execute(plan: Plan, todo, cfg: ExecConfig, result: CampaignResult, *, jobs,
                 if fail_fast:
                     result.aborted = True
                     break
-            if time.perf_counter() - last_write > table_interval:
-                plan.store.write_table(build_table(plan.spec, plan=plan), swept=plan.spec.axis_names)
+            if time.perf_counter() - last_write > table_interval:   # the table and its points, never one alone
+                table = build_table(plan.spec, plan=plan)
+                plan.store.write_table(table, swept=plan.spec.axis_names)
+                write_points(plan.spec, table, plan.store)
                 last_write = time.perf_counter()
     finally:
         gen.close()

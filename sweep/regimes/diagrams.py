@@ -204,8 +204,9 @@ def _draw_separatrix_band(ax, C, cs, fr, level: float = 0.95):
     except ValueError:
         return None
     lim = np.log(cs.min()) - 0.5 * math.log(10.0), np.log(cs.max()) + 0.5 * math.log(10.0)
-    lo, hi = (np.exp(np.clip(v, *lim)) for v in (band.lo, band.hi))
-    clipped = bool(np.any(band.lo < lim[0]) or np.any(band.hi > lim[1]))
+    edge_lo, edge_hi = band.edges              # an unbounded side reaches the clip
+    lo, hi = (np.exp(np.clip(v, *lim)) for v in (edge_lo, edge_hi))
+    clipped = bool(np.any(edge_lo < lim[0]) or np.any(edge_hi > lim[1]))
     ax.fill_between(band.C, lo, hi, color="0.5", alpha=0.3, lw=0, zorder=0,
                     label=f"{level:.0%} band of Ca*$_c$ (whole line, profile likelihood)"
                           + (", clipped" if clipped else ""))

@@ -54,22 +54,36 @@ def wilson_interval(k: Any, n: Any, level: float = 0.95) -> tuple[np.ndarray, np
     return lo, hi
 
 
-def replicate_points(x: Any, y: Any, label: Any, level: float = 0.95) -> dict[str, np.ndarray]:
-    """Group runs by their point (x, y) (equal values, 12 significant digits): per point ``x``, ``y``, ``n`` runs,
-    ``k`` runs labelled True, ``p`` = k/n, the Wilson interval ``lo``, ``hi`` at ``level``, and ``mixed`` (the
-    replicates disagree: 0 < k < n). Units those of x and y."""
+def _sig12(v) -> Any:
+    """A point coordinate as a grouping key: floats to 12 significant digits, other values as they are."""
+    try:
+        return float(f"{float(v):.12g}")
+    except (TypeError, ValueError):
+        return v
+
+
+def replicate_points(x: Any, y: Any, label: Any, level: float = 0.95, *, point: Any = None) -> dict[str, np.ndarray]:
+    """Group runs by their point: per point ``x``, ``y``, ``n`` runs, ``k`` runs labelled True, ``p`` = k/n, the
+    Wilson interval ``lo``, ``hi`` at ``level``, and ``mixed`` (the replicates disagree: 0 < k < n). Units those of
+    x and y.  A point is ``point`` (one id per run: e.g. the tuple of the campaign's axis values), else (x, y)
+    (equal values, 12 significant digits): distinct points can share (x, y) (Ca* ~ eta_o w_i), and their runs
+    are then not replicates of one point."""
     x, y = np.asarray(x, float).ravel(), np.asarray(y, float).ravel()
     lab = np.asarray(label).astype(bool).ravel()
-    if not x.size == y.size == lab.size:
-        raise ValueError(f"x, y, label lengths=({x.size}, {y.size}, {lab.size}): must be equal")
-    keys = np.array([float(f"{a:.12g}") for a in x]), np.array([float(f"{b:.12g}") for b in y])
-    uniq, inv = np.unique(np.c_[keys], axis=0, return_inverse=True)
-    inv = inv.ravel()
-    n = np.bincount(inv, minlength=len(uniq)).astype(int)
-    k = np.bincount(inv, weights=lab.astype(float), minlength=len(uniq)).astype(int)
+    ids = list(zip(x, y)) if point is None else list(point)
+    if not x.size == y.size == lab.size == len(ids):
+        raise ValueError(f"x, y, label, point lengths=({x.size}, {y.size}, {lab.size}, {len(ids)}): must be equal")
+    keys = [tuple(_sig12(v) for v in (i if isinstance(i, tuple) else (i,))) for i in ids]
+    first: dict[tuple, int] = {}
+    inv = np.array([first.setdefault(kk, len(first)) for kk in keys], int)
+    m = len(first)
+    starts = np.unique(inv, return_index=True)[1]           # each point's first run (ids in order of appearance)
+    n = np.bincount(inv, minlength=m).astype(int)
+    k = np.bincount(inv, weights=lab.astype(float), minlength=m).astype(int)
     lo, hi = wilson_interval(k, n, level)
-    return {"x": uniq[:, 0], "y": uniq[:, 1], "n": n, "k": k, "p": k / np.maximum(n, 1), "lo": lo, "hi": hi,
-            "mixed": (k > 0) & (k < n)}
+    order = np.lexsort((y[starts], x[starts]))               # points sorted by (x, y)
+    return {"x": x[starts][order], "y": y[starts][order], "n": n[order], "k": k[order],
+            "p": (k / np.maximum(n, 1))[order], "lo": lo[order], "hi": hi[order], "mixed": ((k > 0) & (k < n))[order]}
 
 
 # --------------------------------------------------------------------------- the smooth classifier
@@ -95,7 +109,7 @@ def fit_probability_map(C: Any, ca_star: Any, fracturing: Any, *, tolerance: tup
 def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement", y: str = "Ca_star",
                              label: str = "fracturing", level: float = 0.95, alpha: float = 0.05,
                              smooth: bool = True, title: str | None = None, truth: Any = None,
-                             formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
+                             by: Sequence[str] | None = None, formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
     """Ca*-C diagram of label probabilities from replicate runs.
 
     df: one row per run with columns ``x`` (C, %), ``y`` (Ca*, > 0) and ``label`` (bool); rows with a missing
@@ -104,18 +118,20 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
     disagree. The background is the smooth classifier's P(fracturing) with its 0.5 contour (dashed) and the edge of
     that contour's 95 % band (dotted), when ``smooth``. The separatrix and its ``level`` band are drawn only when the fit is significant at ``alpha``
     (:func:`separatrix_significance`); otherwise the figure says why. ``truth``: optional callable C -> Ca*_c
-    drawn dotted (a known boundary). Writes PNG plus ``formats``; returns {"paths", "points", "band",
-    "no_fit_reason", "n_dropped"}.
+    drawn dotted (a known boundary). ``by``: the columns that name a point (a campaign's axes; default ``x`` and
+    ``y``): runs at one (C, Ca*) of distinct points are not one point's replicates. Writes PNG plus ``formats``;
+    returns {"paths", "points", "band", "no_fit_reason", "n_dropped"}.
     """
     from matplotlib.colors import LinearSegmentedColormap
 
     from .diagrams import BLUE, ORANGE, _new_figure, _require, _save
 
-    _require(df, (x, y, label), "plot_probability_diagram")
+    _require(df, (x, y, label, *(by or ())), "plot_probability_diagram")
     lab = df[label]
     ok = df[x].notna() & df[y].notna() & lab.notna() & (df[y].astype(float) > 0)
     C, cs, fr = df[x][ok].to_numpy(float), df[y][ok].to_numpy(float), lab[ok].astype(bool).to_numpy()
-    pts = replicate_points(C, cs, fr, level)
+    ids = list(df.loc[ok, list(by)].itertuples(index=False, name=None)) if by else None
+    pts = replicate_points(C, cs, fr, level, point=ids)
     fig = _new_figure((5.8, 4.6))
     ax = fig.add_subplot(1, 1, 1)
     cmap = LinearSegmentedColormap.from_list("p_frac", [BLUE, "#f7f7f7", ORANGE])
@@ -126,8 +142,9 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
     band, why = _band_or_reason(C, cs, fr, level, alpha)
     ylim = (cs.min() / 10**0.5, cs.max() * 10**0.5)   # the band may leave the sampled range: it is clipped
     if band is not None:
-        lo, hi = (np.exp(np.clip(v, *np.log(ylim))) for v in (band.lo, band.hi))
-        clipped = bool(np.any(band.lo < np.log(ylim[0])) or np.any(band.hi > np.log(ylim[1])))
+        edge_lo, edge_hi = band.edges          # an unbounded side reaches the plot's edge
+        lo, hi = (np.exp(np.clip(v, *np.log(ylim))) for v in (edge_lo, edge_hi))
+        clipped = bool(np.any(edge_lo < np.log(ylim[0])) or np.any(edge_hi > np.log(ylim[1])))
         ax.fill_between(band.C, lo, hi, color="0.5", alpha=0.35, lw=0, zorder=1,
                         label=f"{level:.0%} band of Ca*$_c$" + (" (whole line)" if band.simultaneous else "")
                         + (" (beyond the plot where clipped)" if clipped else ""))
@@ -196,11 +213,12 @@ def _shade_smooth(ax, model, cmap, n: int = 120) -> None:
 
 
 def plot_nf_vs_nb_probabilities(df: Any, out_path: str | Path, *, dp_cri: float | None = None, title: str | None = None,
-                                formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
+                                by: Sequence[str] | None = None, formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
     """N_f-N_b diagram (Sec. 3.8) of regime probabilities from replicate runs.
 
-    df: one row per run with ``N_b``, ``N_f`` (-, > 0) and ``regime``; runs at equal (N_b, N_f) are one point's
-    replicates. Each point takes the symbol and colour of its most probable regime (``REGIME_STYLE``), its opacity
+    df: one row per run with ``N_b``, ``N_f`` (-, > 0) and ``regime``; runs at equal (N_b, N_f) and equal ``by``
+    columns (the campaign's axes: distinct points share (N_b, N_f) on decade grids of eta_o, eta_w and kbar) are
+    one point's replicates. Each point takes the symbol and colour of its most probable regime (``REGIME_STYLE``), its opacity
     that regime's share of the replicates, a black ring when the replicates' regimes disagree and the label
     "k/n" (replicates in the most probable regime). Dashed lines N_f = 1 and N_b = 1. ``dp_cri`` (kPa) goes in the
     title. Writes PNG plus ``formats``; returns {"paths", "points" (DataFrame: N_b, N_f, n, top, p_top, mixed),
@@ -211,12 +229,15 @@ def plot_nf_vs_nb_probabilities(df: Any, out_path: str | Path, *, dp_cri: float 
     from .classify import REGIMES
     from .diagrams import REGIME_STYLE, _new_figure, _require, _save
 
-    _require(df, ("N_b", "N_f", "regime"), "plot_nf_vs_nb_probabilities")
+    by = list(by or ())
+    _require(df, ("N_b", "N_f", "regime", *by), "plot_nf_vs_nb_probabilities")
     nb, nf = df["N_b"].astype(float), df["N_f"].astype(float)
     ok = nb.gt(0) & nf.gt(0) & df["regime"].isin(REGIMES)
     d = pd.DataFrame({"N_b": nb[ok].round(12), "N_f": nf[ok].round(12), "regime": df["regime"][ok].astype(str)})
+    for i, c in enumerate(by):
+        d[f"_by{i}"] = df.loc[ok, c].map(_sig12)
     rows = []
-    for (b, f), g in d.groupby(["N_b", "N_f"], sort=False):
+    for (b, f, *_), g in d.groupby(["N_b", "N_f", *(f"_by{i}" for i in range(len(by)))], sort=False, dropna=False):
         counts = g["regime"].value_counts()
         rows.append({"N_b": b, "N_f": f, "n": int(len(g)), "top": counts.index[0], "k_top": int(counts.iloc[0]),
                      "p_top": float(counts.iloc[0] / len(g)), "mixed": bool(len(counts) > 1)})

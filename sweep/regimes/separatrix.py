@@ -291,6 +291,14 @@ class SeparatrixBand(NamedTuple):
         return ok & (True if self.lo_bounded is None else self.lo_bounded) & (True if self.hi_bounded is None else self.hi_bounded)
 
     @property
+    def edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) edges of the band (ln Ca*_c), -inf / +inf where the labels do not bound it: what a
+        figure draws (``lo`` / ``hi`` hold the search's reach there, which can lie inside the plotted range)."""
+        lo = self.lo if self.lo_bounded is None else np.where(self.lo_bounded, self.lo, -np.inf)
+        hi = self.hi if self.hi_bounded is None else np.where(self.hi_bounded, self.hi, np.inf)
+        return lo, hi
+
+    @property
     def half_width_decades(self) -> np.ndarray:
         """Half the band's width at each C, in decades of Ca*: inf where the labels do not bound it."""
         half = 0.5 * (self.hi - self.lo) / math.log(10.0)
@@ -318,7 +326,13 @@ def _design(C, ca_star, fracturing):
         raise ValueError(f"C, ca_star, fracturing lengths=({Cc.size}, {cs.size}, {y.size}): must be equal and >= 3")
     if not (np.all(np.isfinite(Cc)) and np.all(np.isfinite(cs)) and np.all(cs > 0)):
         raise ValueError("C, ca_star: must be finite, Ca* > 0")
-    return np.c_[np.log(cs), -Cc, -np.ones_like(Cc)], y, _sep_min  # the Jeffreys-penalized optimizer
+    X = np.c_[np.log(cs), -Cc, -np.ones_like(Cc)]
+    if np.linalg.matrix_rank(X) < 3:   # the Fisher information is singular: no likelihood ratio, no band
+        where = (f"every run at C = {Cc[0]:.4g} %" if np.ptp(Cc) == 0 else
+                 f"every run at Ca* = {cs[0]:.4g}" if np.ptp(X[:, 0]) == 0 else "the runs lie on one line ln Ca* = a + b C")
+        raise ValueError(f"C, ca_star: {where}: the separatrix Ca*_c = A exp(B C) is not identifiable (needs runs "
+                         "spread over C and Ca*)")
+    return X, y, _sep_min  # the Jeffreys-penalized optimizer
 
 
 def separatrix_significance(C: Any, ca_star: Any, fracturing: Any) -> tuple[float, float]:
@@ -383,7 +397,10 @@ def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 
     out: dict = {"runs": int(Cc.size), "fracturing": int(fr.sum()), "significant": False, "reason": None}
     if Cc.size < 3 or fr.all() or not fr.any():
         return {**out, "reason": "both regimes are needed to fit a separatrix"}
-    lr, pv = separatrix_significance(Cc, cs, fr)
+    try:
+        lr, pv = separatrix_significance(Cc, cs, fr)
+    except ValueError as exc:     # a design that cannot identify the line
+        return {**out, "reason": str(exc)}
     out.update({"lr": lr, "p_value": pv, "significant": bool(pv < alpha)})
     if not out["significant"]:
         return {**out, "reason": f"not significant: p = {pv:.2g} >= {alpha:g} against a constant probability"}
