@@ -163,6 +163,12 @@ class ProfileOptions(_Checked):
                             doc="delta chi2 of the profile: weighted (series weights n_eff/n from the fit's "
                                 "lag-1 autocorrelation), gaussian (the whitened chi2), marginal (the realization "
                                 "covariance's scale integrated over its sampling distribution from k realizations)")
+    threshold: str = _rule("chi2", "choice", choices=("chi2", "f_realizations"),
+                           doc="delta chi2 threshold of the interval: chi2 (the chi2(1) quantile, 3.84 at 95 %) or "
+                               "f_realizations (the F(1, k - 1) quantile at the same probability, k the mesh "
+                               "realizations the covariance is estimated from: the variance along the strength's "
+                               "direction is known to k - 1 degrees of freedom; 6.61 at k = 6, 18.5 at k = 3; the "
+                               "chi2(1) quantile without realizations; stats.realization_level)")
     emulator: str = _rule("none", "choice", choices=("none", "gp"),
                           doc="gp: the profile points' refits on a Gaussian-process emulator of the coarse model "
                               "(emulator.py), its predictive covariance added to the likelihood's, refined with "

@@ -5,7 +5,9 @@ The Wald interval trusts a linearization at the fit; when the effect's signature
 a calibrated parameter along a curved valley (β against E: a smaller β with a stiffer E reproduces the early
 pressure) it is falsely narrow.  The profile refits the other parameters with the strength held at trial
 values; the interval is where the profile's χ² rises by less than ``level``·scale (3.84: 95 % for one
-parameter; scale: the misfit scale of the Wald interval).  Which χ² is ``[profile] likelihood``: "weighted"
+parameter; scale: the misfit scale of the Wald interval; ``[profile] threshold = "f_realizations"``: level the
+F(1, k − 1) quantile of the same probability, k the mesh realizations the covariance is estimated from,
+:func:`~.stats.realization_level`).  Which χ² is ``[profile] likelihood``: "weighted"
 (per-series weights n_eff/n from the fit's lag-1 autocorrelation, for correlations no covariance models),
 "gaussian" (the whitened χ², −2 ln of the Gaussian likelihood with the modelled covariance: the exact
 interval of a linear model) or "marginal" (the realization covariance's scale integrated over its sampling
@@ -54,9 +56,11 @@ class _Profile:
 
     def __init__(self, problem, fit: Fit, j: int, ids, level: float, fine_forward, emulator=None,
                  correction: StrengthCorrection | None = None):
-        self.problem, self.fit, self.j, self.ids, self.level = problem, fit, j, ids, level
+        self.problem, self.fit, self.j, self.ids = problem, fit, j, ids
         self.em, self.last = emulator, None
         self.po = problem.spec.profile
+        rc = problem.noise.real_cov                  # [profile] threshold: χ²(1) or F(1, k − 1) at its probability
+        self.level = stats.realization_level(level, rc.k if rc is not None else 0, self.po.threshold)
         self.x_hat = np.asarray(fit.x, float)
         self.p = fit.params[j]
         self.free = fit.params[:j] + fit.params[j + 1:]
@@ -64,7 +68,7 @@ class _Profile:
         self.w = (stats.series_weights(fit.r, problem.series[self.mask]) if self.po.likelihood == "weighted"
                   else np.ones(fit.r.size))
         chi2_w, n = stats.effective_chi2(fit.r, self.w)
-        self.thr = level * max(1.0, chi2_w / max(n - len(fit.params), 1.0))
+        self.thr = self.level * max(1.0, chi2_w / max(n - len(fit.params), 1.0))
         self.x_lo, self.x_hi = self.p.x_bounds
         self.wald = wald_bounds(fit, j, self.w)[:2]
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
@@ -440,7 +444,7 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
         out["emulator"] = {**emulator.summary(), "checks": pf.checks,
                            "confirmed": all(c["agrees"] for c in _last_per_side(pf.checks))}
     if po.smoothing == "quadratic":
-        _smoothed(out, points, pf.thr, level, pf.p)
+        _smoothed(out, points, pf.thr, pf.level, pf.p)
     return out, pf.cm
 
 
