@@ -18,6 +18,7 @@ from sweep.discrepancy.noise import NoiseModel
 from sweep.discrepancy.options import NoiseOptions, parse_options
 from sweep.discrepancy.realization_blocks import block_kernel, block_rows
 from sweep.discrepancy.realizations import RealizationCovariance
+from sweep.discrepancy.stats import realization_level
 
 OBS = "p_inj"
 
@@ -218,10 +219,17 @@ def _interval(nm: NoiseModel, y: np.ndarray, g: np.ndarray, likelihood: str,
     return float(th), out
 
 
+def f_level(nm: NoiseModel, J: np.ndarray) -> float:
+    """The Δχ² threshold of ``[profile] threshold = "f_realizations"`` at 95 % for the one-parameter model of
+    standardized Jacobian ``J`` (n, 1) on every row: F(1, ν), ν = nm.strength_dof."""
+    return realization_level(3.84, nm.strength_dof(J, 0, np.ones(J.shape[0], bool)))
+
+
 def _draws(blocks: str, n_draws: int, rho: float, k: int, likelihood: str, seed: int = 21, n_cond: int = 4,
-           levels=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per data set (``n_draws``): the estimate θ̂ and the interval's (lower, upper) at each of ``levels``
-    ((n_draws,), (n_draws, L), (n_draws, L); θ_true = 1; a callable level is called with k).  ``n_cond``
+           levels=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per data set (``n_draws``): the estimate θ̂, the interval's (lower, upper) at each of ``levels`` and the
+    levels ((n_draws,), (n_draws, L) × 3; θ_true = 1; a callable level is called with the data set's noise model
+    and the standardized Jacobian (n, 1), as :func:`f_level`).  ``n_cond``
     conditions × 12 times (0.1–1.2 s) of one observable y_c(t) = θ (1 + c/4) t; the coarse model exact up to
     the realization deviation (v = 1, τ = 0.3 s, correlation ρ between conditions); k realizations give the
     correction (their mean deviation) and the covariance; the data are one more realization plus noise
@@ -229,25 +237,27 @@ def _draws(blocks: str, n_draws: int, rho: float, k: int, likelihood: str, seed:
     lay = _layout(n_cond=n_cond, n=12, t_end=1.2)
     g = (1.0 + lay.series / 4.0) * lay.t
     rng = np.random.default_rng(seed)
-    lv = None if levels is None else [x(k) if callable(x) else x for x in levels]
-    est, lo, hi = [], [], []
+    est, lo, hi, used = [], [], [], []
     with one_openblas_thread():                  # small matrices: BLAS threads only wait on each other
         for _ in range(n_draws):
             dev = _shared_deviations(rng, k + 1, n_cond, lay.t[:12], rho, tau=0.3)
             y = g + dev[k] + 0.3 * rng.standard_normal(lay.n) - dev[:k].mean(axis=0)
             nm = NoiseModel(y, 0.3 * np.ones(lay.n), lay)
             nm.set_discretization(np.zeros(lay.n), g + dev[:k], 0.0, blocks)
+            J = nm.standardize(g, np.ones(lay.n, bool), 50.0)[:, None]
+            lv = None if levels is None else [x(nm, J) if callable(x) else x for x in levels]
             th, ints = _interval(nm, y, g, likelihood, lv)
             est.append(th)
             lo.append([a for a, _ in ints])
             hi.append([b for _, b in ints])
-    return np.array(est), np.array(lo), np.array(hi)
+            used.append(lv or [np.nan])
+    return np.array(est), np.array(lo), np.array(hi), np.array(used)
 
 
 def _coverage(blocks: str, n_draws: int, rho: float, k: int, likelihood: str, seed: int = 21) -> tuple[float, float]:
     """Coverage of θ_true = 1 by the 95 % interval and the mean of the intervals' midpoints over ``n_draws``
     data sets of four conditions (:func:`_draws`)."""
-    _, lo, hi = _draws(blocks, n_draws, rho, k, likelihood, seed)
+    _, lo, hi, _ = _draws(blocks, n_draws, rho, k, likelihood, seed)
     return float(np.mean((lo[:, 0] <= 1.0) & (1.0 <= hi[:, 0]))), float(np.mean(0.5 * (lo[:, 0] + hi[:, 0])))
 
 
@@ -278,15 +288,13 @@ def test_shared_realization_marginal_interval_with_six_realizations():
 @pytest.mark.slow
 @pytest.mark.parametrize("k, n_draws", [(6, 200), (3, 200)])
 def test_the_f_threshold_covers_at_few_realizations(k, n_draws):
-    """``[profile] threshold = "f_realizations"`` (stats.realization_level, F(1, k − 1)) on the k = 6 and k = 3
-    toys of four conditions sharing the data's realization ("observable" blocks, the marginal deviance), each
-    data set's interval at both thresholds: the F threshold covers at >= 0.90 (binomial sd over 200 data sets
-    0.017 at 0.94; measured over 1000 sets in results/discrepancy/shared_realization/README.md: 0.94 at k = 6,
-    0.97 at k = 3) where the χ²(1) threshold does not (0.87 and 0.73 there), and the estimate's mean is within
-    3 of its MC sds of the truth."""
-    from sweep.discrepancy.stats import realization_level
-
-    est, lo, hi = _draws("observable", n_draws, 0.9, k, "marginal", levels=[3.84, lambda kk: realization_level(3.84, kk)])
+    """``[profile] threshold = "f_realizations"`` (F(1, ν), ν from NoiseModel.strength_dof) on the k = 6 and
+    k = 3 toys of four conditions sharing the data's realization ("observable" blocks, the marginal deviance),
+    each data set's interval at both thresholds: the F threshold covers at >= 0.90 (binomial sd over 200 data
+    sets 0.017 at 0.94; measured over 1000 sets in results/discrepancy/shared_realization/README.md) where the
+    χ²(1) threshold does not (0.87 and 0.73 there), and the estimate's mean is within 3 of its MC sds of the
+    truth."""
+    est, lo, hi, _ = _draws("observable", n_draws, 0.9, k, "marginal", levels=[3.84, f_level])
     cov_chi2, cov_f = np.mean((lo <= 1.0) & (1.0 <= hi), axis=0)
     assert cov_f >= 0.90 and cov_chi2 < 0.90 and cov_f - cov_chi2 >= 0.04, (cov_chi2, cov_f)
     assert abs(est.mean() - 1.0) <= 3.0 * est.std(ddof=1) / np.sqrt(n_draws), est.mean()

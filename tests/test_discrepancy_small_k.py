@@ -1,8 +1,10 @@
-"""The profile interval's threshold at few mesh realizations k ([profile] threshold = "f_realizations",
-stats.realization_level): the F(1, k − 1) quantile of the χ²(1) level's probability.  Known answers: the
-closed-form Student quantiles at k = 2 (Cauchy) and k = 3, the χ²(1) level as k → ∞ and without
-realizations, the exact coverage of one more realization's prediction interval (Student 1908) through the
-workflow's own noise model, and the threshold of a linear model's profile scaled by exactly that ratio."""
+"""The profile interval's threshold at few mesh realizations k ([profile] threshold = "f_realizations"): the
+F(1, ν) quantile of the χ²(1) level's probability (stats.realization_level), ν the Welch–Satterthwaite degrees
+of freedom of the strength's variance whose realization part is known to k − 1 (NoiseModel.strength_dof).
+Known answers: the closed-form Student quantiles at ν = 1 (Cauchy) and ν = 2, the χ²(1) level at ν = ∞; ν =
+k − 1 when the realization term is all of the variance, the Welch formula with a known noise share, ∞ without
+realizations; the exact coverage of one more realization's prediction interval (Student 1908) through the
+workflow's own noise model; the threshold of a linear model's profile scaled by exactly that ratio."""
 from __future__ import annotations
 
 import math
@@ -14,22 +16,45 @@ from scipy.stats import chi2, t
 from sweep.discrepancy.layout import CurveLayout
 from sweep.discrepancy.noise import NoiseModel
 from sweep.discrepancy.options import ProfileOptions, parse_options
-from sweep.discrepancy.stats import realization_level
+from sweep.discrepancy.stats import realization_level, welch_dof
 
 LEVEL = float(chi2.ppf(0.95, 1))          # 3.841
 
 
 def test_the_f_level_is_students_t_squared_in_closed_form_and_chi2_in_the_limit():
     """F(1, ν) = t²_ν: ν = 1 the Cauchy quantile tan(π (p − ½)), ν = 2 the closed form (2p − 1)/√(2p(1 − p))
-    (p = 0.975 for 95 %); k → ∞ the χ²(1) level; "chi2" and k < 2 (no estimated covariance) the level itself."""
+    (p = 0.975 for 95 %); ν → ∞ the χ²(1) level, ν = ∞ exactly it; decreasing in ν."""
     p = 0.975
-    assert realization_level(LEVEL, 2) == pytest.approx(math.tan(math.pi * (p - 0.5)) ** 2, rel=1e-9)
-    assert realization_level(LEVEL, 3) == pytest.approx(((2 * p - 1) / math.sqrt(2 * p * (1 - p))) ** 2, rel=1e-9)
-    assert realization_level(LEVEL, 10**8) == pytest.approx(LEVEL, rel=1e-6)
-    lv = [realization_level(LEVEL, k) for k in (3, 6, 20, 100)]
+    assert realization_level(LEVEL, 1) == pytest.approx(math.tan(math.pi * (p - 0.5)) ** 2, rel=1e-9)
+    assert realization_level(LEVEL, 2) == pytest.approx(((2 * p - 1) / math.sqrt(2 * p * (1 - p))) ** 2, rel=1e-9)
+    assert realization_level(LEVEL, 1e8) == pytest.approx(LEVEL, rel=1e-6)
+    assert realization_level(LEVEL, math.inf) == LEVEL
+    lv = [realization_level(LEVEL, nu) for nu in (2, 5, 19, 99)]
     assert all(a > b for a, b in zip(lv, lv[1:])) and lv[-1] > LEVEL
-    assert realization_level(LEVEL, 6, "chi2") == LEVEL
-    assert realization_level(LEVEL, 1) == LEVEL and realization_level(LEVEL, 0) == LEVEL
+
+
+def _one_point(sig: float, fines: np.ndarray) -> NoiseModel:
+    """A NoiseModel of one observation (σ = ``sig`` kPa) with the realizations ``fines`` (k,) as its covariance."""
+    lay = CurveLayout(np.zeros(1, int), np.array(["p_inj"]), np.array([0.1]))
+    nm = NoiseModel(np.zeros(1), np.full(1, sig), lay)
+    nm.set_discretization(np.zeros(1), np.asarray(fines, float)[:, None], 0.0)
+    return nm
+
+
+def test_the_strength_dof_is_welch_satterthwaite_with_the_realizations_known_to_k_minus_one():
+    """One observation y = θ + error: V = σ² + (1 + 1/k) s² and ν = (k − 1)(V/((1 + 1/k) s²))² (Welch), k − 1
+    when σ → 0, ∞ without realizations (k < 2); the Jacobian's scale does not matter."""
+    fines = np.array([0.3, -1.1, 0.9, 0.2])
+    k, vr = fines.size, (1 + 1 / fines.size) * np.var(fines, ddof=1)
+    mask = np.ones(1, bool)
+    for sig in (0.5, 2.0):
+        nm = _one_point(sig, fines)
+        J = nm.standardize(np.ones(1), mask, 50.0)[:, None] * 3.0
+        assert nm.strength_dof(J, 0, mask) == pytest.approx((k - 1) * ((sig**2 + vr) / vr) ** 2, rel=1e-9)
+    nm = _one_point(1e-6, fines)
+    assert nm.strength_dof(np.ones((1, 1)), 0, mask) == pytest.approx(k - 1, rel=1e-9)
+    assert _one_point(0.5, fines[:1]).strength_dof(np.ones((1, 1)), 0, mask) == math.inf
+    assert welch_dof(2.0, 1.0, 3) == 12.0 and welch_dof(1.0, 0.0, 3) == math.inf
 
 
 def test_the_f_level_gives_one_more_realizations_prediction_interval_its_exact_coverage():
@@ -39,16 +64,15 @@ def test_the_f_level_gives_one_more_realizations_prediction_interval_its_exact_c
     Over 20000 data sets the F-level interval covers at 0.95 and the χ²-level one at P(|t₂| < 1.96) = 0.811
     (analytic), each within 3 binomial sds (0.0046 and 0.0083)."""
     k, n_sets = 3, 20000
-    lay = CurveLayout(np.zeros(1, int), np.array(["p_inj"]), np.array([0.1]))
     dev = np.random.default_rng(11).standard_normal((n_sets, k + 1))
     y = 1.0 + dev[:, k] - dev[:, :k].mean(axis=1)
     d2 = (y - 1.0) ** 2 / ((1 + 1 / k) * np.var(dev[:, :k], axis=1, ddof=1) + 1e-12)
     mask = np.ones(1, bool)
-    for i in range(20):                                   # the workflow's whitening is this Δχ²
-        nm = NoiseModel(y[i : i + 1], np.full(1, 1e-6), lay)
-        nm.set_discretization(np.zeros(1), dev[i, :k, None], 0.0)
+    for i in range(20):                                   # the workflow's whitening and ν give this Δχ², k − 1
+        nm = _one_point(1e-6, dev[i, :k])
         assert float(nm.standardize(y[i : i + 1] - 1.0, mask, 50.0)[0] ** 2) == pytest.approx(d2[i], rel=1e-9)
-    cover_f = np.mean(d2 <= realization_level(LEVEL, k))
+        assert nm.strength_dof(np.ones((1, 1)), 0, mask) == pytest.approx(k - 1, rel=1e-6)
+    cover_f = np.mean(d2 <= realization_level(LEVEL, k - 1))
     cover_chi2 = np.mean(d2 <= LEVEL)
     want_chi2 = 2 * t.cdf(math.sqrt(LEVEL), k - 1) - 1
     assert abs(cover_f - 0.95) <= 3 * math.sqrt(0.95 * 0.05 / n_sets), cover_f
@@ -58,7 +82,8 @@ def test_the_f_level_gives_one_more_realizations_prediction_interval_its_exact_c
 def test_the_profile_threshold_of_a_linear_model_scales_by_the_f_over_chi2_ratio(tmp_path):
     """The linear-Gaussian problem of test_discrepancy_coverage (Δχ² exactly quadratic in the strength) with
     a realization covariance from k = 4 curves: under "f_realizations" the threshold is the "chi2" one times
-    F(1, 3)/χ²(1) (10.13/3.841) and the interval the same centre with its half-widths √ of that ratio wider."""
+    F(1, ν)/χ²(1), ν = strength_dof (> k − 1: σ is part of the variance), and the interval the same centre with
+    its half-widths √ of that ratio wider."""
     from dataclasses import replace
 
     from sweep.discrepancy.profile import profile_interval
@@ -72,7 +97,9 @@ def test_the_profile_threshold_of_a_linear_model_scales_by_the_f_over_chi2_ratio
     pr = profile_interval(prob, fit, 1, train)
     prob.spec = replace(prob.spec, profile=replace(prob.spec.profile, threshold="f_realizations"))
     pf = profile_interval(prob, fit, 1, train)
-    ratio = realization_level(3.841, 4) / 3.841                          # profile_interval's level
+    nu = prob.noise.strength_dof(fit.J, 1, prob.mask(train))
+    assert pr["threshold_dof"] is None and pf["threshold_dof"] == nu and nu > 3.0        # >= k − 1
+    ratio = realization_level(3.841, nu) / 3.841                          # profile_interval's level
     assert pf["threshold"] == pytest.approx(pr["threshold"] * ratio, rel=1e-9)
     centre = fit.params[1].from_x(fit.x[1])
     tol = 2e-3 * (pr["upper"] - pr["lower"])                              # the optimizer's precision
@@ -84,7 +111,7 @@ def test_an_unknown_threshold_is_refused_in_one_line():
     assert ProfileOptions().threshold == "chi2"
     with pytest.raises(ValueError, match=r"profile\.threshold='t'.*\"chi2\" or \"f_realizations\""):
         parse_options({"profile": {"threshold": "t"}})
-    with pytest.raises(ValueError, match=r"threshold='F'.*one of \('chi2', 'f_realizations'\)"):
-        realization_level(LEVEL, 6, "F")
     with pytest.raises(ValueError, match=r"level=-1.*> 0"):
         realization_level(-1.0, 6)
+    with pytest.raises(ValueError, match=r"nu=0.*> 0"):
+        realization_level(LEVEL, 0)

@@ -165,10 +165,11 @@ class ProfileOptions(_Checked):
                                 "covariance's scale integrated over its sampling distribution from k realizations)")
     threshold: str = _rule("chi2", "choice", choices=("chi2", "f_realizations"),
                            doc="delta chi2 threshold of the interval: chi2 (the chi2(1) quantile, 3.84 at 95 %) or "
-                               "f_realizations (the F(1, k - 1) quantile at the same probability, k the mesh "
-                               "realizations the covariance is estimated from: the variance along the strength's "
-                               "direction is known to k - 1 degrees of freedom; 6.61 at k = 6, 18.5 at k = 3; the "
-                               "chi2(1) quantile without realizations; stats.realization_level)")
+                               "f_realizations (the F(1, nu) quantile at the same probability, nu the "
+                               "Welch-Satterthwaite degrees of freedom of the strength's variance whose mesh-"
+                               "realization part is known to k - 1, k the realizations: nu = k - 1 when that part "
+                               "is all of it, 6.61 at k = 6, 18.5 at k = 3; chi2(1) without realizations; "
+                               "NoiseModel.strength_dof)")
     emulator: str = _rule("none", "choice", choices=("none", "gp"),
                           doc="gp: the profile points' refits on a Gaussian-process emulator of the coarse model "
                               "(emulator.py), its predictive covariance added to the likelihood's, refined with "

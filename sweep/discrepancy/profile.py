@@ -6,8 +6,8 @@ a calibrated parameter along a curved valley (β against E: a smaller β with a 
 pressure) it is falsely narrow.  The profile refits the other parameters with the strength held at trial
 values; the interval is where the profile's χ² rises by less than ``level``·scale (3.84: 95 % for one
 parameter; scale: the misfit scale of the Wald interval; ``[profile] threshold = "f_realizations"``: level the
-F(1, k − 1) quantile of the same probability, k the mesh realizations the covariance is estimated from,
-:func:`~.stats.realization_level`).  Which χ² is ``[profile] likelihood``: "weighted"
+F(1, ν) quantile of the same probability, ν the degrees of freedom of the strength's variance with its
+realization part known to k − 1, k the mesh realizations: :meth:`~.noise.NoiseModel.strength_dof`).  Which χ² is ``[profile] likelihood``: "weighted"
 (per-series weights n_eff/n from the fit's lag-1 autocorrelation, for correlations no covariance models),
 "gaussian" (the whitened χ², −2 ln of the Gaussian likelihood with the modelled covariance: the exact
 interval of a linear model) or "marginal" (the realization covariance's scale integrated over its sampling
@@ -59,12 +59,13 @@ class _Profile:
         self.problem, self.fit, self.j, self.ids = problem, fit, j, ids
         self.em, self.last = emulator, None
         self.po = problem.spec.profile
-        rc = problem.noise.real_cov                  # [profile] threshold: χ²(1) or F(1, k − 1) at its probability
-        self.level = stats.realization_level(level, rc.k if rc is not None else 0, self.po.threshold)
+        self.mask = problem.mask(ids)
+        self.dof = (problem.noise.strength_dof(fit.J, j, self.mask) if self.po.threshold == "f_realizations"
+                    else math.inf)             # [profile] threshold: χ²(1), or F(1, ν) at its probability
+        self.level = stats.realization_level(level, self.dof)
         self.x_hat = np.asarray(fit.x, float)
         self.p = fit.params[j]
         self.free = fit.params[:j] + fit.params[j + 1:]
-        self.mask = problem.mask(ids)
         self.w = (stats.series_weights(fit.r, problem.series[self.mask]) if self.po.likelihood == "weighted"
                   else np.ones(fit.r.size))
         chi2_w, n = stats.effective_chi2(fit.r, self.w)
@@ -430,6 +431,7 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
     rough = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
                                     pf.p.from_x(pf.x_hat[j]))
     out = {"lower": float(pf.p.from_x(lo)), "upper": float(pf.p.from_x(hi)), "threshold": float(pf.thr),
+           "threshold_dof": pf.dof if math.isfinite(pf.dof) else None,
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing,
            "reference_offset": float(pf.chi2_hat - pf.chi2_fit)}

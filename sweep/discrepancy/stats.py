@@ -14,7 +14,7 @@ import numpy as np
 
 __all__ = ["lag1_autocorrelation", "profile_roughness", "series_weights", "effective_chi2", "bic", "systematic_test", "series_statistics",
            "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times", "symmetric_whitener",
-           "moving_average", "pooled_lag1", "realization_level", "THRESHOLDS"]
+           "moving_average", "pooled_lag1", "realization_level", "welch_dof", "THRESHOLDS"]
 
 PHASES = ("before_initiation", "peak", "propagation", "late")
 
@@ -135,37 +135,33 @@ def pooled_lag1(dev_series: list) -> float:
     return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
 
 
-# [profile] threshold: the profile interval's Δχ² threshold from χ²(1), or from F(1, k − 1) (realization_level)
+# [profile] threshold: the profile interval's Δχ² threshold from χ²(1), or from F(1, ν) (realization_level)
 THRESHOLDS = ("chi2", "f_realizations")
 
 
-def realization_level(level: float, k: int, threshold: str = "f_realizations") -> float:
-    """The Δχ² threshold of a one-parameter profile interval whose data covariance is estimated from k mesh
-    realizations: the F(1, k − 1) quantile at the probability of the χ²(1) quantile ``level`` (3.841 at
-    95 % -> 6.61 at k = 6, 18.5 at k = 3, 4.38 at k = 20); ``level`` itself for ``threshold`` "chi2" or
-    k < 2 (no estimated covariance).  Dimensionless.
-
-    The strength's estimate is a linear functional aᵀe of the data's residual e (a the fit's influence
-    vector); e's realization part is one more realization about the k-mean, and the likelihood's variance
-    along a, V̂, is estimated from the k realizations.  Any fixed direction's sample variance over k
-    realizations has k − 1 degrees of freedom, (k − 1) V̂/V ~ χ²_{k−1}, and (θ̂ − θ)²/V̂ is then F(1, k − 1)
-    (Student's t²): the prediction interval of one more realization (Student 1908; Hahn & Meeker 1991,
-    Statistical Intervals, §4.7), exact when the realization term is one curve-wide shift.  The covariance
-    model pools per-point variances over time and conditions and claims up to (k − 1)·n_eff degrees of
-    freedom for its scale (RealizationCovariance.scale_dof), but the strength's direction is a slow, shared
-    one whose variance the model extrapolates from the lag-1 correlation and ρ_o rather than measures: it
-    is known to about k − 1 degrees of freedom (the dof of a variance along one direction, Satterthwaite
-    1946, counted in realizations as the clusters of a cluster-robust variance, Bell & McCaffrey 2002,
-    Survey Methodology 28: 169).  k → ∞ gives ``level``."""
-    if threshold not in THRESHOLDS:
-        raise ValueError(f"realization_level: threshold={threshold!r} is not allowed: one of {THRESHOLDS}")
+def realization_level(level: float, nu: float) -> float:
+    """The F(1, ν) quantile at the probability of the χ²(1) quantile ``level`` (3.841 at 95 % -> 6.61 at ν = 5,
+    18.5 at ν = 2, 4.38 at ν = 19): Student's t²_ν, the Δχ² threshold of a one-parameter interval whose
+    variance is known to ν degrees of freedom (:meth:`~.noise.NoiseModel.strength_dof`); ``level`` itself for
+    ν = ∞.  Dimensionless."""
     if not (level > 0 and math.isfinite(level)):
         raise ValueError(f"realization_level: level={level!r} is not allowed: a finite number > 0 (a χ²(1) quantile)")
-    if threshold == "chi2" or k < 2:
+    if not nu > 0:
+        raise ValueError(f"realization_level: nu={nu!r} is not allowed: degrees of freedom > 0 (inf: χ²(1))")
+    if math.isinf(nu):
         return float(level)
     from scipy.stats import chi2, f
 
-    return float(f.ppf(chi2.cdf(level, 1), 1, k - 1))
+    return float(f.ppf(chi2.cdf(level, 1), 1, nu))
+
+
+def welch_dof(var_total: float, var_estimated: float, dof: float) -> float:
+    """Welch–Satterthwaite degrees of freedom of a variance V = V_known + V_est whose part V_est is estimated
+    with ``dof`` degrees of freedom and the rest known: ν = dof (V/V_est)² (Satterthwaite 1946, Biometrics
+    Bulletin 2: 110; Welch 1947, Biometrika 34: 28); ``dof`` when V is all estimated, ∞ when none is."""
+    if var_estimated <= 0.0:
+        return math.inf
+    return float(dof * (var_total / var_estimated) ** 2)
 
 
 # a profile falling by more than this fraction of its threshold walking away from its lowest point is
