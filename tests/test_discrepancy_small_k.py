@@ -1,6 +1,7 @@
-"""The profile interval's threshold at few mesh realizations k ([profile] threshold = "f_realizations"): the
-F(1, ν) quantile of the χ²(1) level's probability (stats.realization_level), ν the Welch–Satterthwaite degrees
-of freedom of the strength's variance whose realization part is known to k − 1 (NoiseModel.strength_dof).
+"""The profile interval's threshold at few mesh realizations k ([profile] threshold = "f_realizations" or
+"f_welch"): the F(1, ν) quantile of the χ²(1) level's probability (stats.realization_level), ν = k − 1 or the
+Welch–Satterthwaite degrees of freedom of the strength's variance whose realization part is known to k − 1
+(NoiseModel.threshold_dof, strength_dof).
 Known answers: the closed-form Student quantiles at ν = 1 (Cauchy) and ν = 2, the χ²(1) level at ν = ∞; ν =
 k − 1 when the realization term is all of the variance, the Welch formula with a known noise share, ∞ without
 realizations; the exact coverage of one more realization's prediction interval (Student 1908) through the
@@ -55,6 +56,11 @@ def test_the_strength_dof_is_welch_satterthwaite_with_the_realizations_known_to_
     assert nm.strength_dof(np.ones((1, 1)), 0, mask) == pytest.approx(k - 1, rel=1e-9)
     assert _one_point(0.5, fines[:1]).strength_dof(np.ones((1, 1)), 0, mask) == math.inf
     assert welch_dof(2.0, 1.0, 3) == 12.0 and welch_dof(1.0, 0.0, 3) == math.inf
+    nm = _one_point(0.5, fines)                 # the option's ν: ∞, k − 1, Welch
+    J = np.ones((1, 1))
+    assert nm.threshold_dof("chi2", J, 0, mask) == math.inf and nm.threshold_dof("f_realizations", J, 0, mask) == 3.0
+    assert nm.threshold_dof("f_welch", J, 0, mask) == nm.strength_dof(J, 0, mask) > 3.0
+    assert _one_point(0.5, fines[:1]).threshold_dof("f_realizations", J, 0, mask) == math.inf
 
 
 def test_the_f_level_gives_one_more_realizations_prediction_interval_its_exact_coverage():
@@ -79,11 +85,12 @@ def test_the_f_level_gives_one_more_realizations_prediction_interval_its_exact_c
     assert abs(cover_chi2 - want_chi2) <= 3 * math.sqrt(want_chi2 * (1 - want_chi2) / n_sets), cover_chi2
 
 
-def test_the_profile_threshold_of_a_linear_model_scales_by_the_f_over_chi2_ratio(tmp_path):
+@pytest.mark.parametrize("kind", ["f_realizations", "f_welch"])
+def test_the_profile_threshold_of_a_linear_model_scales_by_the_f_over_chi2_ratio(tmp_path, kind):
     """The linear-Gaussian problem of test_discrepancy_coverage (Δχ² exactly quadratic in the strength) with
-    a realization covariance from k = 4 curves: under "f_realizations" the threshold is the "chi2" one times
-    F(1, ν)/χ²(1), ν = strength_dof (> k − 1: σ is part of the variance), and the interval the same centre with
-    its half-widths √ of that ratio wider."""
+    a realization covariance from k = 4 curves: under ``kind`` the threshold is the "chi2" one times
+    F(1, ν)/χ²(1), ν = k − 1 = 3 ("f_realizations") or strength_dof (> 3: σ is part of the variance;
+    "f_welch"), and the interval the same centre with its half-widths √ of that ratio wider."""
     from dataclasses import replace
 
     from sweep.discrepancy.profile import profile_interval
@@ -95,10 +102,10 @@ def test_the_profile_threshold_of_a_linear_model_scales_by_the_f_over_chi2_ratio
     prob.noise.set_discretization(np.zeros(n), fines, 0.0)
     fit = prob.fit(fit.params, [fit.x], train)
     pr = profile_interval(prob, fit, 1, train)
-    prob.spec = replace(prob.spec, profile=replace(prob.spec.profile, threshold="f_realizations"))
+    prob.spec = replace(prob.spec, profile=replace(prob.spec.profile, threshold=kind))
     pf = profile_interval(prob, fit, 1, train)
-    nu = prob.noise.strength_dof(fit.J, 1, prob.mask(train))
-    assert pr["threshold_dof"] is None and pf["threshold_dof"] == nu and nu > 3.0        # >= k − 1
+    nu = 3.0 if kind == "f_realizations" else prob.noise.strength_dof(fit.J, 1, prob.mask(train))
+    assert pr["threshold_dof"] is None and pf["threshold_dof"] == nu and nu >= 3.0
     ratio = realization_level(3.841, nu) / 3.841                          # profile_interval's level
     assert pf["threshold"] == pytest.approx(pr["threshold"] * ratio, rel=1e-9)
     centre = fit.params[1].from_x(fit.x[1])
@@ -109,8 +116,10 @@ def test_the_profile_threshold_of_a_linear_model_scales_by_the_f_over_chi2_ratio
 
 def test_an_unknown_threshold_is_refused_in_one_line():
     assert ProfileOptions().threshold == "chi2"
-    with pytest.raises(ValueError, match=r"profile\.threshold='t'.*\"chi2\" or \"f_realizations\""):
+    with pytest.raises(ValueError, match=r"profile\.threshold='t'.*\"chi2\" or \"f_realizations\" or \"f_welch\""):
         parse_options({"profile": {"threshold": "t"}})
+    with pytest.raises(ValueError, match=r"kind='F'.*one of"):
+        _one_point(0.5, np.array([0.1, 0.2, 0.4])).threshold_dof("F", np.ones((1, 1)), 0, np.ones(1, bool))
     with pytest.raises(ValueError, match=r"level=-1.*> 0"):
         realization_level(-1.0, 6)
     with pytest.raises(ValueError, match=r"nu=0.*> 0"):

@@ -132,7 +132,7 @@ VARIANTS = {v.name: v for v in (
             tables={**_REMEDY, "profile": {"likelihood": "marginal", "correction": "linear"}}),
     Variant("wander_point_marginal_k6", shape="wander", k=6, tables={**_REMEDY, "profile": {"likelihood": "marginal"}}),
     Variant("wander_remedy_marginal_f", shape="wander",
-            tables={**_REMEDY, "profile": {"likelihood": "marginal", "threshold": "f_realizations"}}),
+            tables={**_REMEDY, "profile": {"likelihood": "marginal", "threshold": "f_welch"}}),
     Variant("wander_crn_marginal_emulator_refits", shape="wander", k=6,
             tables={**_REMEDY, "profile": {"likelihood": "marginal", "correction": "linear", "emulator": "gp",
                                            "emulate_refits": True}}),

@@ -211,9 +211,23 @@ class NoiseModel:
         members = self.real_cov.mixture_members(mask, self.sig_diag) if self.real_cov is not None else []
         return ScaledMixture(self.with_scaled(mask, extra), members, extra)
 
+    def threshold_dof(self, kind: str, J: np.ndarray, j: int, mask: np.ndarray) -> float:
+        """Degrees of freedom of the profile threshold F(1, ν) for ``[profile] threshold`` = ``kind``: ∞ for
+        "chi2" and without an estimated realization covariance (k < 2); k − 1 for "f_realizations" (the
+        strength's variance counted as estimated from the k realizations: its realization part along the
+        strength's direction is, and when that part dominates the variance this is the whole variance's dof,
+        see :meth:`strength_dof`); the Welch–Satterthwaite ν of :meth:`strength_dof` for "f_welch".  ``J``,
+        ``j``, ``mask``: as :meth:`strength_dof`."""
+        rc = self.real_cov
+        if kind not in stats.THRESHOLDS:
+            raise ValueError(f"threshold_dof: kind={kind!r} is not allowed: one of {stats.THRESHOLDS}")
+        if kind == "chi2" or rc is None or rc.k < 2:
+            return math.inf
+        return float(rc.k - 1) if kind == "f_realizations" else self.strength_dof(J, j, mask)
+
     def strength_dof(self, J: np.ndarray, j: int, mask: np.ndarray) -> float:
         """Degrees of freedom ν of the variance of parameter ``j``'s estimate, its realization part known to
-        k − 1 (``[profile] threshold = "f_realizations"``; ∞ without an estimated realization covariance).
+        k − 1 (``[profile] threshold = "f_welch"``; ∞ without an estimated realization covariance).
 
         ``J`` (n, p): the Jacobian of the standardized residuals (:meth:`standardize` on ``mask``'s rows) in
         the fit's coordinates.  The estimate moves by aᵀe for standardized data errors e (e = diff/σ_diag),
@@ -228,7 +242,10 @@ class NoiseModel:
         (results/discrepancy/shared_realization/README.md, "Few realizations").  V's degrees of freedom are
         then the Welch–Satterthwaite ν = (k − 1)(V/V_r)² (:func:`stats.welch_dof`): k − 1 when the realization
         term is all of V, whereupon (θ̂ − θ)²/V̂ is F(1, k − 1), the prediction interval of one more
-        realization (Student 1908; Hahn & Meeker 1991, Statistical Intervals, §4.7); ∞ as k → ∞ or V_r → 0."""
+        realization (Student 1908; Hahn & Meeker 1991, Statistical Intervals, §4.7); ∞ as k → ∞ or V_r → 0.
+        V_r here is the model's estimate: where it is low (few realizations, the lag-1 τ̂ short), its share and
+        so ν come out too high (plug-in Satterthwaite is anti-conservative at small k), which "f_realizations"
+        (ν = k − 1 for the whole variance) avoids."""
         rc = self.real_cov
         if rc is None or rc.k < 2:
             return math.inf

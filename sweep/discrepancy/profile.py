@@ -5,9 +5,10 @@ The Wald interval trusts a linearization at the fit; when the effect's signature
 a calibrated parameter along a curved valley (β against E: a smaller β with a stiffer E reproduces the early
 pressure) it is falsely narrow.  The profile refits the other parameters with the strength held at trial
 values; the interval is where the profile's χ² rises by less than ``level``·scale (3.84: 95 % for one
-parameter; scale: the misfit scale of the Wald interval; ``[profile] threshold = "f_realizations"``: level the
-F(1, ν) quantile of the same probability, ν the degrees of freedom of the strength's variance with its
-realization part known to k − 1, k the mesh realizations: :meth:`~.noise.NoiseModel.strength_dof`).  Which χ² is ``[profile] likelihood``: "weighted"
+parameter; scale: the misfit scale of the Wald interval; ``[profile] threshold = "f_realizations"`` or
+``"f_welch"``: level the F(1, ν) quantile of the same probability, ν = k − 1 (k the mesh realizations) or the
+Welch–Satterthwaite degrees of freedom of the strength's variance with its realization part known to k − 1:
+:meth:`~.noise.NoiseModel.threshold_dof`).  Which χ² is ``[profile] likelihood``: "weighted"
 (per-series weights n_eff/n from the fit's lag-1 autocorrelation, for correlations no covariance models),
 "gaussian" (the whitened χ², −2 ln of the Gaussian likelihood with the modelled covariance: the exact
 interval of a linear model) or "marginal" (the realization covariance's scale integrated over its sampling
@@ -60,8 +61,8 @@ class _Profile:
         self.em, self.last = emulator, None
         self.po = problem.spec.profile
         self.mask = problem.mask(ids)
-        self.dof = (problem.noise.strength_dof(fit.J, j, self.mask) if self.po.threshold == "f_realizations"
-                    else math.inf)             # [profile] threshold: χ²(1), or F(1, ν) at its probability
+        # [profile] threshold: χ²(1), or F(1, ν) at its probability
+        self.dof = problem.noise.threshold_dof(self.po.threshold, fit.J, j, self.mask)
         self.level = stats.realization_level(level, self.dof)
         self.x_hat = np.asarray(fit.x, float)
         self.p = fit.params[j]

@@ -135,14 +135,15 @@ def pooled_lag1(dev_series: list) -> float:
     return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
 
 
-# [profile] threshold: the profile interval's Δχ² threshold from χ²(1), or from F(1, ν) (realization_level)
-THRESHOLDS = ("chi2", "f_realizations")
+# [profile] threshold: the profile interval's Δχ² threshold from χ²(1), or from F(1, ν) (realization_level) with
+# ν = k − 1 or the Welch–Satterthwaite ν (NoiseModel.threshold_dof)
+THRESHOLDS = ("chi2", "f_realizations", "f_welch")
 
 
 def realization_level(level: float, nu: float) -> float:
     """The F(1, ν) quantile at the probability of the χ²(1) quantile ``level`` (3.841 at 95 % -> 6.61 at ν = 5,
     18.5 at ν = 2, 4.38 at ν = 19): Student's t²_ν, the Δχ² threshold of a one-parameter interval whose
-    variance is known to ν degrees of freedom (:meth:`~.noise.NoiseModel.strength_dof`); ``level`` itself for
+    variance is known to ν degrees of freedom (:meth:`~.noise.NoiseModel.threshold_dof`); ``level`` itself for
     ν = ∞.  Dimensionless."""
     if not (level > 0 and math.isfinite(level)):
         raise ValueError(f"realization_level: level={level!r} is not allowed: a finite number > 0 (a χ²(1) quantile)")
