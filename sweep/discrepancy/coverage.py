@@ -131,6 +131,8 @@ VARIANTS = {v.name: v for v in (
     Variant("wander_crn_marginal", shape="wander", k=6,
             tables={**_REMEDY, "profile": {"likelihood": "marginal", "correction": "linear"}}),
     Variant("wander_point_marginal_k6", shape="wander", k=6, tables={**_REMEDY, "profile": {"likelihood": "marginal"}}),
+    Variant("wander_remedy_marginal_f", shape="wander",
+            tables={**_REMEDY, "profile": {"likelihood": "marginal", "threshold": "f_welch"}}),
     Variant("wander_crn_marginal_emulator_refits", shape="wander", k=6,
             tables={**_REMEDY, "profile": {"likelihood": "marginal", "correction": "linear", "emulator": "gp",
                                            "emulate_refits": True}}),
@@ -217,6 +219,8 @@ def one_draw(su: SetUp, draw: int, variant: Variant = VARIANTS["default"], seed:
                   correction=run.correction_models.get(su.effect))
     row.update({"dchi2_truth": pf.dchi2(fit.params[j].to_x(truth)), "threshold": pf.thr,
                 "dchi2_truth_others_fixed": _dchi2_others_fixed(pf, truth)})
+    if run.spec.profile.threshold != "chi2":
+        row["threshold_dof"] = pf.dof
     return row
 
 

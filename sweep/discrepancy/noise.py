@@ -211,6 +211,49 @@ class NoiseModel:
         members = self.real_cov.mixture_members(mask, self.sig_diag) if self.real_cov is not None else []
         return ScaledMixture(self.with_scaled(mask, extra), members, extra)
 
+    def threshold_dof(self, kind: str, J: np.ndarray, j: int, mask: np.ndarray) -> float:
+        """Degrees of freedom of the profile threshold F(1, ν) for ``[profile] threshold`` = ``kind``: ∞ for
+        "chi2" and without an estimated realization covariance (k < 2); k − 1 for "f_realizations" (the
+        strength's variance counted as estimated from the k realizations: its realization part along the
+        strength's direction is, and when that part dominates the variance this is the whole variance's dof,
+        see :meth:`strength_dof`); the Welch–Satterthwaite ν of :meth:`strength_dof` for "f_welch".  ``J``,
+        ``j``, ``mask``: as :meth:`strength_dof`."""
+        rc = self.real_cov
+        if kind not in stats.THRESHOLDS:
+            raise ValueError(f"threshold_dof: kind={kind!r} is not allowed: one of {stats.THRESHOLDS}")
+        if kind == "chi2" or rc is None or rc.k < 2:
+            return math.inf
+        return float(rc.k - 1) if kind == "f_realizations" else self.strength_dof(J, j, mask)
+
+    def strength_dof(self, J: np.ndarray, j: int, mask: np.ndarray) -> float:
+        """Degrees of freedom ν of the variance of parameter ``j``'s estimate, its realization part known to
+        k − 1 (``[profile] threshold = "f_welch"``; ∞ without an estimated realization covariance).
+
+        ``J`` (n, p): the Jacobian of the standardized residuals (:meth:`standardize` on ``mask``'s rows) in
+        the fit's coordinates.  The estimate moves by aᵀe for standardized data errors e (e = diff/σ_diag),
+        a = W u with u = J (JᵀJ)⁻¹ e_j and W = R^(−1/2) the whitener, and its variance V = aᵀ R a = uᵀu splits
+        into the realization term's part V_r = aᵀ A a (A = D^(−1/2) C D^(−1/2), estimated from the k
+        realizations) and the known rest (measurement noise, the disc_error_fraction term, the jitter term).  The
+        data's realization deviation enters a as one random curve about the k-mean; the sample variance of
+        any fixed projection of it over k realizations has k − 1 degrees of freedom, so V_r is known to k − 1.
+        The covariance model pools per-point variances over time and conditions and claims up to (k − 1)·n_eff
+        for its scale (:meth:`RealizationCovariance.scale_dof`), but the strength's direction is a slow,
+        shared one whose variance it extrapolates from the lag-1 correlation and ρ_o rather than measures
+        (results/discrepancy/shared_realization/README.md, "Few realizations").  V's degrees of freedom are
+        then the Welch–Satterthwaite ν = (k − 1)(V/V_r)² (:func:`stats.welch_dof`): k − 1 when the realization
+        term is all of V, whereupon (θ̂ − θ)²/V̂ is F(1, k − 1), the prediction interval of one more
+        realization (Student 1908; Hahn & Meeker 1991, Statistical Intervals, §4.7); ∞ as k → ∞ or V_r → 0.
+        V_r here is the model's estimate: where it is low (few realizations, the lag-1 τ̂ short), its share and
+        so ν come out too high (plug-in Satterthwaite is anti-conservative at small k), which "f_realizations"
+        (ν = k − 1 for the whole variance) avoids."""
+        rc = self.real_cov
+        if rc is None or rc.k < 2:
+            return math.inf
+        J = np.asarray(J, float)
+        u = J @ np.linalg.pinv(J.T @ J)[:, j]
+        a = self.standardize(u * self.sig_diag[mask], mask, 0.0)          # W u
+        return stats.welch_dof(float(u @ u), rc.realization_form(a, mask, self.sig_diag), rc.k - 1)
+
     def null_calibration(self, mask: np.ndarray, seed: int) -> dict | None:
         """The residual test's null for the estimated realization covariance on ``mask``'s rows (None
         without one): :meth:`RealizationCovariance.null_calibration`."""

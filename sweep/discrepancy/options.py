@@ -16,6 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
+from .stats import THRESHOLDS
+
 __all__ = ["FitOptions", "AcceptanceOptions", "NoiseOptions", "ProfileOptions", "WorkflowOptions",
            "parse_options", "OPTION_TABLES", "REMOVED_WORKFLOW_KEYS"]
 
@@ -167,6 +169,13 @@ class ProfileOptions(_Checked):
                             doc="delta chi2 of the profile: weighted (series weights n_eff/n from the fit's "
                                 "lag-1 autocorrelation), gaussian (the whitened chi2), marginal (the realization "
                                 "covariance's scale integrated over its sampling distribution from k realizations)")
+    threshold: str = _rule("chi2", "choice", choices=THRESHOLDS,
+                           doc="delta chi2 threshold of the interval: chi2 (the chi2(1) quantile, 3.84 at 95 %), "
+                               "f_realizations (the F(1, k - 1) quantile at the same probability, k the mesh "
+                               "realizations: the strength's variance counted as known to k - 1 degrees of freedom; "
+                               "6.61 at k = 6, 18.5 at k = 3) or f_welch (F(1, nu), nu the Welch-Satterthwaite "
+                               "degrees of freedom with only the variance's realization part known to k - 1: "
+                               "between k - 1 and infinity); chi2(1) without realizations (NoiseModel.threshold_dof)")
     emulator: str = _rule("none", "choice", choices=("none", "gp"),
                           doc="gp: the profile points' refits on a Gaussian-process emulator of the coarse model "
                               "(emulator.py), its predictive covariance added to the likelihood's, refined with "

@@ -5,7 +5,10 @@ The Wald interval trusts a linearization at the fit; when the effect's signature
 a calibrated parameter along a curved valley (β against E: a smaller β with a stiffer E reproduces the early
 pressure) it is falsely narrow.  The profile refits the other parameters with the strength held at trial
 values; the interval is where the profile's χ² rises by less than ``level``·scale (3.84: 95 % for one
-parameter; scale: the misfit scale of the Wald interval).  Which χ² is ``[profile] likelihood``: "weighted"
+parameter; scale: the misfit scale of the Wald interval; ``[profile] threshold = "f_realizations"`` or
+``"f_welch"``: level the F(1, ν) quantile of the same probability, ν = k − 1 (k the mesh realizations) or the
+Welch–Satterthwaite degrees of freedom of the strength's variance with its realization part known to k − 1:
+:meth:`~.noise.NoiseModel.threshold_dof`).  Which χ² is ``[profile] likelihood``: "weighted"
 (per-series weights n_eff/n from the fit's lag-1 autocorrelation, for correlations no covariance models),
 "gaussian" (the whitened χ², −2 ln of the Gaussian likelihood with the modelled covariance: the exact
 interval of a linear model) or "marginal" (the realization covariance's scale integrated over its sampling
@@ -54,17 +57,20 @@ class _Profile:
 
     def __init__(self, problem, fit: Fit, j: int, ids, level: float, fine_forward, emulator=None,
                  correction: StrengthCorrection | None = None):
-        self.problem, self.fit, self.j, self.ids, self.level = problem, fit, j, ids, level
+        self.problem, self.fit, self.j, self.ids = problem, fit, j, ids
         self.em, self.last = emulator, None
         self.po = problem.spec.profile
+        self.mask = problem.mask(ids)
+        # [profile] threshold: χ²(1), or F(1, ν) at its probability
+        self.dof = problem.noise.threshold_dof(self.po.threshold, fit.J, j, self.mask)
+        self.level = stats.realization_level(level, self.dof)
         self.x_hat = np.asarray(fit.x, float)
         self.p = fit.params[j]
         self.free = fit.params[:j] + fit.params[j + 1:]
-        self.mask = problem.mask(ids)
         self.w = (stats.series_weights(fit.r, problem.series[self.mask]) if self.po.likelihood == "weighted"
                   else np.ones(fit.r.size))
         chi2_w, n = stats.effective_chi2(fit.r, self.w)
-        self.thr = level * max(1.0, chi2_w / max(n - len(fit.params), 1.0))
+        self.thr = self.level * max(1.0, chi2_w / max(n - len(fit.params), 1.0))
         self.x_lo, self.x_hi = self.p.x_bounds
         self.wald = wald_bounds(fit, j, self.w)[:2]
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
@@ -426,6 +432,7 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
     rough = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
                                     pf.p.from_x(pf.x_hat[j]))
     out = {"lower": float(pf.p.from_x(lo)), "upper": float(pf.p.from_x(hi)), "threshold": float(pf.thr),
+           "threshold_dof": pf.dof if math.isfinite(pf.dof) else None,
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing,
            "reference_offset": float(pf.chi2_hat - pf.chi2_fit)}
@@ -440,7 +447,7 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
         out["emulator"] = {**emulator.summary(), "checks": pf.checks,
                            "confirmed": all(c["agrees"] for c in _last_per_side(pf.checks))}
     if po.smoothing == "quadratic":
-        _smoothed(out, points, pf.thr, level, pf.p)
+        _smoothed(out, points, pf.thr, pf.level, pf.p)
     return out, pf.cm
 
 

@@ -245,6 +245,18 @@ class RealizationCovariance:
             out.append((pos, Q, logdet - np.sum(np.log(np.maximum(w, 1e-300)))))
         return out
 
+    def realization_form(self, x: np.ndarray, mask: np.ndarray, sig_diag: np.ndarray) -> float:
+        """xᵀ A x for ``x`` on ``mask``'s rows, A = D^(−1/2) C D^(−1/2) the realization term alone (no jitter;
+        D = σ_diag²): the part of a whitened direction's variance estimated from the k realizations.
+        Dimensionless."""
+        x_full = np.zeros(mask.size)
+        x_full[mask] = x
+        total = 0.0
+        for _, rows, r, A, _ in self._scaled_blocks(mask, sig_diag):
+            xb = x_full[r]
+            total += float(xb @ A @ xb)
+        return total
+
     def scale_dof(self, rows: np.ndarray) -> float:
         """Degrees of freedom ν of the block's realization-variance scale (the mean of its smoothed v).
 

@@ -73,6 +73,9 @@ Example (units mm, s, kPa)::
     grid = 4                         # with "quadratic": extra profile points per side
     likelihood = "weighted"          # delta chi2: "weighted" (lag-1 series weights), "gaussian" (whitened chi2),
                                      # "marginal" (realization-covariance scale integrated over its k-run estimate)
+    threshold = "chi2"               # delta chi2 threshold: "chi2" (3.84 at 95 %), "f_realizations" (the F(1, k - 1)
+                                     # quantile, k the mesh realizations: 6.61 at k = 6, 18.5 at k = 3) or "f_welch"
+                                     # (F(1, nu), only the variance's realization part known to k - 1)
     emulator = "none"                # "gp": the profile points' refits on a Gaussian-process emulator of the
                                      # coarse model over the fitted parameters (emulator.py), its predictive
                                      # covariance added to the likelihood's; a design of emulator_design runs

@@ -14,7 +14,7 @@ import numpy as np
 
 __all__ = ["lag1_autocorrelation", "profile_roughness", "series_weights", "effective_chi2", "bic", "systematic_test", "series_statistics",
            "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times", "symmetric_whitener",
-           "moving_average", "pooled_lag1"]
+           "moving_average", "pooled_lag1", "realization_level", "welch_dof", "THRESHOLDS"]
 
 PHASES = ("before_initiation", "peak", "propagation", "late")
 
@@ -133,6 +133,36 @@ def pooled_lag1(dev_series: list) -> float:
     num = sum(float(np.sum(d[:, 1:] * d[:, :-1])) for d in dev_series)
     den = sum(float(np.sum(d * d)) for d in dev_series)
     return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
+
+
+# [profile] threshold: the profile interval's Δχ² threshold from χ²(1), or from F(1, ν) (realization_level) with
+# ν = k − 1 or the Welch–Satterthwaite ν (NoiseModel.threshold_dof)
+THRESHOLDS = ("chi2", "f_realizations", "f_welch")
+
+
+def realization_level(level: float, nu: float) -> float:
+    """The F(1, ν) quantile at the probability of the χ²(1) quantile ``level`` (3.841 at 95 % -> 6.61 at ν = 5,
+    18.5 at ν = 2, 4.38 at ν = 19): Student's t²_ν, the Δχ² threshold of a one-parameter interval whose
+    variance is known to ν degrees of freedom (:meth:`~.noise.NoiseModel.threshold_dof`); ``level`` itself for
+    ν = ∞.  Dimensionless."""
+    if not (level > 0 and math.isfinite(level)):
+        raise ValueError(f"realization_level: level={level!r} is not allowed: a finite number > 0 (a χ²(1) quantile)")
+    if not nu > 0:
+        raise ValueError(f"realization_level: nu={nu!r} is not allowed: degrees of freedom > 0 (inf: χ²(1))")
+    if math.isinf(nu):
+        return float(level)
+    from scipy.stats import chi2, f
+
+    return float(f.ppf(chi2.cdf(level, 1), 1, nu))
+
+
+def welch_dof(var_total: float, var_estimated: float, dof: float) -> float:
+    """Welch–Satterthwaite degrees of freedom of a variance V = V_known + V_est whose part V_est is estimated
+    with ``dof`` degrees of freedom and the rest known: ν = dof (V/V_est)² (Satterthwaite 1946, Biometrics
+    Bulletin 2: 110; Welch 1947, Biometrika 34: 28); ``dof`` when V is all estimated, ∞ when none is."""
+    if var_estimated <= 0.0:
+        return math.inf
+    return float(dof * (var_total / var_estimated) ** 2)
 
 
 # a profile falling by more than this fraction of its threshold walking away from its lowest point is
