@@ -138,9 +138,10 @@ def confounded_measurements(problem, fit, candidates: list, ids, top: int = 5) -
     candidate where the data are) and ``measurements``."""
     sig = signatures(problem, fit, candidates, ids)
     alts = "+".join(a.name for a in problem.spec.alternatives)
+    mimics = {c: alternative_mimic(problem, fit, sig, c) for c in candidates}
+    problem.predict([m for m, _ in mimics.values()], ids)      # one batch: the runs fill the parallel slots
     out = {}
-    for c in candidates:
-        mimic, info = alternative_mimic(problem, fit, sig, c)
+    for c, (mimic, info) in mimics.items():
         probe = problem.spec.probe_strength(c)
         models = {c: {**fit.values(), "effect:" + c: probe}, f"{alts} mimic": mimic}
         out[c] = {"probe": probe, "mimic": mimic, **info, "training_rms": _training_rms(problem, models, ids),
