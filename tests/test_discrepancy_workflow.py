@@ -546,9 +546,12 @@ def test_spec_refuses_the_former_workflow_table_naming_where_each_key_went():
         spec_from_dict({**_DISC_SPEC, "workflow": {"max_nfev": 8, "profile_fine": False, "diff_step": 0.02,
                                                    "interval": "wald", "bogus": 1}})
     msg = str(exc.value)
-    for part in ("max_nfev -> [fit] max_nfev", "profile_fine -> [profile] fine", "diff_step -> removed",
-                 "interval -> removed", "bogus -> unknown"):
+    for part in ("'max_nfev' -> [fit] max_nfev", "'profile_fine' -> [profile] fine", "'diff_step' -> removed",
+                 "'interval' -> removed", "'bogus' -> unknown"):
         assert part in msg
+    with pytest.raises(ValueError) as exc:     # a key with a newline is quoted: the message stays one line
+        spec_from_dict({**_DISC_SPEC, "workflow": {"a\nb": 1}})
+    assert "\n" not in str(exc.value) and "'a\\nb' -> unknown" in str(exc.value)
     with pytest.raises(ValueError, match=r"\[acceptance\] \['tie_bik'\] unknown"):
         spec_from_dict({**_DISC_SPEC, "acceptance": {"tie_bik": 10.0}})
 

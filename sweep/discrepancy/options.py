@@ -291,7 +291,7 @@ def _reject_workflow_table(wf: dict) -> None:
     """The former [workflow] table: refused, each key named with its new table or why it was removed."""
     where = {f.name: f"[{t}] {f.name}" for t, cls in OPTION_TABLES.items() for f in fields(cls)}
     where.update({f"profile_{f.name}": f"[profile] {f.name}" for f in fields(ProfileOptions)})
-    moves = [f"{k} -> {REMOVED_WORKFLOW_KEYS.get(k) or where.get(k) or 'unknown'}" for k in sorted(wf)]
+    moves = [f"{k!r} -> {REMOVED_WORKFLOW_KEYS.get(k) or where.get(k) or 'unknown'}" for k in sorted(wf)]
     raise ValueError("discrepancy spec: the [workflow] table is replaced by [fit], [acceptance], [noise] and "
                      "[profile]; " + ("; ".join(moves) if moves else "remove it"))
 
