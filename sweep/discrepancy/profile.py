@@ -61,8 +61,9 @@ class _Profile:
         self.em, self.last = emulator, None
         self.po = problem.spec.profile
         self.mask = problem.mask(ids)
-        # [profile] threshold: χ²(1), or F(1, ν) at its probability
-        self.dof = problem.noise.threshold_dof(self.po.threshold, fit.J, j, self.mask)
+        # [profile] threshold: χ²(1) (the default asks nothing of the noise model), or F(1, ν) at its probability
+        self.dof = (math.inf if self.po.threshold == "chi2"
+                    else problem.noise.threshold_dof(self.po.threshold, fit.J, j, self.mask))
         self.level = stats.realization_level(level, self.dof)
         self.x_hat = np.asarray(fit.x, float)
         self.p = fit.params[j]
