@@ -190,7 +190,7 @@ def _fields_plot(spec, store, table, g, path) -> list[Path]:
 
 def _phase_diagram(spec, table, g, path) -> list[Path]:
     """The paper's diagrams through sweep.regimes.diagrams (ok runs only); PNG (+ the diagram's formats)."""
-    from sweep.campaign.replicates import fixed_columns, replicate_count
+    from sweep.campaign.replicates import point_columns, replicate_count
     from sweep.regimes import diagrams as dg
 
     ok = table[table["status"] == "ok"]
@@ -214,8 +214,7 @@ def _phase_diagram(spec, table, g, path) -> list[Path]:
     if ok.empty or any(c not in ok.columns for c in need):
         return []
     if replicate_count(spec) > 1:   # a point as in points.csv: distinct points can share (C, Ca*) or (N_b, N_f)
-        axes = [c for c in spec.axis_names if c in ok.columns]
-        kw["by"] = [*axes, *fixed_columns(ok, axes).values()]
+        kw["by"] = point_columns(ok, spec.axis_names)[1]
     res = fn(ok.reset_index(drop=True), path, **kw)
     paths = res.get("paths") if isinstance(res, Mapping) else None
     return [Path(p) for p in paths] if paths else [path]

@@ -29,7 +29,7 @@ import numpy as np
 from sweep.campaign.spec_model import SpecError
 
 __all__ = ["REPLICATE_KEYS", "check_replicates", "replicate_count", "expand_replicates", "point_table",
-           "write_points", "fixed_columns", "CONTINUOUS_MEASURES"]
+           "write_points", "fixed_columns", "point_columns", "CONTINUOUS_MEASURES"]
 
 # replicate key -> (namespace, field it varies)
 REPLICATE_KEYS: dict[str, tuple[str, str]] = {"porosity_seed": ("params", "seed"),
@@ -135,6 +135,15 @@ def fixed_columns(table, axis_cols: Sequence[str]) -> dict[str, str]:
     return out
 
 
+def point_columns(table, axis_names: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(names, columns) that tell a point of ``table`` from another: the axes, then every other parameter and run
+    option that differs between runs (:func:`fixed_columns`); the replicated seeds are not among them.  The one
+    point key of the point table and of the replicated diagrams."""
+    cols = _axis_columns(table, axis_names)
+    fixed = fixed_columns(table, cols)
+    return [*axis_names, *fixed], [*cols, *fixed.values()]
+
+
 def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
     """One row per point of a campaign table with one row per run (pandas DataFrame): the runs with equal axis
     values and equal values of every other parameter and run option but the replicated seeds (blocks may fix a
@@ -154,9 +163,7 @@ def point_table(table, axis_names: Sequence[str], *, level: float = 0.95):
 
     if table is None or len(table) == 0:
         return pd.DataFrame()
-    cols = _axis_columns(table, axis_names)
-    fixed = fixed_columns(table, cols)
-    names, cols = [*axis_names, *fixed], [*cols, *fixed.values()]
+    names, cols = point_columns(table, axis_names)
     ok = (table["status"] == "ok") if "status" in table.columns else pd.Series(True, index=table.index)
     regimes = sorted({str(v) for v in table.loc[ok, "regime"].dropna()}) if "regime" in table.columns else []
     rows = []
