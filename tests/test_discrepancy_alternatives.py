@@ -54,6 +54,37 @@ def test_confounding_by_alternatives_together_names_them_all():
         stats.signature_table(np.zeros_like(t), np.ones_like(t), J, sig, A=A, alternatives=("x1",))
 
 
+def test_an_alternative_confounds_only_within_its_range():
+    """An alternative at the lower end of its range (c_A >= 0) reproduces a signature along +a1 but not one along
+    −a1: the bounded screen (stats.bounded_lstsq) finds −a1 identifiable, with the ratio the calibrated column
+    alone leaves (exact: its projection off J), and keeps +a1 confounded as the unbounded screen does."""
+    t, J, a1, _ = _columns()
+    a1 = a1 - a1.mean()                                        # orthogonal to the calibrated offset
+    sig = {"up": 2.0 * a1, "down": -2.0 * a1}
+    A = a1[:, None]
+    args = (np.zeros_like(t), np.ones_like(t), J, sig)
+    free = stats.signature_table(*args, A=A, alternatives=("x1",))
+    assert not free["up"]["identifiable"] and not free["down"]["identifiable"]
+    bounds = (np.array([-np.inf, 0.0]), np.array([np.inf, np.inf]))
+    tab = stats.signature_table(*args, A=A, alternatives=("x1",), bounds=bounds)
+    assert not tab["up"]["identifiable"] and tab["up"]["confounded_with"] == ["x1"]
+    assert tab["up"]["alternative_ratio"] < 1e-12
+    assert tab["down"]["identifiable"] and tab["down"]["confounded_with"] == []
+    assert tab["down"]["alternative_ratio"] == pytest.approx(tab["down"]["ratio"], rel=1e-9)
+    assert tab["down"]["alternative_ratio"] == pytest.approx(1.0, rel=1e-9)   # a1 ⟂ the offset: nothing absorbed
+
+
+def test_bounded_least_squares_known_answers():
+    """stats.bounded_lstsq: the unbounded solution when it lies within the bounds; otherwise the bounded
+    optimum (two orthonormal columns: each coefficient is its projection clipped to its bounds)."""
+    M = np.eye(3)[:, :2]
+    s = np.array([2.0, -3.0, 1.0])
+    assert stats.bounded_lstsq(M, s) == pytest.approx([2.0, -3.0])
+    assert stats.bounded_lstsq(M, s, [0.0, 0.0], [1.0, np.inf]) == pytest.approx([1.0, 0.0], abs=1e-12)
+    with pytest.raises(ValueError, match="bounded_lstsq: bounds"):
+        stats.bounded_lstsq(M, s, [1.0, 0.0], [0.0, 1.0])
+
+
 # ----------------------------------------------------------------------------- the SPEC
 def _spec(alternatives=(), calibrate=("E",), cands=("compliant_boundary", "damage_viscosity"), baseline=None):
     bounds = {"kbar": (5e-4, 5e-3), "E": (150.0, 700.0)}

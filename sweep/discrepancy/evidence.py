@@ -87,7 +87,8 @@ def screen(problem: Problem, fit: Fit, candidates, ids) -> dict:
     return stats.signature_table(fit.r, sig["w"], sig["J"], sig["signatures"],
                                  min_ratio=problem.spec.acceptance.min_ratio,
                                  tie_cos=problem.spec.acceptance.tie_cos, A=sig["A"],
-                                 alternatives=tuple(a.name for a in problem.spec.alternatives))
+                                 alternatives=tuple(a.name for a in problem.spec.alternatives),
+                                 bounds=sig["bounds"])
 
 
 def signatures(problem: Problem, fit: Fit, candidates, ids) -> dict:
@@ -95,7 +96,9 @@ def signatures(problem: Problem, fit: Fit, candidates, ids) -> dict:
     model change from off to its probe strength), ``A`` (one column per ``[[alternative]]``: the standardized
     change for its finite-difference step, :func:`alternative_steps`; None without alternatives), ``J`` (the
     model's standardized sensitivity to the free calibrated parameters, per unit of their fit coordinates),
-    ``free`` (which calibrated parameters are free, :func:`free_columns`) and ``w`` (the series weights)."""
+    ``free`` (which calibrated parameters are free, :func:`free_columns`), ``w`` (the series weights) and
+    ``bounds`` (lower, upper per column of [J, A]: how far each parameter can move within its range, in the
+    column's unit: fit coordinates for J, finite-difference steps for A; :func:`move_bounds`)."""
     vals0 = fit.values()
     alts = problem.spec.alternatives
     vlist = ([vals0] + [{**vals0, "effect:" + c: problem.spec.probe_strength(c)} for c in candidates]
@@ -109,7 +112,26 @@ def signatures(problem: Problem, fit: Fit, candidates, ids) -> dict:
     free = free_columns(fit)
     return {"signatures": dict(zip(candidates, diffs[:len(candidates)])),
             "A": np.column_stack(diffs[len(candidates):]) if alts else None,
-            "J": -fit.J[:, free], "free": free, "w": stats.series_weights(fit.r, problem.series[m])}
+            "J": -fit.J[:, free], "free": free, "w": stats.series_weights(fit.r, problem.series[m]),
+            "bounds": move_bounds(problem, fit, free)}
+
+
+def _moves(problem: Problem, fit: Fit, free) -> list:
+    """(parameter, its starting fit coordinate, the coordinate change of one column unit) for each column of
+    [J, A]: the free calibrated parameters (unit: one fit coordinate), then the ``[[alternative]]`` parameters
+    (unit: one finite-difference step, :func:`alternative_steps`)."""
+    moves = [(p, float(fit.x[j]), 1.0) for j, p in enumerate(fit.params) if free[j]]
+    return moves + [(a, a.to_x(a.initial), a.inward_step(a.to_x(a.initial))) for a in problem.spec.alternatives]
+
+
+def move_bounds(problem: Problem, fit: Fit, free) -> tuple:
+    """(lower, upper) of each column's coefficient in [J, A] c that keeps its parameter within its range."""
+    lo, hi = [], []
+    for p, x0, unit in _moves(problem, fit, free):
+        a, b = ((xb - x0) / unit for xb in p.x_bounds)
+        lo.append(min(a, b))
+        hi.append(max(a, b))
+    return np.array(lo), np.array(hi)
 
 
 def alternative_mimic(problem: Problem, fit: Fit, sig: dict, candidate: str) -> tuple[dict, dict]:
@@ -117,26 +139,22 @@ def alternative_mimic(problem: Problem, fit: Fit, sig: dict, candidate: str) -> 
     and its ``[[alternative]]`` parameters moved, to first order, so as to reproduce the candidate's screening
     signature (``sig``: :func:`signatures`) on the conditions it was taken on.  The move is the weighted least
     squares solution of [J, A] c = s in the screen's standardized space (the calibrated parameters by c_J in
-    their fit coordinates, each alternative by c_A of its finite-difference steps), clipped to each parameter's
-    range.  Returns (values, info): the values dict (calibrated parameters and alternatives by name, in their
-    units) and {"linear_misfit": ‖[J, A]c − s‖/‖s‖ (weighted), "clipped": the parameters clipped}."""
-    alts = problem.spec.alternatives
-    if not alts:
+    their fit coordinates, each alternative by c_A of its finite-difference steps) within each parameter's
+    range (``sig["bounds"]``, :func:`stats.bounded_lstsq`, the screen's own rule).  Returns (values, info): the
+    values dict (calibrated parameters and alternatives by name, in their units) and {"linear_misfit":
+    ‖[J, A]c − s‖/‖s‖ (weighted), "clipped": the parameters the move leaves at an end of their range}."""
+    if not problem.spec.alternatives:
         raise ValueError("alternative_mimic: the SPEC has no [[alternative]] parameter")
     sw = np.sqrt(np.asarray(sig["w"], float))
     s = np.asarray(sig["signatures"][candidate], float) * sw
     M = np.column_stack([sig["J"], sig["A"]]) * sw[:, None]
-    c = np.linalg.lstsq(M, s, rcond=None)[0]
+    lower, upper = sig["bounds"]
+    c = stats.bounded_lstsq(M, s, lower, upper)
     misfit = float(np.linalg.norm(M @ c - s) / max(np.linalg.norm(s), 1e-300))
     values, clipped = fit.values(), []
-    n_cal = sig["J"].shape[1]
-    moves = [(p, float(fit.x[j])) for j, p in enumerate(fit.params) if sig["free"][j]]
-    moves += [(a, a.to_x(a.initial)) for a in alts]
-    steps = [1.0] * n_cal + [a.inward_step(a.to_x(a.initial)) for a in alts]   # c_A counts steps
-    for (p, x0), d, step in zip(moves, c, steps):
-        lo, hi = p.x_bounds
-        x = float(np.clip(x0 + d * step, lo, hi))
-        if x != x0 + d * step:
+    for (p, x0, unit), d, lo, hi in zip(_moves(problem, fit, sig["free"]), c, lower, upper):
+        x = float(np.clip(x0 + d * unit, *sorted(p.x_bounds)))
+        if np.isclose(d, lo, rtol=0, atol=1e-9 * max(1.0, abs(lo))) or np.isclose(d, hi, rtol=0, atol=1e-9 * max(1.0, abs(hi))):
             clipped.append(p.name)
         values[p.name] = p.from_x(x)
     return values, {"linear_misfit": misfit, "clipped": clipped}

@@ -44,7 +44,7 @@ def confounded_lines(report: dict) -> list[str]:
          "they hold the observable, else the registry's default), at the time it is largest.", ""]
     for c, e in conf.items():
         L += [f"**{c}** at {fmt(e['probe'])} against the mimic {fmt(e['mimic'])}"
-              + (f" (clipped at the range of {e['clipped']})" if e.get("clipped") else "")
+              + (f" (at an end of the range of {e['clipped']})" if e.get("clipped") else "")
               + f": linear misfit {fmt(e['linear_misfit'])}, training RMS {fmt(e['training_rms'])} sd.", ""]
         L += measurement_table(e["measurements"]) + [""]
     return L

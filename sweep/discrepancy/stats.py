@@ -248,8 +248,26 @@ def project_out(J, s) -> np.ndarray:
     return s - Q @ (Q.T @ s)
 
 
+def bounded_lstsq(M, s, lower=None, upper=None) -> np.ndarray:
+    """The least-squares c of M c = s with lower <= c <= upper elementwise (None or ±inf: unbounded on that
+    side; all unbounded: the minimum-norm solution of numpy's lstsq).  A parameter that can move only within its
+    range moves a signature only that far: a direction reachable only by a move outside it does not count."""
+    M, s = np.asarray(M, float), np.asarray(s, float)
+    n = M.shape[1]
+    lb = np.full(n, -np.inf) if lower is None else np.asarray(lower, float)
+    ub = np.full(n, np.inf) if upper is None else np.asarray(upper, float)
+    if lb.shape != (n,) or ub.shape != (n,) or np.any(lb > ub):
+        raise ValueError(f"bounded_lstsq: bounds {lb}, {ub} are not allowed for {n} columns: lower <= upper, one each")
+    c = np.linalg.lstsq(M, s, rcond=None)[0] if n else np.zeros(0)
+    if n == 0 or np.all((c >= lb) & (c <= ub)):
+        return c
+    from scipy.optimize import lsq_linear
+
+    return lsq_linear(M, s, bounds=(lb, ub), method="bvls", tol=1e-12).x
+
+
 def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_cos: float = 0.95,
-                    A=None, alternatives: tuple = ()) -> dict:
+                    A=None, alternatives: tuple = (), bounds=None) -> dict:
     """Screen candidate effects from their signatures.
 
     r : standardized residuals of the calibrated baseline; w : series weights; J : Jacobian of the
@@ -264,7 +282,10 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
     parameters held fixed but uncertain): the signature is also projected off [J, A].  Its
     ``alternative_ratio`` below ``min_ratio`` makes the candidate not identifiable, and ``confounded_with``
     names the alternatives that bring it there (each alone, or all together when none does alone): what
-    the candidate would explain, a change of those parameters would explain as well.
+    the candidate would explain, a change of those parameters would explain as well.  ``bounds`` (lower, upper:
+    one per column of [J, A], in the columns' units) keeps those changes within the parameters' ranges
+    (:func:`bounded_lstsq`): a signature the alternatives reproduce only beyond their range is not confounded
+    with them.  None: unbounded.
     """
     r = np.asarray(r, float)
     sw = np.sqrt(np.asarray(w, float))
@@ -281,7 +302,7 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
         sp = project_out(Jw, sw_s) if ns > 0 else sw_s
         nsp = float(np.linalg.norm(sp))
         ratio = nsp / ns if ns > 0 else 0.0
-        alt_ratio, confounded = _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio)
+        alt_ratio, confounded = _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio, bounds)
         ident = bool(ok and ns > 1e-9 and ratio >= min_ratio and not confounded)
         rw = r * sw
         a = float(rw @ sp / nsp**2) if nsp > 0 else 0.0
@@ -300,15 +321,22 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
     return out
 
 
-def _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio) -> tuple:
-    """(‖s off [J, A]‖/‖s‖, the alternatives that bring it below ``min_ratio``), or (None, []) without any."""
+def _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio, bounds=None) -> tuple:
+    """(‖s off [J, A]‖/‖s‖, the alternatives that bring it below ``min_ratio``), or (None, []) without any;
+    with ``bounds`` (lower, upper per column of [J, A]) the residual of the bounded least squares."""
     if not alternatives:
         return None, []
     if ns <= 0:
         return 0.0, []
+    nJ = Jw.shape[1]
 
     def ratio(cols):
-        return float(np.linalg.norm(project_out(np.column_stack([Jw, Aw[:, cols]]), sw_s))) / ns
+        M = np.column_stack([Jw, Aw[:, cols]])
+        if bounds is None:
+            return float(np.linalg.norm(project_out(M, sw_s))) / ns
+        keep = list(range(nJ)) + [nJ + k for k in cols]
+        c = bounded_lstsq(M, sw_s, np.asarray(bounds[0], float)[keep], np.asarray(bounds[1], float)[keep])
+        return float(np.linalg.norm(M @ c - sw_s)) / ns
 
     total = ratio(list(range(len(alternatives))))
     if total >= min_ratio:
