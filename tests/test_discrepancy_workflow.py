@@ -111,6 +111,20 @@ def test_hidden_effect_is_named_with_its_strength(tmp_path, hidden, effect, trut
                              "workflow": directory_hash(Path(sweep.discrepancy.__file__).parent)}
 
 
+def test_a_candidate_the_data_ask_for_below_off_is_reported_as_such(tmp_path):
+    """Data with hidden β = 40 (it raises the injection pressure): the outer compliance lowers it, so its
+    linearized amplitude is not positive, its score is 0 and it is not refitted; the report says so by name.
+    Every candidate row carries the screen's amplitude, and a positive score only comes with a positive one."""
+    rep = run_workflow(_twin(tmp_path, {"beta": 40.0}), _spec(), ToyForward({}, h=8.0), out_dir=tmp_path / "out",
+                       figures=False)
+    rows = {c["effect"]: c for c in rep["candidates"]}
+    assert all((c["score"] > 0) <= (c["amplitude"] > 0) for c in rows.values())
+    cb = rows["compliant_boundary"]
+    assert cb["identifiable"] and cb["amplitude"] <= 0 and cb["score"] == 0.0 and cb["delta_bic"] is None
+    line = next(ln for ln in (tmp_path / "out" / "report.md").read_text().splitlines() if "ask for less than off" in ln)
+    assert "compliant_boundary" in line and "damage_viscosity" not in line
+
+
 def test_negative_control_names_nothing(tmp_path):
     rep = run_workflow(_twin(tmp_path, {}), _spec(), ToyForward({}, h=8.0))
     assert rep["verdict"] == "no_missing_effect" and rep["named_effect"] is None

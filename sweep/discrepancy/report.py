@@ -317,6 +317,12 @@ def _caveat_lines(report: dict) -> list[str]:
     if report["not_identifiable"]:
         L += [f"Not identifiable with these conditions (signature inside the calibrated baseline's reach or null, "
               f"or a profile interval reaching off): {report['not_identifiable']}", ""]
+    against = [c for c in report["candidates"] if c["identifiable"] and c.get("amplitude") is not None
+               and c["amplitude"] <= 0]
+    if against:
+        L += ["Identifiable, but the data ask for less than off (the screen's linearized amplitude, in units of the "
+              "probe strength, is not positive), so not refitted: "
+              + ", ".join(f"{c['effect']} ({c['amplitude']:.3g})" for c in against) + ".", ""]
     for c in report["candidates"]:
         if c.get("confounded_with"):
             L += [f"{c['effect']}: not identifiable against {c['confounded_with']} (held fixed but uncertain, "

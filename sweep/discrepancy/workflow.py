@@ -162,7 +162,8 @@ def _candidate_row(c: str, scr: dict, rf: dict | None) -> dict:
     def ev(key):
         return rf[key] if rf else None
 
-    row = {"effect": c, "score": scr["score"], "identifiable": scr["identifiable"], "signature_ratio": scr["ratio"],
+    row = {"effect": c, "score": scr["score"], "amplitude": scr["amplitude"], "identifiable": scr["identifiable"],
+           "signature_ratio": scr["ratio"],
            "alternative_ratio": scr["alternative_ratio"], "confounded_with": scr["confounded_with"],
            "tied_with": scr["tied_with"], "delta_bic": ev("delta_bic"), "passed": rf["passed"] if rf else False,
            "strength": ev("strength"), "strength_interval": ev("strength_interval"),
