@@ -20,7 +20,8 @@ well below the noise for the solver's responses over ±15 %) and v_q,i = RSS_i /
 jitter variance in that direction, averaged over ``window`` neighbouring points of the series.  A coarse
 model jagged in one parameter is jagged for every fit that moves it, so v_i = max_q v_q,i over the stepped
 parameters.  τ_o from the lag-1 autocorrelation of the polynomial residuals pooled over series, runs and
-parameters (as :class:`~.realizations.RealizationCovariance`, the estimator ``[noise] lag1``).  Units: v in kPa², mm²; τ in s.
+parameters (as :class:`~.realizations.RealizationCovariance`, the estimator ``[noise] lag1``).  Units: v in
+kPa², mm²; τ in s.
 
 Cost: (m − 1) coarse runs per condition and stepped parameter (the centre run is usually cached).
 
@@ -116,8 +117,8 @@ def estimate_model_jitter(evaluate, layout: CurveLayout, values: dict, params, n
 
     evaluate(list of values dicts) -> array (runs × curve rows): the model on every row of ``layout``.
     Parameters at 0 are not stepped (an effect off).  τ_o from the lag-1 estimator ``lag1`` ([noise] lag1,
-    :func:`stats.lag1_estimate`; points a run could not compute left out).  None when nothing can be stepped.  ``runs`` of the
-    result is left 0: the caller knows what the evaluations cost."""
+    :func:`stats.lag1_estimate`; points a run could not compute left out).  None when nothing can be stepped.
+    ``runs`` of the result is left 0: the caller knows what the evaluations cost."""
     series_rows = layout.series_rows()
     per_q, by_obs, per_rms, steps, dofs = {}, {}, {}, {}, {}
     for p in params:

@@ -42,7 +42,8 @@ class RealizationCovariance:
     v_i = (1 + 1/k) s_i² averaged over ``window`` neighbouring points of the series (s_i the sample std of
     the realizations at that point; 1 + 1/k: one more realization about a k-sample mean), τ_o per
     observable from the lag-1 autocorrelation ρ of the realizations' deviation curves pooled over
-    conditions (estimator ``lag1``, [noise] lag1: :func:`stats.lag1_estimate`), τ = −Δt/ln ρ (Δt the median time step; ρ clipped to [0, 0.99]; ρ = 0: C diagonal).
+    conditions (estimator ``lag1``, [noise] lag1: :func:`stats.lag1_estimate`), τ = −Δt/ln ρ (Δt the median
+    time step; ρ clipped to [0, 0.99]; ρ = 0: C diagonal).
     ``mode`` "series": series are independent of one another.  ``mode`` "observable": an observable's series
     (its conditions) are one block, correlated between conditions at ρ_o, the pooled correlation between
     conditions of the deviation curves (realization_blocks.py); the jitter term stays per series, embedded

@@ -9,7 +9,9 @@ conditions, σ = 0.3, θ = 1; the data one realization outside the k).  Two meas
 - "wald_exact": the GLS Wald interval's exact coverage given the k realizations, 2Φ(1.96 √(V̂/V)) − 1
   (results/archive/discrepancy/smallk/diagnose.py), averaged over draws of the k realizations.
 
-    PYTHONPATH=<worktree> python results/archive/discrepancy/lag1/coverage.py K N_DRAWS N_EXACT
+    PYTHONPATH=<worktree> python results/archive/discrepancy/lag1/coverage.py K N_DRAWS N_EXACT [LIKELIHOOD]
+
+(with LIKELIHOOD, e.g. marginal: that profile alone, N_EXACT unused)
 
 appends JSON lines to results/discrepancy/shared_realization/lag1_coverage.jsonl."""
 import json
@@ -30,16 +32,16 @@ OUT = ROOT / "results/discrepancy/shared_realization/lag1_coverage.jsonl"
 EST = ("pooled", "mean_ratio")
 
 
-def profile(k, n_draws, seed=101):
+def profile(k, n_draws, seed=101, likelihood="gaussian"):
     t0 = time.time()
     levels = [3.84, T.f_level("f_welch"), T.f_level("f_realizations")]
     hits, ests = {}, {}
     for e in EST:
-        est, lo, hi, _ = T._draws("observable", n_draws, 0.9, k, "gaussian", seed=seed, levels=levels, lag1=e)
+        est, lo, hi, _ = T._draws("observable", n_draws, 0.9, k, likelihood, seed=seed, levels=levels, lag1=e)
         hits[e] = (lo <= 1.0) & (1.0 <= hi)
         ests[e] = est
     d = hits["mean_ratio"].astype(float) - hits["pooled"]
-    row = {"measure": "profile", "likelihood": "gaussian", "n_cond": 4, "blocks": "observable", "k": k,
+    row = {"measure": "profile", "likelihood": likelihood, "n_cond": 4, "blocks": "observable", "k": k,
            "n_draws": n_draws, "seed": seed, "levels": ["chi2", "f_welch", "f_realizations"],
            **{f"coverage_{e}": hits[e].mean(axis=0).tolist() for e in EST},
            **{f"coverage_mc_sd_{e}": np.sqrt(hits[e].mean(axis=0) * (1 - hits[e].mean(axis=0)) / n_draws).tolist()
@@ -80,7 +82,11 @@ def wald_exact(k, n_draws, seed=3, tau=0.3, rho=0.9, sig=0.3):
 
 if __name__ == "__main__":
     k, n_prof, n_exact = (int(x) for x in sys.argv[1:4])
-    for row in (wald_exact(k, n_exact), profile(k, n_prof)):
+    if len(sys.argv) > 4:                   # a likelihood: its profile alone (e.g. marginal, the starting SPEC's)
+        rows = [profile(k, n_prof, likelihood=sys.argv[4])]
+    else:
+        rows = [wald_exact(k, n_exact), profile(k, n_prof)]
+    for row in rows:
         with open(OUT, "a") as fh:
             fh.write(json.dumps(row) + "\n")
         print(json.dumps(row), flush=True)
