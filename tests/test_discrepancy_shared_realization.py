@@ -227,14 +227,14 @@ def f_level(kind: str):
 
 
 def _draws(blocks: str, n_draws: int, rho: float, k: int, likelihood: str, seed: int = 21, n_cond: int = 4,
-           levels=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           levels=None, lag1: str = "pooled") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per data set (``n_draws``): the estimate θ̂, the interval's (lower, upper) at each of ``levels`` and the
     levels ((n_draws,), (n_draws, L) × 3; θ_true = 1; a callable level is called with the data set's noise model
     and the standardized Jacobian (n, 1), as :func:`f_level`).  ``n_cond``
     conditions × 12 times (0.1–1.2 s) of one observable y_c(t) = θ (1 + c/4) t; the coarse model exact up to
     the realization deviation (v = 1, τ = 0.3 s, correlation ρ between conditions); k realizations give the
     correction (their mean deviation) and the covariance; the data are one more realization plus noise
-    (σ = 0.3)."""
+    (σ = 0.3); τ by the ``[noise] lag1`` estimator ``lag1`` (the data sets do not depend on it)."""
     lay = _layout(n_cond=n_cond, n=12, t_end=1.2)
     g = (1.0 + lay.series / 4.0) * lay.t
     rng = np.random.default_rng(seed)
@@ -244,7 +244,7 @@ def _draws(blocks: str, n_draws: int, rho: float, k: int, likelihood: str, seed:
             dev = _shared_deviations(rng, k + 1, n_cond, lay.t[:12], rho, tau=0.3)
             y = g + dev[k] + 0.3 * rng.standard_normal(lay.n) - dev[:k].mean(axis=0)
             nm = NoiseModel(y, 0.3 * np.ones(lay.n), lay)
-            nm.set_discretization(np.zeros(lay.n), g + dev[:k], 0.0, blocks)
+            nm.set_discretization(np.zeros(lay.n), g + dev[:k], 0.0, blocks, lag1)
             J = nm.standardize(g, np.ones(lay.n, bool), 50.0)[:, None]
             lv = None if levels is None else [x(nm, J) if callable(x) else x for x in levels]
             th, ints = _interval(nm, y, g, likelihood, lv)

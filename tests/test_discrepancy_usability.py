@@ -105,6 +105,24 @@ def test_init_writes_a_commented_spec_that_loads(tmp_path):
         assert set(parsed[table]) == {f.name for f in dataclasses.fields(cls)}
 
 
+def test_init_spec_uses_the_shared_realization_settings_and_the_library_keeps_its_defaults(tmp_path):
+    """The starting SPEC parses with [profile] threshold = "f_realizations", [noise] realization_blocks =
+    "observable" and lag1 = "mean_ratio" (results/discrepancy/shared_realization/README.md), each line saying
+    why; the library defaults stay "chi2", "series", "pooled" (committed twins reproduce)."""
+    from sweep.discrepancy.init_spec import starting_spec
+
+    folder = _folder(tmp_path)
+    text = starting_spec(load_measured(folder), folder)
+    spec = spec_from_dict(tomllib.loads(text))
+    assert (spec.profile.threshold, spec.noise.realization_blocks, spec.noise.lag1) == \
+        ("f_realizations", "observable", "mean_ratio")
+    lib = parse_options({})
+    assert (lib.profile.threshold, lib.noise.realization_blocks, lib.noise.lag1) == ("chi2", "series", "pooled")
+    for key in ("threshold = \"f_realizations\"", "realization_blocks = \"observable\"", "lag1 = \"mean_ratio\""):
+        line = next(x for x in text.splitlines() if x.startswith(key))
+        assert "shared_realization/README.md" in line and "library default" in line, line
+
+
 def test_init_does_not_calibrate_what_the_conditions_set(tmp_path):
     from sweep.discrepancy.init_spec import starting_spec
 

@@ -101,12 +101,22 @@ def _model_tables(data: MeasuredData) -> list[str]:
 # The likelihood's own error terms (no fraction of the correction added to σ, the realization covariance's
 # scale integrated over its k-run estimate) make the interval's coverage nominal rather than conservative
 # (results/discrepancy/coverage/README.md); the library defaults keep the committed twins reproducible.
+# The data are one realization for every condition, few realizations know the strength's variance to about
+# k − 1 degrees of freedom, and the pooled lag-1 estimator makes τ short: the covariance blocks per observable,
+# the F(1, k − 1) threshold and the mean-ratio estimator (results/discrepancy/shared_realization/README.md).
+_SR = "results/discrepancy/shared_realization/README.md"
 STARTING = {("profile", "emulator"): ("gp", "for solver runs (library default \"none\"):"),
             ("profile", "emulate_refits"): (True, "for solver runs (library default false):"),
             ("noise", "disc_error_fraction"): (0.0, "a calibrated interval (library default 0.5):"),
             ("profile", "likelihood"): ("marginal", "a calibrated interval (library default \"weighted\"):"),
             ("profile", "correction"): ("linear", "a smooth profile, the correction following the strength "
-                                                  "(library default \"point\"):")}
+                                                  "(library default \"point\"):"),
+            ("profile", "threshold"): ("f_realizations", f"covers at few realizations ({_SR}, \"Few realizations\"; "
+                                                         "library default \"chi2\"):"),
+            ("noise", "realization_blocks"): ("observable", f"the data one realization for every condition ({_SR}, "
+                                                            "\"Toy\"; library default \"series\"):"),
+            ("noise", "lag1"): ("mean_ratio", f"tau not short ({_SR}, \"The lag-1 estimator\"; library default "
+                                              "\"pooled\"):")}
 
 
 def _option_tables() -> list[str]:
@@ -117,7 +127,7 @@ def _option_tables() -> list[str]:
         L.append(f"[{table}]".ljust(33) + "# " + cls.__doc__.splitlines()[0])
         for f in fields(cls):
             value, why = STARTING.get((table, f.name), (f.default, ""))
-            L.append(f"{f.name} = {_toml(value)}".ljust(33) + f"# {why + ' ' if why else ''}{f.metadata['doc']}")
+            L.append(f"{f.name} = {_toml(value)}".ljust(32) + f" # {why + ' ' if why else ''}{f.metadata['doc']}")
         L.append("")
     return L
 

@@ -20,7 +20,8 @@ well below the noise for the solver's responses over ±15 %) and v_q,i = RSS_i /
 jitter variance in that direction, averaged over ``window`` neighbouring points of the series.  A coarse
 model jagged in one parameter is jagged for every fit that moves it, so v_i = max_q v_q,i over the stepped
 parameters.  τ_o from the lag-1 autocorrelation of the polynomial residuals pooled over series, runs and
-parameters (as :class:`~.realizations.RealizationCovariance`).  Units: v in kPa², mm²; τ in s.
+parameters (as :class:`~.realizations.RealizationCovariance`, the estimator ``[noise] lag1``).  Units: v in
+kPa², mm²; τ in s.
 
 Cost: (m − 1) coarse runs per condition and stepped parameter (the centre run is usually cached).
 
@@ -109,13 +110,15 @@ def _residuals(u: np.ndarray, Y: np.ndarray, degree: int) -> tuple[np.ndarray, n
 
 
 def estimate_model_jitter(evaluate, layout: CurveLayout, values: dict, params, n_steps: int = 7,
-                          rel_step: float = 0.05, degree: int = 2, window: int = 5) -> ModelJitter | None:
+                          rel_step: float = 0.05, degree: int = 2, window: int = 5,
+                          lag1: str = "pooled") -> ModelJitter | None:
     """Jitter of a forward model at ``values`` ({name: value}, names as the fit's: calibrated Parameters fields
     and 'effect:<name>'; units theirs) in the directions of ``params`` (CalibParam: name, lower, upper).
 
     evaluate(list of values dicts) -> array (runs × curve rows): the model on every row of ``layout``.
-    Parameters at 0 are not stepped (an effect off).  None when nothing can be stepped.  ``runs`` of the
-    result is left 0: the caller knows what the evaluations cost."""
+    Parameters at 0 are not stepped (an effect off).  τ_o from the lag-1 estimator ``lag1`` ([noise] lag1,
+    :func:`stats.lag1_estimate`; points a run could not compute left out).  None when nothing can be stepped.
+    ``runs`` of the result is left 0: the caller knows what the evaluations cost."""
     series_rows = layout.series_rows()
     per_q, by_obs, per_rms, steps, dofs = {}, {}, {}, {}, {}
     for p in params:
@@ -129,7 +132,8 @@ def estimate_model_jitter(evaluate, layout: CurveLayout, values: dict, params, n
         vq = np.zeros_like(raw)
         for rows in series_rows.values():
             vq[rows] = stats.moving_average(raw[rows], window)
-            by_obs.setdefault(str(layout.obs[rows[0]]), []).append(res[:, rows])
+            by_obs.setdefault(str(layout.obs[rows[0]]), []).append(
+                np.where(np.isfinite(rss[rows]), res[:, rows], np.nan))
         per_q[p.name] = vq
         per_rms[p.name] = {str(o): float(math.sqrt(np.mean(raw[layout.obs == o]))) for o in np.unique(layout.obs)}
         steps[p.name] = [float(x) for x in u]
@@ -137,6 +141,6 @@ def estimate_model_jitter(evaluate, layout: CurveLayout, values: dict, params, n
     if not per_q:
         return None
     var = np.max(np.vstack(list(per_q.values())), axis=0)
-    rho = {o: stats.pooled_lag1(curves) for o, curves in by_obs.items()}
+    rho = {o: stats.lag1_estimate(curves, lag1) for o, curves in by_obs.items()}
     tau = {o: correlation_time(rho[o], layout, o) for o in rho}
     return ModelJitter(var, tau, rho, per_rms, {k_: float(v) for k_, v in values.items()}, steps, dofs)

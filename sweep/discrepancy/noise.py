@@ -63,19 +63,20 @@ class NoiseModel:
             self._whiteners.clear()
 
     def set_discretization(self, err: np.ndarray, fines: np.ndarray, fraction: float,
-                           blocks: str = "series") -> None:
+                           blocks: str = "series", lag1: str = "pooled") -> None:
         """Compare with y_measured − ``err`` (0 where not finite) and widen σ by ``fraction``·err; ``fines``
         (k, n): the realizations' predictions.  With k >= 2 their deviations enter as a covariance correlated
         in time, in blocks per series or per observable over its conditions (``blocks``, [noise]
-        realization_blocks; :meth:`RealizationCovariance.estimate`), else their per-point spread (0 for one
-        model) in quadrature.  Replaces any earlier correction; keeps the jitter term."""
+        realization_blocks), its correlation time from the lag-1 estimator ``lag1`` ([noise] lag1;
+        :meth:`RealizationCovariance.estimate`), else their per-point spread (0 for one model) in
+        quadrature.  Replaces any earlier correction; keeps the jitter term."""
         fines = np.atleast_2d(np.asarray(fines, float))
         err = np.where(np.isfinite(err), err, 0.0)
         spread = realization_mean_spread(fines)[1]
         self._y = self.y_measured - err
         sig_diag = np.sqrt(self.sig_measured**2 + (fraction * err) ** 2)
         if fines.shape[0] >= 2:
-            self.real_cov = RealizationCovariance.estimate(fines, self.layout, mode=blocks)
+            self.real_cov = RealizationCovariance.estimate(fines, self.layout, mode=blocks, lag1=lag1)
             self.sig_diag = sig_diag
         else:
             self.real_cov = None
@@ -394,8 +395,8 @@ def add_discretization_error(problem, fine_forward, values: dict | None = None) 
     coarse, fines = coarse_and_fines(problem, fines_fw, vals)
     err = realization_mean_spread(fines)[0] - coarse
     err = np.where(np.isfinite(err), err, 0.0)
-    problem.noise.set_discretization(err, fines, problem.spec.noise.disc_error_fraction,
-                                     problem.spec.noise.realization_blocks)
+    opts = problem.spec.noise
+    problem.noise.set_discretization(err, fines, opts.disc_error_fraction, opts.realization_blocks, opts.lag1)
     return rms_per_observable(problem.layout, err)
 
 
@@ -413,7 +414,7 @@ def model_jitter_at(problem, values: dict, params, n_steps: int | None = None,
 
     mj = estimate_model_jitter(evaluate, problem.layout, values, params,
                                n_steps=opts.model_jitter_steps if n_steps is None else n_steps,
-                               rel_step=opts.model_jitter_rel_step if rel_step is None else rel_step)
+                               rel_step=opts.model_jitter_rel_step if rel_step is None else rel_step, lag1=opts.lag1)
     if mj is not None:
         mj.runs = int(getattr(problem.forward, "n_runs", 0)) - before
     return mj

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-from .stats import THRESHOLDS
+from .stats import LAG1_ESTIMATORS, THRESHOLDS
 
 __all__ = ["FitOptions", "AcceptanceOptions", "NoiseOptions", "ProfileOptions", "WorkflowOptions",
            "parse_options", "OPTION_TABLES", "REMOVED_WORKFLOW_KEYS"]
@@ -112,6 +112,12 @@ class NoiseOptions(_Checked):
             "observable (one per observable over all its conditions, correlated between conditions at the pooled "
             "correlation rho_o of the realizations' deviation curves: the data are one realization for every "
             "condition)")
+    lag1: str = _rule(
+        "pooled", "choice", choices=tuple(LAG1_ESTIMATORS),
+        doc="estimator of the lag-1 autocorrelation rho giving the correlation time tau = -dt/ln rho of the "
+            "realization covariance and of the jitter term: pooled (the sum of the n - 1 lag products over the sum "
+            "of the n squares of each curve: E = (n - 1)/n rho, tau short) or mean_ratio (the mean lag product over "
+            "the mean square, each sum over its own count: E -> rho; stats.mean_ratio_lag1)")
     model_jitter: str = _rule("none", "choice", choices=("none", "estimated"),
                               doc="the coarse model's jitter in its parameters as an error term")
     model_jitter_steps: int = _rule(7, "int", 5, 21, odd=True, doc="runs per stepped parameter (odd)")

@@ -42,7 +42,8 @@ class RealizationCovariance:
     v_i = (1 + 1/k) s_i² averaged over ``window`` neighbouring points of the series (s_i the sample std of
     the realizations at that point; 1 + 1/k: one more realization about a k-sample mean), τ_o per
     observable from the lag-1 autocorrelation ρ of the realizations' deviation curves pooled over
-    conditions, τ = −Δt/ln ρ (Δt the median time step; ρ clipped to [0, 0.99]; ρ = 0: C diagonal).
+    conditions (estimator ``lag1``, [noise] lag1: :func:`stats.lag1_estimate`), τ = −Δt/ln ρ (Δt the median
+    time step; ρ clipped to [0, 0.99]; ρ = 0: C diagonal).
     ``mode`` "series": series are independent of one another.  ``mode`` "observable": an observable's series
     (its conditions) are one block, correlated between conditions at ρ_o, the pooled correlation between
     conditions of the deviation curves (realization_blocks.py); the jitter term stays per series, embedded
@@ -63,6 +64,7 @@ class RealizationCovariance:
     mode: str = "series"            # [noise] realization_blocks
     rho_cond: dict | None = None    # observable -> pooled correlation between conditions of the deviations
     rho_cond_dof: dict | None = None    # observable -> its degrees of freedom
+    lag1: str = "pooled"            # [noise] lag1: the estimator of rho (stats.LAG1_ESTIMATORS)
 
     @classmethod
     def empty(cls, layout: CurveLayout) -> "RealizationCovariance":
@@ -126,19 +128,22 @@ class RealizationCovariance:
 
     @classmethod
     def estimate(cls, fines: np.ndarray, layout: CurveLayout, window: int = 5,
-                 mode: str = "series") -> "RealizationCovariance":
+                 mode: str = "series", lag1: str = "pooled") -> "RealizationCovariance":
         """From the realizations' predictions ``fines`` (k, n) on the rows of ``layout``, in blocks of ``mode``
-        (realization_blocks.py).  ρ_o (``rho_cond``) is estimated in either mode; "series" does not use it."""
+        (realization_blocks.py), ρ by the estimator ``lag1`` ([noise] lag1, :func:`stats.lag1_estimate`; a
+        point with fewer than 2 finite realizations, or a realization's missing value, left out).  ρ_o
+        (``rho_cond``) is estimated in either mode; "series" does not use it."""
         fines = np.atleast_2d(np.asarray(fines, float))
         ok = np.isfinite(fines)
         cnt = ok.sum(axis=0)
         mean, spread = realization_mean_spread(fines)
         with np.errstate(invalid="ignore", divide="ignore"):
             var = np.where(cnt >= 2, (1.0 + 1.0 / cnt) * spread**2, 0.0)
-        dev = np.where(ok & (cnt >= 2), fines - np.where(np.isfinite(mean), mean, 0.0), 0.0)
+        dev = np.where(ok & (cnt >= 2), fines - np.where(np.isfinite(mean), mean, 0.0), np.nan)
         series_rows = layout.series_rows()
-        rho = {str(o): stats.pooled_lag1([dev[:, r] for r in series_rows.values() if layout.obs[r[0]] == o])
+        rho = {str(o): stats.lag1_estimate([dev[:, r] for r in series_rows.values() if layout.obs[r[0]] == o], lag1)
                for o in np.unique(layout.obs)}
+        dev = np.where(np.isfinite(dev), dev, 0.0)
         tau = {o: correlation_time(rho[o], layout, o) for o in rho}
         cross = {o: cross_condition_correlation(dev, layout, o, tau[o]) for o in rho}
         rho_c = {o: c[0] for o, c in cross.items()}
@@ -148,7 +153,7 @@ class RealizationCovariance:
             v = np.concatenate([stats.moving_average(var[r], window) for r in _series_runs(layout, rows)])
             blocks[g] = (rows, np.sqrt(np.outer(v, v)) * block_kernel(layout, rows, tau[o], rho_c[o]))
         return cls(blocks, tau, rho, int(fines.shape[0]), layout, window, mode=mode, rho_cond=rho_c,
-                   rho_cond_dof={o: c[1] for o, c in cross.items()})
+                   rho_cond_dof={o: c[1] for o, c in cross.items()}, lag1=lag1)
 
     def _kernel_squared(self, rows: np.ndarray) -> np.ndarray:
         """ρ_ij² between the block's ``rows``: the kernel with τ/2 and ρ_o² (identity without a layout)."""

@@ -59,6 +59,7 @@ def _noise_fields(run) -> dict:
             "realization_covariance": ("correlated" if has_rc else "diagonal") if fine is not None else None,
             "realization_correlation_time": rc.tau if has_rc else None,
             "realization_lag1": rc.rho if has_rc else None,
+            "realization_lag1_estimator": rc.lag1 if has_rc else None,
             "realization_blocks": rc.mode if has_rc else None,
             # the pooled correlation between conditions of the realizations' deviations and its dof
             "realization_condition_correlation": ({o: [rc.rho_cond[o], rc.rho_cond_dof[o]] for o in rc.rho_cond}

@@ -58,6 +58,8 @@ Example (units mm, s, kPa)::
     disc_refresh_tol_sd = 0.0        # by <= disc_refresh_tol_sd times its Wald standard error
     realization_blocks = "series"    # "observable": one realization covariance block per observable over its
                                      # conditions, correlated between them (the data: one realization for all)
+    lag1 = "pooled"                  # the realization covariance's and jitter's lag-1 estimator for τ: "pooled"
+                                     # (E = (n − 1)/n ρ, τ short) or "mean_ratio" (mean product / mean square)
     model_jitter = "none"            # "estimated": the coarse model's jitter in its parameters is an error term
     model_jitter_steps = 7; model_jitter_rel_step = 0.05    # (sweep/discrepancy/jitter.py)
     [profile]                        # the named strength's profile-likelihood interval

@@ -14,7 +14,8 @@ import numpy as np
 
 __all__ = ["lag1_autocorrelation", "profile_roughness", "series_weights", "effective_chi2", "bic", "systematic_test", "series_statistics",
            "project_out", "signature_table", "wald_interval", "PHASES", "phase_of_times", "symmetric_whitener",
-           "moving_average", "pooled_lag1", "realization_level", "welch_dof", "THRESHOLDS"]
+           "moving_average", "pooled_lag1", "mean_ratio_lag1", "lag1_estimate", "LAG1_ESTIMATORS", "realization_level",
+           "welch_dof", "THRESHOLDS"]
 
 PHASES = ("before_initiation", "peak", "propagation", "late")
 
@@ -129,10 +130,40 @@ def moving_average(v, window: int) -> np.ndarray:
 
 
 def pooled_lag1(dev_series: list) -> float:
-    """Lag-1 autocorrelation pooled over curves (rows of each (k, n) array, about zero), clipped to [0, 0.99]."""
-    num = sum(float(np.sum(d[:, 1:] * d[:, :-1])) for d in dev_series)
-    den = sum(float(np.sum(d * d)) for d in dev_series)
+    """Lag-1 autocorrelation pooled over curves (rows of each (k, n) array, about zero; NaN: a missing point,
+    left out), clipped to [0, 0.99]: the sum of the n − 1 lag products over the sum of the n squares of each
+    curve.  For a stationary series of correlation ρ its expectation is ((n − 1)/n)·ρ (biased low: τ from it
+    short; :func:`mean_ratio_lag1` removes the factor)."""
+    num = sum(float(np.nansum(d[:, 1:] * d[:, :-1])) for d in dev_series)
+    den = sum(float(np.nansum(d * d)) for d in dev_series)
     return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
+
+
+def mean_ratio_lag1(dev_series: list) -> float:
+    """Lag-1 autocorrelation over curves (rows of each (k, n) array, about zero; NaN: a missing point, left
+    out), clipped to [0, 0.99]: the mean lag product over the mean square, each sum divided by its own count
+    (the adjacent pairs with both points present, the points present).  For a stationary series of
+    correlation ρ, E[d_i d_{i+1}] = ρ E[d_i²], so it tends to ρ as the curves grow in number (a ratio of
+    means: bias O(1/(k n))), where :func:`pooled_lag1` tends to ((n − 1)/n)·ρ."""
+    prods = [d[:, 1:] * d[:, :-1] for d in dev_series]
+    n_prod = sum(int(np.isfinite(p).sum()) for p in prods)
+    n_sq = sum(int(np.isfinite(d).sum()) for d in dev_series)
+    if n_prod == 0 or n_sq == 0:
+        return 0.0
+    num = sum(float(np.nansum(p)) for p in prods) / n_prod
+    den = sum(float(np.nansum(d * d)) for d in dev_series) / n_sq
+    return float(np.clip(num / den, 0.0, 0.99)) if den > 0 else 0.0
+
+
+# [noise] lag1: the estimator of the lag-1 autocorrelation giving the error model's correlation times τ
+LAG1_ESTIMATORS = {"pooled": pooled_lag1, "mean_ratio": mean_ratio_lag1}
+
+
+def lag1_estimate(dev_series: list, estimator: str = "pooled") -> float:
+    """The lag-1 autocorrelation of ``dev_series`` by ``estimator`` (a key of :data:`LAG1_ESTIMATORS`)."""
+    if estimator not in LAG1_ESTIMATORS:
+        raise ValueError(f"lag1_estimate: estimator={estimator!r} is not allowed: one of {tuple(LAG1_ESTIMATORS)}")
+    return LAG1_ESTIMATORS[estimator](dev_series)
 
 
 # [profile] threshold: the profile interval's Δχ² threshold from χ²(1), or from F(1, ν) (realization_level) with
