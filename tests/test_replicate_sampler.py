@@ -116,3 +116,30 @@ def test_a_label_outside_the_two_named_labels_is_ignored_never_a_negative():
     bare = _spec(label="regime")
     with pytest.raises(SpecError, match=r"sampler\.label='regime'.*labels = \[negative, positive\]"):
         BoundarySampler().refine(bare, table)
+
+
+def test_a_rerun_archived_run_replaces_its_committed_row(tmp_path):
+    """A committed replicated boundary campaign made by older code (another code hash, and other run keys: a
+    parameter added to the model changes every key) without its run folders: ``rerun_archived`` reruns the runs the
+    sampler asks for again (round 0, matched to their rows by swept values and seed), and each new run replaces its
+    committed row.  The old row was left unmatched, and a sampler's table shows its unmatched rows: the table held
+    two rows of each rerun run (24 rows for 15 runs, points.csv counted 24 replicates)."""
+    import shutil
+
+    from sweep.campaign.table import build_table
+
+    spec = _spec(budget=15)
+    run_campaign(spec, tmp_path, runner=oracle_runner, jobs=1, code_hash="older", progress=None, isolate="none")
+    d = tmp_path / "rep_boundary"
+    old = pd.read_csv(d / "table.csv")
+    old.assign(key="old-" + old["key"]).to_csv(d / "table.csv", index=False)
+    (d / "table.parquet").unlink()
+    shutil.rmtree(d / "runs")
+    res = run_campaign(spec, tmp_path, runner=oracle_runner, jobs=1, code_hash="newer", progress=None,
+                       isolate="none", rerun_archived=True)
+    assert res.n_executed == 9                                   # the initial design, one run per point
+    for table in (pd.read_csv(d / "table.csv"), build_table(spec, tmp_path, code_hash="newer")):
+        assert len(table) == len(old) == 15
+        assert not table.duplicated(["cement", "eta_o", "seed"]).any()
+        assert (table["code_hash"] == "newer").sum() == 9 and (table["code_hash"] == "older").sum() == 6
+    assert pd.read_csv(d / "points.csv")["n_runs"].sum() == 15
