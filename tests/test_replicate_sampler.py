@@ -77,7 +77,8 @@ def test_campaign_with_replicated_boundary_writes_its_points(tmp_path):
     assert res.n_executed == st["runs_used"] <= 30 and st["stopped"]
     pts = pd.read_csv(d / "points.csv")
     assert pts["n_runs"].sum() == st["runs_used"]
-    assert sorted(pts["n_runs"]) == sorted(p["replicates"] for p in st["points"])
+    assert sorted(pts["n_ok"]) == sorted(p["replicates"] for p in st["points"])
+    assert not any(p["pending"] or p["unlabelled"] for p in st["points"])
 
 
 @pytest.mark.parametrize("kw, match", [
@@ -143,3 +144,42 @@ def test_a_rerun_archived_run_replaces_its_committed_row(tmp_path):
         assert not table.duplicated(["cement", "eta_o", "seed"]).any()
         assert (table["code_hash"] == "newer").sum() == 9 and (table["code_hash"] == "older").sum() == 6
     assert pd.read_csv(d / "points.csv")["n_runs"].sum() == 15
+
+
+def test_sampler_state_counts_finished_labelled_runs_as_replicates_never_pending_ones():
+    """sampler.json's per-point ``replicates`` are the finished runs with a label (what the fit counts, points.csv
+    ``n_ok``); the runs of the current round not yet finished are ``pending`` and a failed run ``unlabelled``, each
+    under its own key.  Here the first run of round 0 fails and the first round with replicates is cut after its
+    first run: the counts are read off the table and the runs left.  The replicate count was the highest replicate
+    index proposed plus one, pending and failed runs included."""
+    spec = _spec()
+    s, rows = BoundarySampler(), []
+    pts = s.initial(spec)
+    base = min(p.params["seed"] for p in pts)
+
+    def run(batch):
+        return [{"status": "ok", "cement": p.params["cement"], "eta_o": p.params["eta_o"], "seed": p.params["seed"],
+                 "fracturing": ORACLE.label((p.params["cement"], p.params["eta_o"]), p.params["seed"], 0)}
+                for p in batch]
+
+    rows = run(pts)
+    rows[0] = {**rows[0], "status": "failed", "fracturing": None}
+    pts = s.refine(spec, pd.DataFrame(rows))
+    while pts and not any(p.params["seed"] > base for p in pts):     # up to the first round with a replicate
+        rows += run(pts)
+        pts = s.refine(spec, pd.DataFrame(rows))
+    left = pts[1:]
+    table = pd.DataFrame(rows + run(pts[:1]))
+    st = BoundarySampler().state(spec, table)
+    assert st["pending"] == len(left) >= 1 and not st["stopped"]
+    got = {(p["cement"], p["eta_o"]): (p["replicates"], p["unlabelled"], p["pending"]) for p in st["points"]}
+    want: dict = {}
+    for k, ok in zip(zip(table["cement"], table["eta_o"]), table["status"] == "ok"):
+        r, u, n = want.get(k, (0, 0, 0))
+        want[k] = (r + int(ok), u + int(not ok), n)
+    for p in left:
+        r, u, n = want.get((p.params["cement"], p.params["eta_o"]), (0, 0, 0))
+        want[(p.params["cement"], p.params["eta_o"])] = (r, u, n + 1)
+    assert got == want
+    assert sum(r for r, _, _ in got.values()) == len(table) - 1 and sum(u for _, u, _ in got.values()) == 1
+    assert any(r >= 1 and n >= 1 for r, _, n in got.values())          # a point with a pending replicate
