@@ -183,3 +183,23 @@ def test_sampler_state_counts_finished_labelled_runs_as_replicates_never_pending
     assert got == want
     assert sum(r for r, _, _ in got.values()) == len(table) - 1 and sum(u for _, u, _ in got.values()) == 1
     assert any(r >= 1 and n >= 1 for r, _, n in got.values())          # a point with a pending replicate
+
+
+def test_cli_status_of_a_replicated_boundary_campaign(tmp_path, capsys):
+    """``campaign status`` on a boundary campaign with replicates states the round, the budget and the replicate
+    counts (it failed with KeyError 'uncertainty': the replicated sampler's state has a band, not that key)."""
+    from sweep.campaign.cli import main as cli_main
+    from sweep.campaign.spec import load_spec
+
+    path = tmp_path / "rep_boundary.toml"
+    path.write_text('name = "rep_boundary"\n[base]\neta_w = 1e-6\nkbar = 0.0015\n[options]\nh = 4.0\n[axes]\n'
+                    'cement = {linear = [0.5, 3.0, 3]}\neta_o = {log = [0.01, 10.0, 3]}\n[replicates]\nporosity_seed = 5\n'
+                    '[sampler]\nkind = "boundary"\nbudget = 15\ntolerance = 0.1\nlabel = "fracturing"\nbatch = 6\n'
+                    'band_tolerance = 0.3\n[run]\nisolate = "none"\n')
+    run_campaign(load_spec(path), tmp_path, runner=oracle_runner, jobs=1, code_hash="t", progress=None)
+    assert cli_main(["status", str(path), "--results", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    st = json.loads((tmp_path / "rep_boundary" / "sampler.json").read_text())
+    assert f"boundary sampler: round {st['round']}, 15 of 15 runs used, 0 pending" in out
+    assert f"15 labelled runs at {len(st['points'])} points (at most 5 each), 0 pending" in out
+    assert "stopped: budget spent" in out
