@@ -26,7 +26,8 @@ def _grid(labels):
 
 def test_a_separatrix_that_explains_the_labels_is_drawn(tmp_path):
     df = _grid(lambda C, ca: np.log10(ca) > 3.5 + 0.8 * C)
-    assert dg.separatrix_p_value(df.cement, df.Ca_star, df.fracturing) < 1e-3
+    # 16 separable labels: the penalized (Jeffreys) likelihood ratio stays finite, p = 0.0015
+    assert dg.separatrix_test(df.cement, df.Ca_star, df.fracturing).p_value < 0.01
     res = dg.plot_ca_star_vs_cement(df, tmp_path / "d.png", formats=())
     assert res["fit"] is not None and res["no_fit_reason"] is None
 
@@ -34,7 +35,7 @@ def test_a_separatrix_that_explains_the_labels_is_drawn(tmp_path):
 def test_labels_independent_of_the_axes_give_no_separatrix(tmp_path):
     # a checkerboard over C and Ca*: half the runs fracture at every C and every Ca*, so no line explains them
     df = _grid(lambda C, ca: (np.round(C / 0.8333).astype(int) + np.round(np.log10(ca)).astype(int)) % 2 == 0)
-    p = dg.separatrix_p_value(df.cement, df.Ca_star, df.fracturing)
+    p = dg.separatrix_test(df.cement, df.Ca_star, df.fracturing).p_value
     assert p > dg.SEPARATRIX_P_MAX
     res = dg.plot_ca_star_vs_cement(df, tmp_path / "d.png", formats=())
     assert res["fit"] is None and ("none found" in res["no_fit_reason"] or "do not locate" in res["no_fit_reason"]

@@ -304,3 +304,59 @@ def test_a_design_that_cannot_locate_the_line_gives_no_separatrix_and_no_fake_si
         separatrix_band(C, cs, y)
     s = separatrix_summary(C, cs, y)
     assert not s["significant"] and "not identifiable" in s["reason"] and "p_value" not in s
+
+
+# two Ca*-C label sets of 16 runs drawn from P = expit(ln10 (log10 Ca* - 4.5 - 0.3 C)): the separatrix test's p
+# just above 0.05 (0.053; the ridge likelihood-ratio test the one-run diagram used gave 0.012) and just below (0.044)
+NEAR_C = {"above": [2.02, 2.37, 2.45, 1.22, 2.23, 2.82, 1.78, 2.68, 2.57, 1.09, 2.57, 0.55, 1.04, 1.27, 0.8, 1.6],
+          "below": [2.09, 1.17, 0.6, 0.54, 2.53, 2.78, 2.02, 2.32, 1.86, 2.84, 2.54, 0.51, 2.64, 0.58, 2.32, 0.94]}
+NEAR_CA = {"above": [79070.0, 19880.0, 312900.0, 81950.0, 356500.0, 9260.0, 68480.0, 1190.0, 2160.0, 49060.0,
+                     74020.0, 20570.0, 3730.0, 134200.0, 281800.0, 250900.0],
+           "below": [388600.0, 42110.0, 7930.0, 18540.0, 1220.0, 2360.0, 102800.0, 87410.0, 70170.0, 14160.0,
+                     980900.0, 876000.0, 113900.0, 89410.0, 116200.0, 14680.0]}
+NEAR_Y = {"above": [0, 0, 1, 0, 0, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1, 1],
+          "below": [1, 0, 0, 1, 0, 0, 0, 1, 0, 0, 1, 1, 1, 0, 1, 0]}
+
+
+def _firth_lr_p(C, cs, y):
+    """The penalized likelihood-ratio test written out independently: -log L + (-1/2) log det(X' W X) of the
+    logistic model z = s ln Ca* - s B C - s ln A (X = [ln Ca*, -C, -1]), minimized by Nelder-Mead over the three
+    coefficients and over a constant z; chi2 with 2 degrees of freedom."""
+    from scipy.optimize import minimize
+    from scipy.stats import chi2
+
+    X = np.c_[np.log(cs), -np.asarray(C), -np.ones(len(C))]
+    y = np.asarray(y, float)
+
+    def nll(theta):
+        z = X @ theta
+        w = 1.0 / (2.0 + 2.0 * np.cosh(z))
+        return np.sum(np.logaddexp(0.0, z) - y * z) - 0.5 * np.linalg.slogdet((X * w[:, None]).T @ X)[1]
+
+    opts = {"xatol": 1e-10, "fatol": 1e-12, "maxiter": 40000, "maxfev": 40000}
+    full = min(minimize(nll, t0, method="Nelder-Mead", options=opts).fun
+               for t0 in ([1.0, 0.0, 11.0], [2.0, 1.0, 20.0], [0.5, 0.2, 5.0]))
+    null = minimize(lambda c: nll(np.array([0.0, 0.0, c[0]])), [0.0], method="Nelder-Mead", options=opts).fun
+    return chi2.sf(2.0 * (null - full), 2)
+
+
+@pytest.mark.parametrize("case, significant", [("above", False), ("below", True)])
+def test_both_ca_star_diagrams_decide_a_separatrix_by_one_test(tmp_path, case, significant):
+    """The one-run Ca*-C diagram and the replicated (probability) diagram draw the separatrix by one rule,
+    sweep.regimes.separatrix.separatrix_test (the penalized likelihood-ratio test at p < 0.05), here on label sets
+    whose p lies on either side of 0.05 (checked against the test written out independently).  The one-run diagram
+    used a ridge-penalized test (p = 0.012 on 'above') and drew a line the replicated diagram refused."""
+    from sweep.regimes.diagrams import plot_ca_star_vs_cement
+    from sweep.regimes.separatrix import SEPARATRIX_P_MAX, separatrix_test
+
+    C, cs, y = np.array(NEAR_C[case]), np.array(NEAR_CA[case]), np.array(NEAR_Y[case], bool)
+    test = separatrix_test(C, cs, y)
+    assert test.p_value == pytest.approx(_firth_lr_p(C, cs, y), rel=1e-4)
+    assert 0.03 < test.p_value < 0.06 and test.significant == significant and SEPARATRIX_P_MAX == 0.05
+    df = pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": y})
+    one = plot_ca_star_vs_cement(df, tmp_path / "one", formats=())
+    rep = plot_probability_diagram(df, tmp_path / "rep", formats=(), smooth=False)
+    assert (one["fit"] is not None) == (rep["band"] is not None) == significant
+    if not significant:
+        assert "not significant" in one["no_fit_reason"] and "not significant" in rep["no_fit_reason"]
+        assert f"p = {test.p_value:.2g}" in one["no_fit_reason"] and f"p = {test.p_value:.2g}" in rep["no_fit_reason"]

@@ -77,7 +77,8 @@ def test_campaign_with_replicated_boundary_writes_its_points(tmp_path):
     assert res.n_executed == st["runs_used"] <= 30 and st["stopped"]
     pts = pd.read_csv(d / "points.csv")
     assert pts["n_runs"].sum() == st["runs_used"]
-    assert sorted(pts["n_runs"]) == sorted(p["replicates"] for p in st["points"])
+    assert sorted(pts["n_ok"]) == sorted(p["replicates"] for p in st["points"])
+    assert not any(p["pending"] or p["unlabelled"] for p in st["points"])
 
 
 @pytest.mark.parametrize("kw, match", [
@@ -116,3 +117,89 @@ def test_a_label_outside_the_two_named_labels_is_ignored_never_a_negative():
     bare = _spec(label="regime")
     with pytest.raises(SpecError, match=r"sampler\.label='regime'.*labels = \[negative, positive\]"):
         BoundarySampler().refine(bare, table)
+
+
+def test_a_rerun_archived_run_replaces_its_committed_row(tmp_path):
+    """A committed replicated boundary campaign made by older code (another code hash, and other run keys: a
+    parameter added to the model changes every key) without its run folders: ``rerun_archived`` reruns the runs the
+    sampler asks for again (round 0, matched to their rows by swept values and seed), and each new run replaces its
+    committed row.  The old row was left unmatched, and a sampler's table shows its unmatched rows: the table held
+    two rows of each rerun run (24 rows for 15 runs, points.csv counted 24 replicates)."""
+    import shutil
+
+    from sweep.campaign.table import build_table
+
+    spec = _spec(budget=15)
+    run_campaign(spec, tmp_path, runner=oracle_runner, jobs=1, code_hash="older", progress=None, isolate="none")
+    d = tmp_path / "rep_boundary"
+    old = pd.read_csv(d / "table.csv")
+    old.assign(key="old-" + old["key"]).to_csv(d / "table.csv", index=False)
+    (d / "table.parquet").unlink()
+    shutil.rmtree(d / "runs")
+    res = run_campaign(spec, tmp_path, runner=oracle_runner, jobs=1, code_hash="newer", progress=None,
+                       isolate="none", rerun_archived=True)
+    assert res.n_executed == 9                                   # the initial design, one run per point
+    for table in (pd.read_csv(d / "table.csv"), build_table(spec, tmp_path, code_hash="newer")):
+        assert len(table) == len(old) == 15
+        assert not table.duplicated(["cement", "eta_o", "seed"]).any()
+        assert (table["code_hash"] == "newer").sum() == 9 and (table["code_hash"] == "older").sum() == 6
+    assert pd.read_csv(d / "points.csv")["n_runs"].sum() == 15
+
+
+def test_sampler_state_counts_finished_labelled_runs_as_replicates_never_pending_ones():
+    """sampler.json's per-point ``replicates`` are the finished runs with a label (what the fit counts, points.csv
+    ``n_ok``); the runs of the current round not yet finished are ``pending`` and a failed run ``unlabelled``, each
+    under its own key.  Here the first run of round 0 fails and the first round with replicates is cut after its
+    first run: the counts are read off the table and the runs left.  The replicate count was the highest replicate
+    index proposed plus one, pending and failed runs included."""
+    spec = _spec()
+    s, rows = BoundarySampler(), []
+    pts = s.initial(spec)
+    base = min(p.params["seed"] for p in pts)
+
+    def run(batch):
+        return [{"status": "ok", "cement": p.params["cement"], "eta_o": p.params["eta_o"], "seed": p.params["seed"],
+                 "fracturing": ORACLE.label((p.params["cement"], p.params["eta_o"]), p.params["seed"], 0)}
+                for p in batch]
+
+    rows = run(pts)
+    rows[0] = {**rows[0], "status": "failed", "fracturing": None}
+    pts = s.refine(spec, pd.DataFrame(rows))
+    while pts and not any(p.params["seed"] > base for p in pts):     # up to the first round with a replicate
+        rows += run(pts)
+        pts = s.refine(spec, pd.DataFrame(rows))
+    left = pts[1:]
+    table = pd.DataFrame(rows + run(pts[:1]))
+    st = BoundarySampler().state(spec, table)
+    assert st["pending"] == len(left) >= 1 and not st["stopped"]
+    got = {(p["cement"], p["eta_o"]): (p["replicates"], p["unlabelled"], p["pending"]) for p in st["points"]}
+    want: dict = {}
+    for k, ok in zip(zip(table["cement"], table["eta_o"]), table["status"] == "ok"):
+        r, u, n = want.get(k, (0, 0, 0))
+        want[k] = (r + int(ok), u + int(not ok), n)
+    for p in left:
+        r, u, n = want.get((p.params["cement"], p.params["eta_o"]), (0, 0, 0))
+        want[(p.params["cement"], p.params["eta_o"])] = (r, u, n + 1)
+    assert got == want
+    assert sum(r for r, _, _ in got.values()) == len(table) - 1 and sum(u for _, u, _ in got.values()) == 1
+    assert any(r >= 1 and n >= 1 for r, _, n in got.values())          # a point with a pending replicate
+
+
+def test_cli_status_of_a_replicated_boundary_campaign(tmp_path, capsys):
+    """``campaign status`` on a boundary campaign with replicates states the round, the budget and the replicate
+    counts (it failed with KeyError 'uncertainty': the replicated sampler's state has a band, not that key)."""
+    from sweep.campaign.cli import main as cli_main
+    from sweep.campaign.spec import load_spec
+
+    path = tmp_path / "rep_boundary.toml"
+    path.write_text('name = "rep_boundary"\n[base]\neta_w = 1e-6\nkbar = 0.0015\n[options]\nh = 4.0\n[axes]\n'
+                    'cement = {linear = [0.5, 3.0, 3]}\neta_o = {log = [0.01, 10.0, 3]}\n[replicates]\nporosity_seed = 5\n'
+                    '[sampler]\nkind = "boundary"\nbudget = 15\ntolerance = 0.1\nlabel = "fracturing"\nbatch = 6\n'
+                    'band_tolerance = 0.3\n[run]\nisolate = "none"\n')
+    run_campaign(load_spec(path), tmp_path, runner=oracle_runner, jobs=1, code_hash="t", progress=None)
+    assert cli_main(["status", str(path), "--results", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    st = json.loads((tmp_path / "rep_boundary" / "sampler.json").read_text())
+    assert f"boundary sampler: round {st['round']}, 15 of 15 runs used, 0 pending" in out
+    assert f"15 labelled runs at {len(st['points'])} points (at most 5 each), 0 pending" in out
+    assert "stopped: budget spent" in out

@@ -102,13 +102,17 @@ def _point_identity(p, identity) -> tuple:
     return tuple(_norm((p.params if target == "params" else p.options).get(name)) for target, name in identity)
 
 
-def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mapping[str, Any]], identity=()):
+def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mapping[str, Any]], identity=(),
+                    held=()):
     """(matched, unmatched): ``matched`` {point key: committed row} for the points whose key is not in ``skip``
     (points with a record or a run folder), by run key first, then by swept values and blocks (rows in table
     order); ``unmatched``: the rows no point took (runs a sampler added, or points the spec no longer asks for).
     ``identity``: the (namespace, name) of the fields that the replicates of a point vary (``[replicates]``:
     ("params", "seed"), ("options", "mesh_seed")); their values must match too, since a point's replicates share
-    its swept values."""
+    its swept values.  ``held``: (point, key) of the runs here (records); each takes the committed row of its own
+    run first, by key, else by swept values, blocks and identity (a row of older code has another key), so that a
+    rerun archived run replaces its row: the row is neither matched nor unmatched (a sampler's table shows its
+    unmatched rows)."""
     by_key = {r.get("key"): i for i, r in enumerate(rows)}
     taken: set[int] = {by_key[k] for k in skip if k in by_key}
     matched: dict[str, dict] = {}
@@ -116,24 +120,40 @@ def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mappi
         if k not in skip and k in by_key and by_key[k] not in taken:
             matched[k] = rows[by_key[k]]
             taken.add(by_key[k])
-    index: dict[tuple, dict[tuple, list[int]]] = {}
+    find = _SweptIndex(rows, identity)
+    for p, k in held:
+        if k not in by_key and p.swept and (i := find(p, taken)) is not None:
+            taken.add(i)
     for p, k in zip(points, keys):
-        if k in skip or k in matched:
-            continue
-        names = tuple(sorted(p.swept))
-        if names not in index:
-            index[names] = {}
-            for i, r in enumerate(rows):
+        if k not in skip and k not in matched and (i := find(p, taken)) is not None:
+            matched[k] = rows[i]
+            taken.add(i)
+    return matched, [r for i, r in enumerate(rows) if i not in taken]
+
+
+class _SweptIndex:
+    """The committed rows indexed by swept values (blocks, and without) and the replicated fields ``identity``;
+    called with a point and the rows taken, it returns the first row of the point not taken, or None."""
+
+    def __init__(self, rows: Sequence[Mapping[str, Any]], identity):
+        self.rows, self.identity, self.index = rows, identity, {}
+
+    def _by_names(self, names: tuple) -> dict:
+        if names not in self.index:
+            self.index[names] = {}
+            for i, r in enumerate(self.rows):
                 sw = _row_swept(r, names)
                 if sw is not None:
-                    rid = _row_identity(r, identity)
-                    index[names].setdefault(_signature(sw, _row_blocks(r)) + rid, []).append(i)
-                    index[names].setdefault(_signature(sw, None) + rid, []).append(i)
-        pid = _point_identity(p, identity)
+                    rid = _row_identity(r, self.identity)
+                    self.index[names].setdefault(_signature(sw, _row_blocks(r)) + rid, []).append(i)
+                    self.index[names].setdefault(_signature(sw, None) + rid, []).append(i)
+        return self.index[names]
+
+    def __call__(self, p, taken: set) -> int | None:
+        index = self._by_names(tuple(sorted(p.swept)))
+        pid = _point_identity(p, self.identity)
         for sig in (_signature(p.swept, ";".join(p.blocks)) + pid, _signature(p.swept, None) + pid):
-            cand = [i for i in index[names].get(sig, []) if i not in taken]
+            cand = [i for i in index.get(sig, []) if i not in taken]
             if cand:
-                matched[k] = rows[cand[0]]
-                taken.add(cand[0])
-                break
-    return matched, [r for i, r in enumerate(rows) if i not in taken]
+                return cand[0]
+        return None

@@ -324,6 +324,30 @@ def _print_provenance(res) -> None:
               "(`--relabel` or `campaign classify` relabels them)")
 
 
+def _sampler_status_lines(st: dict) -> list[str]:
+    """The lines of ``campaign status`` on an adaptive sampler's state: the boundary sampler's round, budget and
+    boundary uncertainty (tolerance units), or with replicates its band (decades) and replicate counts."""
+    if "uncertainty" not in st:     # with replicates: sweep.campaign.replicate_sampler.state
+        from sweep.campaign.run import _sampler_text
+
+        pts = st["points"]
+        lines = [f"{st['sampler']} {_sampler_text(st)}",
+                 f"  {sum(p['replicates'] for p in pts)} labelled runs at {len(pts)} points (at most "
+                 f"{st['replicates']} each), {sum(p['pending'] for p in pts)} pending, "
+                 f"{sum(p['unlabelled'] for p in pts)} finished without a label"]
+        return lines + ([] if st["stopped"] else ["  running: rerun `campaign run` to continue"])
+    from sweep.regimes.diagrams import regime_style
+
+    unc = "not yet measured (fewer than two labels)" if st["uncertainty"] is None else \
+        f"{st['uncertainty']:.2f} x tolerance (largest half-width of the boundary's band)"
+    lines = [f"{st['sampler']} sampler: round {st['round']}, {st['runs_used']}/{st['budget']} runs of the budget "
+             f"({st['pending']} pending), boundary uncertainty {unc}"]
+    for pair, v in sorted(st["uncertainty_by_pair"].items()):
+        words = " | ".join(regime_style(x.strip())["label"] for x in str(pair).split("|"))
+        lines.append(f"  boundary {words}: {v:.2f} x tolerance")
+    return lines + [f"  stopped: {st['reason']}" if st["stopped"] else "  running: rerun `campaign run` to continue"]
+
+
 @_guarded
 def cmd_status(args) -> int:
     from sweep.campaign.accounting import campaign_throughput
@@ -353,16 +377,7 @@ def cmd_status(args) -> int:
         print(f"  failed {k} ({swept}): {plan.records[k].get('reason')}")
     st = sampler_status(spec, args.results)
     if st is not None:
-        unc = "not yet measured (fewer than two labels)" if st["uncertainty"] is None else \
-            f"{st['uncertainty']:.2f} x tolerance (largest half-width of the boundary's band)"
-        print(f"{st['sampler']} sampler: round {st['round']}, {st['runs_used']}/{st['budget']} runs of the budget "
-              f"({st['pending']} pending), boundary uncertainty {unc}")
-        from sweep.regimes.diagrams import regime_style
-
-        for pair, v in sorted(st["uncertainty_by_pair"].items()):
-            words = " | ".join(regime_style(x.strip())["label"] for x in str(pair).split("|"))
-            print(f"  boundary {words}: {v:.2f} x tolerance")
-        print(f"  stopped: {st['reason']}" if st["stopped"] else "  running: rerun `campaign run` to continue")
+        print("\n".join(_sampler_status_lines(st)))
     if plan.damaged:
         print(plan.damage_text())
         return 1

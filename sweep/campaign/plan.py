@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from sweep.campaign.paths import DEFAULT_ROOT, results_root
@@ -171,9 +171,25 @@ def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, poin
 
         identity = [REPLICATE_KEYS[k] for k in sorted(getattr(spec, "replicates", None) or {})]
         plan.archived_rows, unmatched = match_committed(pts, keys, set(recs), [r for r in rows if r.get("key") not in here],
-                                                        identity)
+                                                        identity, _held(spec, store, pts, keys, recs))
         plan.unmatched_rows = unmatched
     return plan
+
+
+def _held(spec: CampaignSpec, store: ResultsStore, pts, keys, recs) -> list[tuple[Point, str]]:
+    """(point, key) of the runs here: the plan's points with a record and, for a sampler, every other record of
+    the store (the runs of earlier rounds).  A point rebuilt from a record has no swept values: they are its
+    values of the spec's axes (one block: a sampler's)."""
+    out = [(p, k) for p, k in zip(pts, keys) if k in recs]
+    if spec.sampler["kind"] != "grid":
+        out += [(Point(r["params"], r["options"], {}, ("refined",), -1), k)
+                for k, r in store.records().items() if k not in recs]
+    axes = spec.blocks[0].axes if len(spec.blocks) == 1 else ()
+
+    def swept(p: Point) -> dict:
+        return {a.name: (p.params if a.target == "params" else p.options).get(a.name) for a in axes}
+
+    return [(p if p.swept else replace(p, swept=swept(p)), k) for p, k in out]
 
 
 def check_intact(plan: Plan, allow_damaged: bool = False) -> None:

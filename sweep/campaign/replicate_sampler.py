@@ -120,7 +120,7 @@ def _replay(sampler, spec, table) -> dict:
     while True:
         pending = [(c, r) for c, r in rounds[-1] if (coord_key(c), r) not in seen]
         if pending:
-            return {"cfg": cfg, "rounds": rounds, "pending": pending, "stop": "", "decision": None}
+            return {"cfg": cfg, "rounds": rounds, "pending": pending, "stop": "", "decision": None, "seen": seen}
         runs = [(c, r, seen[(coord_key(c), r)]) for rr in rounds for c, r in rr]
         sig = ("replicates", tuple((coord_key(c), r, v) for c, r, v in runs))   # memoized: each round is decided once
         if sig not in sampler._memo:
@@ -128,7 +128,8 @@ def _replay(sampler, spec, table) -> dict:
                                               seed=cfg.settings.seed, round_no=len(rounds))
         dec = sampler._memo[sig]
         if dec["stop"]:
-            return {"cfg": cfg, "rounds": rounds, "pending": [], "stop": dec["stop"], "decision": dec, "runs": runs}
+            return {"cfg": cfg, "rounds": rounds, "pending": [], "stop": dec["stop"], "decision": dec, "runs": runs,
+                    "seen": seen}
         rounds.append(dec["batch"])
 
 
@@ -158,13 +159,11 @@ def refine(sampler, spec, table) -> list:
 
 def state(sampler, spec, table) -> dict:
     """JSON-able standing: rounds, runs used of the budget, stop reason, band half-width (decades), the separatrix,
-    and the replicate count of every point."""
+    and per point of the sequence its ``replicates`` (finished runs with a label: those the fit counts, as
+    ``n_ok`` of points.csv), ``unlabelled`` (finished runs without one: failed, or a label outside ``labels``)
+    and ``pending`` (runs of the current round not finished)."""
     st = _replay(sampler, spec, table)
     cfg, dec = st["cfg"], st["decision"]
-    counts: dict = {}
-    for rr in st["rounds"]:
-        for c, r in rr:
-            counts[tuple(c)] = max(counts.get(tuple(c), 0), r + 1)
     band = dec["band"] if dec else None
     names = [a.name for a in cfg.axes]
     return {"sampler": "boundary", "replicates": spec.replicates["porosity_seed"], "round": len(st["rounds"]),
@@ -173,7 +172,19 @@ def state(sampler, spec, table) -> dict:
             "band_half_width_decades": None if not dec or not math.isfinite(dec["half"]) else dec["half"],
             "separatrix": None if band is None else {"A": band.A, "B": band.B, "p_value": band.p_value,
                                                      "significant": band.significant},
-            "points": [{**dict(zip(names, c)), "replicates": n} for c, n in counts.items()]}
+            "points": [{**dict(zip(names, c)), **n} for c, n in _point_runs(st).items()]}
+
+
+def _point_runs(st: dict) -> dict:
+    """{coords: {"replicates", "unlabelled", "pending"}} of the replayed sequence ``st``: a run of the rounds is
+    pending when the table has no row of it, else labelled or not (``_observed``)."""
+    out: dict = {}
+    for rr in st["rounds"]:
+        for c, r in rr:
+            d = out.setdefault(tuple(c), {"replicates": 0, "unlabelled": 0, "pending": 0})
+            k = (coord_key(c), r)
+            d["pending" if k not in st["seen"] else "unlabelled" if st["seen"][k] is None else "replicates"] += 1
+    return out
 
 
 def majority_label(votes: list) -> str:

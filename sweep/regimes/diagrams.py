@@ -25,7 +25,7 @@ import numpy as np
 from sweep.figio import FIGURE_FORMATS, write_figure
 
 from .classify import REGIMES
-from .separatrix import (SEPARATRIX_P_MAX, fit_exponential_separatrix, separatrix_band, separatrix_p_value,
+from .separatrix import (SEPARATRIX_P_MAX, fit_exponential_separatrix, separatrix_band, separatrix_test,
                          unlocated_reason)
 
 __all__ = [
@@ -35,7 +35,7 @@ __all__ = [
     "plot_nf_vs_nb",
     "plot_boundary_sampling",
     "regime_style",
-    "separatrix_p_value",
+    "separatrix_test",
     "SEPARATRIX_P_MAX",
 ]
 
@@ -136,7 +136,9 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     df columns: ``cement``, ``Ca_star``, ``fracturing`` (+ optional ``source``).
     Porous invasion: open circles; fracturing: filled triangles; one colour per source.
     With ``fit`` and both outcomes present, the separatrix Ca*_c = A exp(B C) is fitted
-    (``fit_exponential_separatrix``) and drawn with A, B and their 1-sigma in the legend.
+    (``fit_exponential_separatrix``) and drawn with A, B and their 1-sigma in the legend, unless the labels do
+    not locate it (``unlocated_reason``: its significance is :func:`separatrix_test`, the rule of the replicated
+    diagram too).
     Writes ``out_path`` as PNG plus ``formats``; returns {"paths", "fit", "n_dropped"}.
     """
     _require(df, ("cement", "Ca_star", "fracturing"), "plot_ca_star_vs_cement")

@@ -14,7 +14,8 @@ Their labels are Bernoulli draws of the point's label probability p. This module
   whole true line at once with probability ``level`` (asymptotically), not just each C0 alone.
   **Significance**: the penalized likelihood-ratio test of the separatrix model against a constant
   probability (2 degrees of freedom: B and s); a separatrix whose test does not reject at ``alpha`` is never
-  drawn (the labels do not show that the plane orders them).
+  drawn (the labels do not show that the plane orders them).  :func:`separatrix_test` is that rule, for this
+  diagram and the one-run Ca*-C diagram alike.
 * **a smooth classifier**: :func:`sweep.regimes.regime_model.fit_regime_model` (a logistic fit on a cubic
   Legendre basis with a smoothness prior whose scale is weighed by its evidence), the non-parametric check of
   the straight line; its 0.5 contour and its Laplace band (``boundary_band``).
@@ -28,10 +29,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .separatrix import SeparatrixBand, separatrix_band, separatrix_significance, separatrix_summary
+from .separatrix import (SEPARATRIX_P_MAX, SeparatrixBand, separatrix_band, separatrix_significance,
+                         separatrix_summary, separatrix_test)
 
 __all__ = ["wilson_interval", "replicate_points", "SeparatrixBand", "separatrix_band", "separatrix_significance",
-           "fit_probability_map", "plot_probability_diagram", "plot_nf_vs_nb_probabilities", "separatrix_summary"]
+           "separatrix_test", "fit_probability_map", "plot_probability_diagram", "plot_nf_vs_nb_probabilities", "separatrix_summary"]
 
 
 def wilson_interval(k: Any, n: Any, level: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
@@ -107,7 +109,7 @@ def fit_probability_map(C: Any, ca_star: Any, fracturing: Any, *, tolerance: tup
 
 # --------------------------------------------------------------------------- the diagram
 def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement", y: str = "Ca_star",
-                             label: str = "fracturing", level: float = 0.95, alpha: float = 0.05,
+                             label: str = "fracturing", level: float = 0.95, alpha: float = SEPARATRIX_P_MAX,
                              smooth: bool = True, title: str | None = None, truth: Any = None,
                              by: Sequence[str] | None = None, formats: Sequence[str] = ("svg",)) -> dict[str, Any]:
     """Ca*-C diagram of label probabilities from replicate runs.
@@ -117,7 +119,7 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
     to orange 1), its size grows with the replicate count, and a black ring marks the points whose replicates
     disagree. The background is the smooth classifier's P(fracturing) with its 0.5 contour (dashed) and the edge of
     that contour's 95 % band (dotted), when ``smooth``. The separatrix and its ``level`` band are drawn only when the fit is significant at ``alpha``
-    (:func:`separatrix_significance`); otherwise the figure says why. ``truth``: optional callable C -> Ca*_c
+    (:func:`separatrix_test`, the rule of the one-run diagram too); otherwise the figure says why. ``truth``: optional callable C -> Ca*_c
     drawn dotted (a known boundary). ``by``: the columns that name a point (a campaign's axes; default ``x`` and
     ``y``): runs at one (C, Ca*) of distinct points are not one point's replicates. Writes PNG plus ``formats``;
     returns {"paths", "points", "band", "no_fit_reason", "n_dropped"}.
@@ -174,17 +176,16 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
 
 
 def _band_or_reason(C, cs, fr, level, alpha):
-    """(band, None) when the separatrix is significant at ``alpha``, else (None, why)."""
+    """(band, None) when the separatrix is significant at ``alpha`` (:func:`separatrix_test`), else (None, why)."""
     if len(C) < 3 or fr.all() or (~fr).all():
         return None, "both regimes are needed to fit a separatrix"
     try:
-        band = separatrix_band(C, cs, fr, level=level, alpha=alpha)
+        test = separatrix_test(C, cs, fr, alpha)
+        if not test.significant:
+            return None, f"the fit is {test.reason}"
+        return separatrix_band(C, cs, fr, level=level, alpha=alpha), None
     except ValueError as exc:
         return None, str(exc)
-    if not band.significant:
-        return None, (f"the fit is not significant (penalized likelihood ratio {band.lr:.2f} against a constant "
-                      f"probability, p = {band.p_value:.2g} >= {alpha:g})")
-    return band, None
 
 
 def _shade_smooth(ax, model, cmap, n: int = 120) -> None:

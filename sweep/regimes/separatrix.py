@@ -6,6 +6,8 @@ intervals, honest on separable labels); ``unlocated_reason`` says when the label
 ``separatrix_band`` gives the profile-likelihood band of ln Ca*_c over C (simultaneous: it covers the whole line),
 ``separatrix_significance`` the penalized likelihood-ratio test against a constant probability, and
 ``separatrix_summary`` what a campaign report states of them (sweep.regimes.probability re-exports the three).
+``separatrix_test`` is the one rule of whether a fit is significant (that test at ``SEPARATRIX_P_MAX``): every
+diagram (one run per point or replicates), the campaign report and the replicated sampler decide by it.
 C in % (cement ratio), Ca* dimensionless.  Drawing lives in ``sweep.regimes.diagrams``.
 """
 from __future__ import annotations
@@ -23,8 +25,9 @@ __all__ = [
     "SeparatrixInterval",
     "separatrix_profile_interval",
     "unlocated_reason",
-    "separatrix_p_value",
     "SEPARATRIX_P_MAX",
+    "SeparatrixTest",
+    "separatrix_test",
     "SeparatrixBand",
     "separatrix_band",
     "separatrix_significance",
@@ -214,22 +217,40 @@ def separatrix_profile_interval(C: Any, ca_star: Any, fracturing: Any, level: fl
                               b_iv, level, separable, float(th[0]))
 
 
-SEPARATRIX_P_MAX = 0.05
+SEPARATRIX_P_MAX = 0.05   # significance level of the separatrix test: p below it, the fit is significant
 
 
-def separatrix_p_value(C: Any, ca_star: Any, fracturing: Any, ridge: float = 1e-3) -> float:
-    """p-value of the likelihood-ratio test of the logistic fit logit P = b0 + b1 C + b2 ln Ca* (the
-    separatrix's model) against a constant fracturing rate: chi-squared with 2 degrees of freedom."""
-    from scipy.stats import chi2
+class SeparatrixTest(NamedTuple):
+    """The separatrix test's outcome: ``lr`` the penalized likelihood-ratio statistic against a constant
+    probability, ``p_value`` (chi2 with 2 degrees of freedom), ``alpha`` the level; ``significant`` = p < alpha."""
 
-    fr = np.asarray(fracturing).astype(bool).ravel()
-    X = np.c_[np.asarray(C, float).ravel(), np.log(np.asarray(ca_star, float).ravel())]
-    fit = logistic_fit(X, fr, ridge=ridge)
-    z = fit.beta[0] + X @ np.asarray(fit.beta[1:], float)
-    ll_fit = float(np.sum(fr * -np.logaddexp(0.0, -z) + (~fr) * -np.logaddexp(0.0, z)))
-    q = fr.mean()
-    ll_null = float(fr.sum() * np.log(q) + (~fr).sum() * np.log(1.0 - q))
-    return float(chi2.sf(max(0.0, 2.0 * (ll_fit - ll_null)), 2))
+    lr: float
+    p_value: float
+    alpha: float
+
+    @property
+    def significant(self) -> bool:
+        return bool(self.p_value < self.alpha)
+
+    @property
+    def reason(self) -> str | None:
+        """Why the fit is not significant (None when it is), as a figure or report says it."""
+        if self.significant:
+            return None
+        return (f"not significant: penalized likelihood ratio {self.lr:.2f} against a constant probability, "
+                f"p = {self.p_value:.2g} >= {self.alpha:g}")
+
+
+def separatrix_test(C: Any, ca_star: Any, fracturing: Any, alpha: float = SEPARATRIX_P_MAX) -> SeparatrixTest:
+    """Whether the labels' separatrix Ca*_c = A exp(B C) is significant: the one rule of the single-run and the
+    replicated Ca*-C diagrams, the campaign report and the replicated boundary sampler.  The Jeffreys-penalized
+    likelihood-ratio test of the fit against a constant fracturing probability (:func:`separatrix_significance`,
+    the likelihood of the band and the profile intervals), significant when p < ``alpha``.  C in %, Ca* (-) > 0,
+    fracturing bools; ValueError when the design cannot identify the line or ``alpha`` is not in (0, 1)."""
+    if not (isinstance(alpha, (int, float)) and 0 < alpha < 1):
+        raise ValueError(f"alpha={alpha!r}: must be a number in (0, 1)")
+    lr, p = separatrix_significance(C, ca_star, fracturing)
+    return SeparatrixTest(lr, p, float(alpha))
 
 
 def unlocated_reason(sep, C, cs, fr) -> str | None:
@@ -249,11 +270,11 @@ def unlocated_reason(sep, C, cs, fr) -> str | None:
         major = "fracturing" if fr.sum() > (~fr).sum() else "porous invasion"
         return (f"{head} puts {wrong} of {fr.size} runs on the wrong side, no fewer than calling every run "
                 f"{major} ({minority}): the labels do not locate it")
-    p = separatrix_p_value(C, cs, fr)
-    if p >= SEPARATRIX_P_MAX:
-        return (f"{head} is not significant: against a constant fracturing rate the likelihood-ratio test "
-                f"gives p = {p:.2g} (>= {SEPARATRIX_P_MAX:g}); none found")
-    return None
+    try:
+        test = separatrix_test(C, cs, fr)
+    except ValueError as exc:     # a design that cannot identify the line
+        return str(exc)
+    return None if test.significant else f"{head} is {test.reason}; none found"
 
 
 # --------------------------------------------------------------------------- the separatrix and its band
@@ -350,12 +371,13 @@ def separatrix_significance(C: Any, ca_star: Any, fracturing: Any) -> tuple[floa
 
 
 def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95, simultaneous: bool = True,
-                    at: Any = None, n_grid: int = 13, alpha: float = 0.05) -> SeparatrixBand:
+                    at: Any = None, n_grid: int = 13, alpha: float = SEPARATRIX_P_MAX) -> SeparatrixBand:
     """Fit the separatrix and its profile-likelihood band of ln Ca*_c (see the module docstring).
 
     C (%), ca_star (-, > 0), fracturing (bools, both outcomes). ``at``: the C values of the band (default
     ``n_grid`` values over the sampled range). ``simultaneous``: threshold chi2_2(level)/2 (the whole line),
-    else chi2_1(level)/2 (each C alone). Raises ValueError when fracturing does not increase with Ca*.
+    else chi2_1(level)/2 (each C alone). ``significant``: :func:`separatrix_test` at ``alpha``. Raises ValueError
+    when fracturing does not increase with Ca*.
     """
     from scipy.stats import chi2
 
@@ -367,7 +389,7 @@ def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.9
     full, th = sep_min(X, y, np.eye(3))
     if not th[0] > 0:
         raise ValueError("fracturing: does not increase with Ca* (fitted sharpness <= 0); no separatrix")
-    lr, pv = separatrix_significance(C, ca_star, fracturing)
+    test = separatrix_test(C, ca_star, fracturing, alpha)
     Cc = -X[:, 1]
     grid = np.linspace(Cc.min(), Cc.max(), n_grid) if at is None else np.atleast_1d(np.asarray(at, float))
     thr = chi2.ppf(level, 2 if simultaneous else 1) / 2.0
@@ -382,13 +404,14 @@ def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.9
             return sep_min(X, y, np.array([[1.0, 0.0], [0.0, 1.0], [v, -c0]]))[0] - full - thr
         (lo[i], hi[i]), (lo_ok[i], hi_ok[i]) = _profile_search(rise, float(center[i]), step)
     return SeparatrixBand(grid, center, lo, hi, level, simultaneous, float(math.exp(lnA)), float(B), float(th[0]),
-                          lr, pv, bool(pv < alpha), int(y.size), lo_ok, hi_ok)
+                          test.lr, test.p_value, test.significant, int(y.size), lo_ok, hi_ok)
 
 
-def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95, alpha: float = 0.05) -> dict:
+def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.95,
+                       alpha: float = SEPARATRIX_P_MAX) -> dict:
     """What the labels say about the separatrix Ca*_c = A exp(B C), as a campaign report states it: the runs,
     the penalized likelihood-ratio test against a constant probability (``lr``, ``p_value``, ``significant`` at
-    ``alpha``), and when it is significant A and B with their ``level`` profile-likelihood intervals
+    ``alpha``: :func:`separatrix_test`), and when it is significant A and B with their ``level`` profile-likelihood intervals
     (:func:`~.separatrix.separatrix_profile_interval`), ``B_positive`` (the interval of B above 0: the paper's
     increasing separatrix, Sec. 3.6) and the simultaneous band's half-width in decades at the two ends of the
     sampled C (:func:`separatrix_band`); ``reason`` says why there is no separatrix otherwise.  C in %, Ca* -."""
@@ -398,12 +421,12 @@ def separatrix_summary(C: Any, ca_star: Any, fracturing: Any, *, level: float = 
     if Cc.size < 3 or fr.all() or not fr.any():
         return {**out, "reason": "both regimes are needed to fit a separatrix"}
     try:
-        lr, pv = separatrix_significance(Cc, cs, fr)
+        test = separatrix_test(Cc, cs, fr, alpha)
     except ValueError as exc:     # a design that cannot identify the line
         return {**out, "reason": str(exc)}
-    out.update({"lr": lr, "p_value": pv, "significant": bool(pv < alpha)})
-    if not out["significant"]:
-        return {**out, "reason": f"not significant: p = {pv:.2g} >= {alpha:g} against a constant probability"}
+    out.update({"lr": test.lr, "p_value": test.p_value, "significant": test.significant})
+    if not test.significant:
+        return {**out, "reason": test.reason}
     try:
         iv = separatrix_profile_interval(Cc, cs, fr, level=level)
         band = separatrix_band(Cc, cs, fr, level=level, at=[Cc.min(), Cc.max()])
