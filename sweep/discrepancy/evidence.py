@@ -151,13 +151,11 @@ def alternative_mimic(problem: Problem, fit: Fit, sig: dict, candidate: str) -> 
     lower, upper = sig["bounds"]
     c = stats.bounded_lstsq(M, s, lower, upper)
     misfit = float(np.linalg.norm(M @ c - s) / max(np.linalg.norm(s), 1e-300))
-    values, clipped = fit.values(), []
-    for (p, x0, unit), d, lo, hi in zip(_moves(problem, fit, sig["free"]), c, lower, upper):
-        x = float(np.clip(x0 + d * unit, *sorted(p.x_bounds)))
-        if np.isclose(d, lo, rtol=0, atol=1e-9 * max(1.0, abs(lo))) or np.isclose(d, hi, rtol=0, atol=1e-9 * max(1.0, abs(hi))):
-            clipped.append(p.name)
-        values[p.name] = p.from_x(x)
-    return values, {"linear_misfit": misfit, "clipped": clipped}
+    at_end = np.isclose(c, lower, rtol=1e-9) | np.isclose(c, upper, rtol=1e-9)
+    values, moves = fit.values(), _moves(problem, fit, sig["free"])
+    for (p, x0, unit), d in zip(moves, c):
+        values[p.name] = p.from_x(float(np.clip(x0 + d * unit, *sorted(p.x_bounds))))   # the clip: rounding only
+    return values, {"linear_misfit": misfit, "clipped": [p.name for (p, _, _), e in zip(moves, at_end) if e]}
 
 
 def alternative_steps(alts) -> list:

@@ -363,11 +363,9 @@ def _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio, bounds=None) -
 
     def ratio(cols):
         M = np.column_stack([Jw, Aw[:, cols]])
-        if bounds is None:
-            return float(np.linalg.norm(project_out(M, sw_s))) / ns
         keep = list(range(nJ)) + [nJ + k for k in cols]
-        c = bounded_lstsq(M, sw_s, np.asarray(bounds[0], float)[keep], np.asarray(bounds[1], float)[keep])
-        return float(np.linalg.norm(M @ c - sw_s)) / ns
+        lb, ub = (None, None) if bounds is None else (np.asarray(b, float)[keep] for b in bounds)
+        return float(np.linalg.norm(M @ bounded_lstsq(M, sw_s, lb, ub) - sw_s)) / ns
 
     total = ratio(list(range(len(alternatives))))
     if total >= min_ratio:
