@@ -58,7 +58,8 @@ def test_a_folder_without_runs_is_refused_in_one_line(tmp_path, capsys):
     assert main(["cracks", "history", str(tmp_path), "--out", str(tmp_path / "h.csv")]) == 2
     assert main(["cracks", "separatrix", str(tmp_path), "--l-min", "4", "--out", str(tmp_path / "s.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "no runs/ folder" in err[0] and "no crack_history.csv" in err[1]
+    assert len(err) == 3 and "no runs/ folder" in err[0] and "no crack_history.csv" in err[1]
+    assert "no runs/ or longest_crack_steps.csv" in err[2]
 
 
 def _close(a, b):
@@ -80,3 +81,41 @@ def test_h1_line_longest_crack_separatrix_regenerates(tmp_path):
                  "--out", str(out), "--md", str(md)]) == 0
     assert md.read_text() == (folder / "longest_crack_separatrix.md").read_text()
     assert _close(json.loads(out.read_text()), json.loads((folder / "longest_crack_separatrix.json").read_text()))
+
+
+def test_peak_label_separatrix_regenerates_without_its_runs(tmp_path):
+    """The h = 2 peak-label folder keeps no runs/: the steps' lengths come from its longest_crack_steps.csv, and
+    both files regenerate (Markdown byte for byte, JSON to the fits' optimizer tolerance)."""
+    folder = RESULTS / "ca_star_peak_label_h2"
+    assert not (folder / "runs").exists()
+    out, md = tmp_path / "l.json", tmp_path / "l.md"
+    assert main(["cracks", "separatrix", str(folder), "--l-min", *map(str, range(2, 11)),
+                 "--out", str(out), "--md", str(md)]) == 0
+    assert md.read_text() == (folder / "longest_crack_separatrix.md").read_text()
+    assert _close(json.loads(out.read_text()), json.loads((folder / "longest_crack_separatrix.json").read_text()))
+
+
+def test_steps_csv_stands_in_for_the_runs(tmp_path):
+    """Lengths written with --steps-out from a folder with runs/ (a made-up two-run store) give the same steps
+    half when read back from longest_crack_steps.csv in a copy of the folder without runs/; a run missing from
+    the CSV is named."""
+    folder = tmp_path / "with_runs"
+    rows = []
+    for key, (tc, tips) in {"a1": (1.0, [5.0, 9.0, 7.0]), "b2": (2.0, [5.0, 6.0, 12.0])}.items():
+        rd = folder / "runs" / key
+        rd.mkdir(parents=True)
+        pd.DataFrame({"t": [0.5, 1.0, 1.5], "open_tip_radius": tips}).to_csv(rd / "timeseries.csv", index=False)
+        (rd / "params.toml").write_text("[parameters]\nr_inner = 5.0\n")
+        rows.append({"key": key, "status": "ok", "t_classified": tc})
+    table = pd.DataFrame(rows).set_index("key")
+    steps = cracks.longest_from_steps(folder, table)
+    assert steps.loc["a1", "L@0.99"] == pytest.approx(4.0) and steps.loc["a1", "t_longest"] == 1.0
+    assert steps.loc["b2", "L@0.99"] == pytest.approx(7.0) and steps.loc["b2", "t_longest"] == 1.5
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    steps.rename_axis("key").reset_index()[cracks.STEPS_COLUMNS].to_csv(bare / cracks.STEPS_CSV, index=False)
+    pd.testing.assert_frame_equal(cracks.longest_from_steps(bare, table), steps[cracks.STEPS_COLUMNS[1:]],
+                                  check_names=False)
+    table.loc["c3"] = ["ok", 1.0]
+    with pytest.raises(ValueError, match=r"no rows for the finished runs \['c3'\]"):
+        cracks.longest_from_steps(bare, table)

@@ -56,11 +56,13 @@ def add_cracks_command(subparsers):
     h.add_argument("--summary", type=Path, help="also write the per-run summary (Markdown)")
     h.set_defaults(func=_deferred(mod, "cmd_history"))
     s = sub.add_parser("separatrix", help="the Ca*-C separatrix with each run labelled by its longest crack")
-    s.add_argument("folder", type=Path, help="a boundary campaign's results folder (runs/, crack_history.csv)")
+    s.add_argument("folder", type=Path, help="a boundary campaign's results folder (crack_history.csv; runs/ or longest_crack_steps.csv)")
     s.add_argument("--table", type=Path, help="the campaign's table.csv (default FOLDER/table.csv)")
     s.add_argument("--l-min", type=float, nargs="+", required=True, help="crack lengths L_min (mm)")
     s.add_argument("--out", type=Path, required=True)
     s.add_argument("--md", type=Path)
+    s.add_argument("--steps-out", type=Path, help="also write the steps' longest crack per run (CSV; committed as "
+                   "FOLDER/longest_crack_steps.csv it stands in for runs/)")
     s.set_defaults(func=_deferred(mod, "cmd_separatrix"))
     return c
 

@@ -17,7 +17,10 @@ timeseries.csv and params.toml, ``crack_history.csv``, ``table.csv``) by the lon
 judged time, read two ways: ``steps`` (every accepted step, phi_open = 0.99: ``open_tip_radius - r_inner``,
 solver.metrics.open_tip_radius) and ``snapshots`` (the classifier's crack on the stored snapshots at each phi_open
 of the history), and fits Ca*_c = A exp(B C) at each (phi_open, L_min) with the protocol's fit
-(``sweep.studies.threshold_sensitivity.separatrix_grid``).
+(``sweep.studies.threshold_sensitivity.separatrix_grid``).  ``--steps-out F.csv`` also writes the steps' lengths
+per run (key, ``L@0.99``, ``t_longest``, ``t_judged``); committed as FOLDER/``longest_crack_steps.csv``
+(:data:`STEPS_CSV`), it stands in for ``runs/`` in a results folder that does not keep its runs, so that the fits
+regenerate from committed files alone.
 
 Units: mm, s, C in %; d, phi, eps_v dimensionless.
 """
@@ -36,10 +39,12 @@ from sweep.regimes.classify import classify_fields, list_snapshots, longest_open
 from sweep.studies.threshold_sensitivity import ThresholdGrid, separatrix_grid, to_markdown
 
 __all__ = ["PHI_OPEN", "L_MIN", "snapshot_row", "run_history", "summary", "summary_markdown",
-           "longest_from_snapshots", "longest_from_steps", "longest_crack_separatrix"]
+           "longest_from_snapshots", "longest_from_steps", "longest_crack_separatrix", "STEPS_CSV", "STEPS_COLUMNS"]
 
 PHI_OPEN = (0.95, 0.99, 0.995)
 L_MIN = 4.0  # mm, the boundary campaigns' threshold
+STEPS_CSV = "longest_crack_steps.csv"  # the steps' longest crack per run, where a results folder keeps no runs/
+STEPS_COLUMNS = ["key", "L@0.99", "t_longest", "t_judged"]
 
 
 def snapshot_row(points, tris, r_i, r_o, z) -> dict:
@@ -126,7 +131,10 @@ def longest_from_snapshots(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
 
 def longest_from_steps(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
     """``L@0.99`` (mm) per run key: the largest ``open_tip_radius - r_inner`` over the accepted steps at
-    t <= the judged time (``sweep.regimes.classify.longest_open_crack``), and the time it was reached (s)."""
+    t <= the judged time (``sweep.regimes.classify.longest_open_crack``), and the time it was reached (s).  Read
+    from the runs' time series in FOLDER/runs, or, in a folder without runs/, from FOLDER/:data:`STEPS_CSV`."""
+    if not (folder / "runs").is_dir():
+        return _steps_from_csv(folder / STEPS_CSV, table)
     rows = {}
     for key, run in table.iterrows():
         rd = folder / "runs" / key
@@ -140,6 +148,15 @@ def longest_from_steps(folder: Path, table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame.from_dict(rows, orient="index")
 
 
+def _steps_from_csv(path: Path, table: pd.DataFrame) -> pd.DataFrame:
+    """The steps' lengths of every finished run of ``table`` from ``path`` (:data:`STEPS_COLUMNS`)."""
+    steps = pd.read_csv(path, dtype={"key": str}).set_index("key")
+    missing = sorted(set(table.index) - set(steps.index))
+    if missing:
+        raise ValueError(f"{path}: no rows for the finished runs {missing}")
+    return steps.loc[table.index, STEPS_COLUMNS[1:]]
+
+
 def _with_axes(lengths: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
     out = lengths.copy()
     out["cement"] = table.loc[out.index, "cement"].astype(float)
@@ -147,13 +164,17 @@ def _with_axes(lengths: pd.DataFrame, table: pd.DataFrame) -> pd.DataFrame:
     return out.rename_axis("key").reset_index()
 
 
-def longest_crack_separatrix(folder: Path, l_min, table_csv: Path | None = None) -> tuple[dict, str]:
+def longest_crack_separatrix(folder: Path, l_min, table_csv: Path | None = None,
+                             steps_out: Path | None = None) -> tuple[dict, str]:
     """The separatrix fits with the longest crack read over the steps and over the snapshots: (JSON document,
-    Markdown)."""
+    Markdown).  ``steps_out``: where to write the steps' lengths per run (CSV, :data:`STEPS_COLUMNS`)."""
     table = _finished(folder, table_csv)
+    steps = longest_from_steps(folder, table)
+    if steps_out is not None:
+        atomic_write_text(steps_out, steps.rename_axis("key").reset_index()[STEPS_COLUMNS]
+                          .to_csv(index=False, float_format="%.17g"))
     doc, md = {"label": "the longest crack at or before the judged time"}, []
-    for name, lengths in (("steps", longest_from_steps(folder, table)),
-                          ("snapshots", longest_from_snapshots(folder, table))):
+    for name, lengths in (("steps", steps), ("snapshots", longest_from_snapshots(folder, table))):
         lengths = _with_axes(lengths, table)
         levels = tuple(float(c[2:]) for c in lengths.columns if c.startswith("L@"))
         fits = separatrix_grid(lengths, ThresholdGrid(phi_open=levels, l_min=tuple(l_min)))
@@ -191,12 +212,15 @@ def cmd_history(a) -> int:
 
 
 def cmd_separatrix(a) -> int:
-    for need in ("crack_history.csv", "runs"):
-        if not (a.folder / need).exists():
-            print(f"dchfrac cracks separatrix: {a.folder}: no {need} (allowed: a boundary campaign's results folder "
-                  "with runs/ and crack_history.csv)", file=sys.stderr)
-            return 2
-    doc, md = longest_crack_separatrix(a.folder, a.l_min, a.table)
+    missing = [need for need, ok in (("crack_history.csv", (a.folder / "crack_history.csv").is_file()),
+                                     (f"runs/ or {STEPS_CSV}",
+                                      (a.folder / "runs").is_dir() or (a.folder / STEPS_CSV).is_file())) if not ok]
+    for need in missing:
+        print(f"dchfrac cracks separatrix: {a.folder}: no {need} (allowed: a boundary campaign's results folder "
+              f"with crack_history.csv and runs/ or {STEPS_CSV})", file=sys.stderr)
+    if missing:
+        return 2
+    doc, md = longest_crack_separatrix(a.folder, a.l_min, a.table, a.steps_out)
     atomic_write_text(a.out, json.dumps(doc, indent=1))
     if a.md:
         atomic_write_text(a.md, md)
