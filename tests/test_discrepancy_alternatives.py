@@ -74,6 +74,28 @@ def test_an_alternative_confounds_only_within_its_range():
     assert tab["down"]["alternative_ratio"] == pytest.approx(1.0, rel=1e-9)   # a1 ⟂ the offset: nothing absorbed
 
 
+def test_a_calibrated_parameter_absorbs_a_signature_only_within_its_range():
+    """The calibrated offset can move by at most +0.5 (its range's end): a signature of +2 along it keeps the
+    share it cannot reach, 1.5/2 = 0.75 of its norm (exact), with the amplitude and score of that share, where
+    the unbounded projection absorbed it all (ratio 0, not identifiable); a signature of +0.4 lies within reach
+    and is absorbed either way.  With alternatives, the calibrated-only ratio is never below the one off
+    [J, A]: one bounded rule for both."""
+    t, J, a1, _ = _columns()
+    a1 = a1 - a1.mean()
+    sig = {"far": 2.0 * J[:, 0], "near": 0.4 * J[:, 0]}
+    r = 1.5 * J[:, 0]                                          # the data ask for what the offset cannot give
+    free = stats.signature_table(r, np.ones_like(t), J, sig)
+    assert free["far"]["ratio"] < 1e-12 and not free["far"]["identifiable"]
+    tab = stats.signature_table(r, np.ones_like(t), J, sig, bounds=(np.array([-np.inf]), np.array([0.5])))
+    assert tab["far"]["ratio"] == pytest.approx(0.75, rel=1e-9) and tab["far"]["identifiable"]
+    assert tab["far"]["amplitude"] == pytest.approx(1.5 / 1.5, rel=1e-9)          # r·s⊥/|s⊥|², s⊥ = 1.5·1
+    assert tab["far"]["score"] == pytest.approx(1.5 ** 2 * t.size, rel=1e-9)      # (r·s⊥)²/|s⊥|²
+    assert tab["near"]["ratio"] < 1e-9 and not tab["near"]["identifiable"]
+    both = stats.signature_table(r, np.ones_like(t), J, {"far": sig["far"] + a1}, A=a1[:, None],
+                                 alternatives=("x1",), bounds=(np.array([-np.inf, -np.inf]), np.array([0.5, 0.1])))
+    assert both["far"]["ratio"] >= both["far"]["alternative_ratio"] - 1e-12
+
+
 def test_bounded_least_squares_known_answers():
     """stats.bounded_lstsq: the unbounded solution when it lies within the bounds; otherwise the bounded
     optimum (two orthonormal columns: each coefficient is its projection clipped to its bounds)."""

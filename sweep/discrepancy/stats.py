@@ -315,7 +315,8 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
     names the alternatives that bring it there (each alone, or all together when none does alone): what
     the candidate would explain, a change of those parameters would explain as well.  ``bounds`` (lower, upper:
     one per column of [J, A], in the columns' units) keeps those changes within the parameters' ranges
-    (:func:`bounded_lstsq`): a signature the alternatives reproduce only beyond their range is not confounded
+    (:func:`bounded_lstsq`), for the calibrated parameters' projection (``ratio``, the amplitude and the score)
+    as for the alternatives': a signature the parameters reproduce only beyond their range is not confounded
     with them.  None: unbounded.
     """
     r = np.asarray(r, float)
@@ -330,7 +331,7 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
         ok = np.all(np.isfinite(s))
         sw_s = np.where(np.isfinite(s), s, 0.0) * sw
         ns = float(np.linalg.norm(sw_s))
-        sp = project_out(Jw, sw_s) if ns > 0 else sw_s
+        sp = _off_calibrated(Jw, sw_s, bounds) if ns > 0 else sw_s
         nsp = float(np.linalg.norm(sp))
         ratio = nsp / ns if ns > 0 else 0.0
         alt_ratio, confounded = _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio, bounds)
@@ -350,6 +351,18 @@ def signature_table(r, w, J, signatures: dict, *, min_ratio: float = 0.15, tie_c
                 out[a]["tied_with"].append(b)
                 out[b]["tied_with"].append(a)
     return out
+
+
+def _off_calibrated(Jw, sw_s, bounds=None) -> np.ndarray:
+    """The part of the (weighted) signature ``sw_s`` the calibrated parameters' columns ``Jw`` cannot reproduce:
+    its least-squares residual on them, within their ranges when ``bounds`` (lower, upper per column of [J, A])
+    are given (:func:`bounded_lstsq`, the same rule as :func:`_alternative_ratio`), else the orthogonal
+    projection (:func:`project_out`)."""
+    if bounds is None or Jw.shape[1] == 0:
+        return project_out(Jw, sw_s)
+    nJ = Jw.shape[1]
+    lb, ub = (np.asarray(b, float)[:nJ] for b in bounds)
+    return sw_s - Jw @ bounded_lstsq(Jw, sw_s, lb, ub)
 
 
 def _alternative_ratio(Jw, Aw, alternatives, sw_s, ns, min_ratio, bounds=None) -> tuple:
