@@ -55,6 +55,10 @@ class FitOptions(_Checked):
                       doc="robust loss of scipy.optimize.least_squares")
     f_scale: float = _rule(3.0, "float", 0.0, lo_open=True, doc="residual scale where the robust loss bends")
     max_nfev: int = _rule(20, "int", 1, doc="function evaluations per least-squares start")
+    chi2_tol: float = _rule(0.0, "float", 0.0,
+                            doc="a least-squares start stops once a step lowers the (robust) chi2 by less than "
+                                "this (0: scipy's ftol 1e-8, run to max_nfev on a model with jitter); a chi2 "
+                                "far below every interval's threshold (3.84 and up) moves no reported number")
     starts: int = _rule(1, "int", 1, 50, doc="starts per fit (the spec's initial values, then random ones)")
     seed: int = _rule(0, "int", 0, doc="seed of the random starts and of the residual test's null draws")
     nan_residual: float = _rule(50.0, "float", 0.0, lo_open=True,

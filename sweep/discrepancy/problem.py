@@ -238,6 +238,18 @@ class Problem:
         r0 = rs[0]
         return np.column_stack([(ri - r0) / h for ri, h in zip(rs[1:], steps)]) if params else np.zeros((r0.size, 0))
 
+    def _ftol(self, params, x0, ids) -> float:
+        """scipy's ftol for a start at ``x0``: 1e-8, or with ``[fit] chi2_tol`` > 0 the relative cost change
+        chi2_tol / (r0·r0) (r0: the residuals at x0, a run the fit makes first anyway).  scipy stops when a step
+        lowers the cost F by less than ftol × F; F never exceeds ½ r0·r0 along the fit (its steps descend; the
+        robust loss lies below the quadratic), so it stops only once a step gains less than chi2_tol in χ²."""
+        tol = self.spec.fit.chi2_tol
+        if tol <= 0.0:
+            return 1e-8
+        ahead = self.jacobian_points(params, x0)[0] if self.spec.fit.prefetch_jacobian else []
+        r0 = self.residual_batch(params, [x0] + ahead, ids)[0]      # with the prefetch: the fit's first batch
+        return float(np.clip(tol / max(float(r0 @ r0), 1e-300), np.finfo(float).eps, 0.1))
+
     def fit(self, params: tuple, x0s: list, ids, max_nfev: int | None = None) -> Fit:
         """Robust bounded least squares (scipy TRF) from each start in ``x0s``; the lowest cost wins.
         ``max_nfev``: evaluations per start (default: ``[fit] max_nfev``; 1: the residuals and Jacobian at
@@ -260,7 +272,7 @@ class Problem:
             res = least_squares(fun, x0,
                                 jac=lambda x: self.jacobian(params, x, ids), bounds=(lb, ub),
                                 loss=fo.loss, f_scale=fo.f_scale, max_nfev=max_nfev or fo.max_nfev, x_scale=ub - lb,
-                                method="trf")
+                                ftol=self._ftol(params, x0, ids), method="trf")
             nf += res.nfev
             r = self.residual_batch(params, [res.x], ids)[0]
             cost = 0.5 * float(r @ r)

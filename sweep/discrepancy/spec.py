@@ -47,7 +47,7 @@ Example (units mm, s, kPa)::
                                      # per observable over its conditions: [noise] realization_blocks)
 
     [fit]                            # optional tables of settings, defaults shown (sweep/discrepancy/options.py)
-    loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; starts = 1; seed = 0; n_jobs = 1
+    loss = "soft_l1"; f_scale = 3.0; max_nfev = 20; chi2_tol = 0.0; starts = 1; seed = 0; n_jobs = 1
     [acceptance]                     # passing candidates are ranked, and tied within tie_bic, by their BICs
     delta_bic = -10.0; tie_bic = 10.0; min_gap_reduction = 0.1; min_explained = 0.5    # under common weights
     min_ratio = 0.15; tie_cos = 0.95; z_crit = 3.0; rho_crit = 0.3; max_rounds = 3; max_refits = 2
