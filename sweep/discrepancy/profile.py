@@ -77,6 +77,7 @@ class _Profile:
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
         self.fines = realizations(fine_forward)
         self.checks: list = []
+        self.open: set = set()           # the sides (-1, +1) not crossed within the parameter's range
         self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
         self.cm = None                   # with [profile] correction = "linear": the correction's model
         if self.fines and self.po.correction == "linear":
@@ -343,23 +344,23 @@ class _Profile:
 
     def side(self, sign: int) -> float:
         """One bound: from the Wald bound, doubling the distance from the fit (``expand`` times) until the
-        threshold is crossed; the parameter's bound when it never is within it."""
+        threshold is crossed, then at the parameter's bound itself; where it is not crossed there either, the
+        parameter's bound, and the side is open (``self.open``: the range is all the profile excludes)."""
         xh = float(self.x_hat[self.j])
         bound = self.x_hi if sign > 0 else self.x_lo
         step = max(abs(self.p.to_x(self.wald[1] if sign > 0 else self.wald[0]) - xh), 1e-6 * (self.x_hi - self.x_lo))
         x_in, d_in = xh, 0.0
-        for _ in range(self.po.expand + 1):
-            xt = float(np.clip(xh + sign * step, self.x_lo, self.x_hi))
+        for k in range(self.po.expand + 2):
+            xt = float(np.clip(xh + sign * step, self.x_lo, self.x_hi)) if k <= self.po.expand else bound
             if xt == x_in:
-                return bound
+                break
             d = self.dchi2(xt)
             if d >= self.thr:
                 return self.refine(x_in, d_in, xt, d)
             x_in, d_in = xt, d
-            if xt == bound:
-                return bound
             step *= 2.0
-        return x_in   # not crossed within the bracket: the last point inside (a lower bound on the width)
+        self.open.add(sign)
+        return bound
 
     def widen(self, lo: float, hi: float) -> None:
         """``grid`` more points per side, evenly out to twice the raw bound's distance from the fit (where a
@@ -406,8 +407,9 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     """Profile-likelihood interval of parameter ``j`` of ``fit`` (see the module docstring).
 
     Each side starts at the Wald bound and doubles its distance from the fit until the threshold is crossed,
-    then the crossing is interpolated and refined (:class:`_Profile`); a side that never crosses ends at the
-    parameter's bound.  ``fine_forward`` (the fine check models): the discretization correction is a constant
+    then the crossing is interpolated and refined (:class:`_Profile`); a side that does not cross within the
+    doublings is evaluated at the parameter's bound, and where it does not cross there either it ends at that
+    bound, open ("lower_open", "upper_open": the data do not bound the strength on that side).  ``fine_forward`` (the fine check models): the discretization correction is a constant
     vector estimated at the fit, so without them the profile has the coarse model's shape away from the fit;
     with them each point is corrected where it is.  ``emulator`` (:func:`emulator_for`): the refits run on it
     and each end is confirmed with real runs (:meth:`_Profile.confirm`).  Returns lower/upper (parameter
@@ -436,7 +438,8 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
            "threshold_dof": pf.dof if math.isfinite(pf.dof) else None,
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing,
-           "reference_offset": float(pf.chi2_hat - pf.chi2_fit)}
+           "reference_offset": float(pf.chi2_hat - pf.chi2_fit),
+           "lower_open": -1 in pf.open, "upper_open": +1 in pf.open}
     low = min(points, key=lambda q: q["delta_chi2"])
     out["monotone_fall"] = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
                                                    low["value"])

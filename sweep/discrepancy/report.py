@@ -284,9 +284,17 @@ def _verdict_lines(report: dict) -> list[str]:
          f"**Verdict: {report['verdict']}**" + (f" — named effect `{report['named_effect']}`, strength "
                                                 f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
                                                 f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''}"
-                                                f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''})"
+                                                f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''}"
+                                                f"{_interval_caveats(report)})"
                                                 if report["named_effect"] else ""), ""]
     return L
+
+
+def _interval_caveats(report: dict) -> str:
+    """What the named strength's profile says of its interval's ends beyond their values: an end open at the
+    strength's range (the data do not bound it there)."""
+    pr = (report.get("profiles") or {}).get(report.get("named_effect")) or {}
+    return "".join(f"; open at the {s} end (the range's)" for s in ("lower", "upper") if pr.get(f"{s}_open"))
 
 
 def _caveat_lines(report: dict) -> list[str]:
@@ -418,6 +426,11 @@ def _profile_lines(report: dict) -> list[str]:
                           f"Ionides et al. 2017): centre {qd['center']:.4g}, statistical se {qd['se_stat']:.3g}, "
                           f"Monte-Carlo se {qd['se_mc']:.3g} (points' scatter about the quadratic {qd['residual_sd']:.3g} "
                           f"in Δχ²); interval {_f([pr['lower'], pr['upper']])} (raw crossings {_f(pr['raw'])})."]
+        opened = [s for s in ("lower", "upper") if pr.get(f"{s}_open")]
+        if opened:
+            L += ["", f"**Open interval**: Δχ² stays below the threshold out to the strength's range at the "
+                      f"{' and '.join(opened)} end, so that end is the range's ({', '.join(f'{pr[s]:.4g}' for s in opened)}): the "
+                      "data do not bound the strength there."]
         if pr.get("rough"):
             L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
                       f"(more than `[profile] rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
