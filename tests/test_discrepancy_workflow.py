@@ -1137,6 +1137,27 @@ def test_a_profile_side_that_never_crosses_is_open_to_the_parameters_bound():
     assert pr["lower"] == pytest.approx(33.43, abs=0.01) and not pr["lower_open"]
 
 
+def test_an_interval_end_the_refinement_leaves_off_the_threshold_is_flagged():
+    """Δχ²(β) = 3 (1 − e^{−(50 − β)/5}) + ((20 − β)₊)² below the fit at β = 50: nearly flat at 2.99 down to
+    β = 20, then a wall; the exact lower end is β = 19.08 (3 (1 − e^{−6}) + 0.92² = 3.841).  The bracket closes
+    at the range's end, Δχ² = 403 at off, and regula falsi in √Δχ² from there creeps: two refinements leave the
+    end near β = 34 with Δχ² 2.9 there, 15 kPa·s inside the exact end.  Such an end is reported with its
+    bracket and flagged, never as a converged crossing; a quadratic side, refined to the threshold, is not."""
+    pr = _profile_1d(lambda b: 3.0 * (1 - np.exp(-(50.0 - b) / 5.0)) + max(20.0 - b, 0.0) ** 2
+                     if b < 50 else (b - 50.0) ** 2, 50.0)
+    lo = pr["unconverged"]["lower"]
+    assert pr["lower"] > 30.0 and lo["bracket"][0] <= 19.08 < pr["lower"] <= lo["bracket"][1]
+    assert lo["delta_chi2"][1] < 0.85 * pr["threshold"] and "upper" not in pr["unconverged"]
+    from sweep.discrepancy.report import _profile_lines
+    assert any(l.startswith("**Unconverged interval end**") for l in _profile_lines({"profiles": {"e": pr}}))
+    from sweep.discrepancy.report import _verdict_lines
+    rep = {"verdict": "named", "named_effect": "e", "strength": 50.0, "strength_interval": [pr["lower"], pr["upper"]],
+           "profiles": {"e": pr}}
+    assert "lower end unconverged" in _verdict_lines(rep)[2]
+    pr = _profile_1d(lambda b: (b - 50.0) ** 2, 50.0)
+    assert pr["unconverged"] == {}
+
+
 @pytest.mark.parametrize("key, value", [("refine", -1), ("refine", 1.5), ("refine_tol", 0.0),
                                         ("refine_tol", 1.0), ("rough_tol", 0.0), ("rough_tol", "0.25")])
 def test_spec_rejects_bad_profile_refinement(key, value):

@@ -78,6 +78,7 @@ class _Profile:
         self.fines = realizations(fine_forward)
         self.checks: list = []
         self.open: set = set()           # the sides (-1, +1) not crossed within the parameter's range
+        self.unconverged: dict = {}      # "lower"/"upper": a refined bound's bracket left off the threshold
         self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
         self.cm = None                   # with [profile] correction = "linear": the correction's model
         if self.fines and self.po.correction == "linear":
@@ -304,9 +305,19 @@ class _Profile:
                                 "deviation": dev, "emulator_sd": u, "agrees": agree})
             em.add([x], m[None, :])
             if agree:
+                self.check_end(sign, d_em)
                 break
             xb = self.side(sign)
         return xb
+
+    def check_end(self, sign: int, d_end: float) -> None:
+        """The profile evaluated at a reported end (Δχ² ``d_end``): within ``refine_tol`` of the threshold it
+        confirms the end (its side cleared from ``self.unconverged``), else that Δχ² is recorded there."""
+        side = "upper" if sign > 0 else "lower"
+        if abs(d_end - self.thr) <= self.po.refine_tol * self.thr:
+            self.unconverged.pop(side, None)
+        else:
+            self.unconverged.setdefault(side, {})["delta_chi2_at_end"] = float(d_end)
 
     def real_dchi2(self, m: np.ndarray) -> float:
         """Δχ² of a real run's model vector ``m`` at the last profile point, under the correction that point's
@@ -329,7 +340,9 @@ class _Profile:
     def refine(self, x_in: float, d_in: float, x_out: float, d_out: float) -> float:
         """The bound by regula falsi in √Δχ²: a bracket closed by a point far outside leaves the bound to the
         quadratic assumption, so the profile is evaluated at the interpolated bound and re-bracketed until Δχ²
-        there is within ``refine_tol`` of the threshold, at most ``refine`` times."""
+        there is within ``refine_tol`` of the threshold, at most ``refine`` times.  A bound whose final bracket
+        has neither end within ``refine_tol`` of the threshold is an interpolation the profile has not
+        confirmed: its bracket and Δχ² there are kept in ``self.unconverged`` (:meth:`mark_converged`)."""
         xb = self.cross(x_in, d_in, x_out, d_out)
         for _ in range(self.po.refine):
             db = self.dchi2(xb)
@@ -340,7 +353,19 @@ class _Profile:
             xb = self.cross(x_in, d_in, x_out, d_out)     # the tightest bracket's bound, also when stopping
             if abs(db - self.thr) <= self.po.refine_tol * self.thr:
                 break
+        self.mark_converged(x_in, d_in, x_out, d_out)
         return xb
+
+    def mark_converged(self, x_in: float, d_in: float, x_out: float, d_out: float) -> None:
+        """Record the side of the bracket (``x_in`` inside, ``x_out`` outside, fit coordinates) as unconverged
+        in ``self.unconverged`` (its bracket in the parameter's units, Δχ² at its ends) when neither end is
+        within ``refine_tol`` of the threshold, else clear it."""
+        side = "upper" if x_out > x_in else "lower"
+        if min(abs(d_in - self.thr), abs(d_out - self.thr)) <= self.po.refine_tol * self.thr:
+            self.unconverged.pop(side, None)
+            return
+        ends = sorted(((self.p.from_x(x_out), d_out), (self.p.from_x(x_in), d_in)))
+        self.unconverged[side] = {"bracket": [float(v) for v, _ in ends], "delta_chi2": [float(d) for _, d in ends]}
 
     def side(self, sign: int) -> float:
         """One bound: from the Wald bound, doubling the distance from the fit (``expand`` times) until the
@@ -439,7 +464,7 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing,
            "reference_offset": float(pf.chi2_hat - pf.chi2_fit),
-           "lower_open": -1 in pf.open, "upper_open": +1 in pf.open}
+           "lower_open": -1 in pf.open, "upper_open": +1 in pf.open, "unconverged": pf.unconverged}
     low = min(points, key=lambda q: q["delta_chi2"])
     out["monotone_fall"] = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
                                                    low["value"])

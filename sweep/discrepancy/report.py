@@ -292,9 +292,10 @@ def _verdict_lines(report: dict) -> list[str]:
 
 def _interval_caveats(report: dict) -> str:
     """What the named strength's profile says of its interval's ends beyond their values: an end open at the
-    strength's range (the data do not bound it there)."""
+    strength's range (the data do not bound it there); an end the profile's refinement left off the threshold."""
     pr = (report.get("profiles") or {}).get(report.get("named_effect")) or {}
-    return "".join(f"; open at the {s} end (the range's)" for s in ("lower", "upper") if pr.get(f"{s}_open"))
+    return ("".join(f"; open at the {s} end (the range's)" for s in ("lower", "upper") if pr.get(f"{s}_open"))
+            + "".join(f"; {s} end unconverged" for s in (pr.get("unconverged") or {})))
 
 
 def _caveat_lines(report: dict) -> list[str]:
@@ -431,6 +432,15 @@ def _profile_lines(report: dict) -> list[str]:
             L += ["", f"**Open interval**: Δχ² stays below the threshold out to the strength's range at the "
                       f"{' and '.join(opened)} end, so that end is the range's ({', '.join(f'{pr[s]:.4g}' for s in opened)}): the "
                       "data do not bound the strength there."]
+        for side, u in (pr.get("unconverged") or {}).items():
+            L += ["", f"**Unconverged interval end**: the {side} end "
+                      f"{(pr.get('raw') or [pr['lower'], pr['upper']])[side == 'upper']:.4g} is interpolated, not a crossing the "
+                      f"profile confirmed (the `[profile] refine` evaluations did not bring Δχ² within"
+                      f" `refine_tol` of the threshold {pr['threshold']:.3g}): "
+                      + (f"the crossing lies in {_f(u['bracket'])}, Δχ² {_f(u['delta_chi2'])} there" if "bracket" in u
+                         else "")
+                      + (f"; Δχ² at the end itself {u['delta_chi2_at_end']:.3g}" if "delta_chi2_at_end" in u else "")
+                      + "."]
         if pr.get("rough"):
             L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
                       f"(more than `[profile] rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
