@@ -285,12 +285,12 @@ def _verdict_lines(report: dict) -> list[str]:
                                                 f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
                                                 f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''}"
                                                 f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''}"
-                                                f"{_interval_caveats(report)})"
+                                                f"{interval_caveats(report)})"
                                                 if report["named_effect"] else ""), ""]
     return L
 
 
-def _interval_caveats(report: dict) -> str:
+def interval_caveats(report: dict) -> str:
     """What the named strength's profile says of its interval's ends beyond their values: an end open at the
     strength's range (the data do not bound it there); an end the profile's refinement left off the threshold."""
     pr = (report.get("profiles") or {}).get(report.get("named_effect")) or {}
