@@ -1158,6 +1158,25 @@ def test_an_interval_end_the_refinement_leaves_off_the_threshold_is_flagged():
     assert pr["unconverged"] == {}
 
 
+@pytest.mark.parametrize("cand, msg", [
+    ({"probe": {"damage_viscosity": 0.0}}, "probe.damage_viscosity=0.0"),
+    ({"probe": {"damage_viscosity": -5.0}}, "probe.damage_viscosity=-5.0"),
+    ({"probe": {"damage_viscosity": 500.0}}, "probe.damage_viscosity=500.0"),
+    ({"probe": {"damage_viscosity": 40.0}, "upper": {"damage_viscosity": 30.0}}, "probe.damage_viscosity=40.0"),
+    ({"probe": {"damage_viscosity": float("nan")}}, "probe.damage_viscosity=nan"),
+    ({"upper": {"damage_viscosity": 0.0}}, "upper.damage_viscosity=0.0"),
+    ({"upper": {"damage_viscosity": float("inf")}}, "upper.damage_viscosity=inf")])
+def test_spec_refuses_a_probe_or_upper_strength_outside_off_to_upper(cand, msg):
+    """A candidate's signature is the model's change from off to its probe strength, its strength fitted in
+    [off, upper]: a probe at off gives no signature (the toy's hidden β = 40 then ends "unexplained_discrepancy"
+    instead of named), one below off the opposite one, one above upper a change the fit cannot reach; an upper
+    at or below off (or not finite) leaves no range.  Each is refused when the SPEC is read, naming the key."""
+    with pytest.raises(ValueError, match=f"candidates.{msg} is not allowed"):
+        _spec_with({"candidates": {"effects": ["damage_viscosity"], **cand}}, cands=["damage_viscosity"])
+    _spec_with({"candidates": {"effects": ["damage_viscosity"], "probe": {"damage_viscosity": 30.0},
+                               "upper": {"damage_viscosity": 30.0}}}, cands=["damage_viscosity"])    # probe = upper
+
+
 @pytest.mark.parametrize("key, value", [("refine", -1), ("refine", 1.5), ("refine_tol", 0.0),
                                         ("refine_tol", 1.0), ("rough_tol", 0.0), ("rough_tol", "0.25")])
 def test_spec_rejects_bad_profile_refinement(key, value):
