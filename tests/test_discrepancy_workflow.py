@@ -1137,6 +1137,18 @@ def test_a_profile_side_that_never_crosses_is_open_to_the_parameters_bound():
     assert pr["lower"] == pytest.approx(33.43, abs=0.01) and not pr["lower_open"]
 
 
+def test_a_smoothed_interval_clipped_to_the_range_is_open_there():
+    """``[profile] smoothing = "quadratic"``: Δχ²(β) = (β − 96)²/4 (+ sin²(5β), a deterministic jitter) about a
+    fit at β = 96 in [0, 100].  Smooth, the quadratic's interval is 96 ± 3.92, inside the range, closed; with the
+    jitter its Monte-Carlo-widened upper end passes the range's end (100.1) and is clipped to 100: that end is
+    then the range's, open, as a raw side that never crosses (the data do not bound the strength there)."""
+    pr = _profile_1d(lambda b: (b - 96.0) ** 2 / 4, 96.0, {"smoothing": "quadratic"})
+    assert pr["upper"] == pytest.approx(99.92, abs=0.01) and not pr["upper_open"] and not pr["lower_open"]
+    pr = _profile_1d(lambda b: (b - 96.0) ** 2 / 4 + np.sin(5 * b) ** 2, 96.0, {"smoothing": "quadratic"})
+    assert pr["quadratic"]["upper"] > 100.0 and pr["raw"][1] < 100.0                      # the premise
+    assert pr["upper"] == 100.0 and pr["upper_open"] and not pr["lower_open"]
+
+
 def test_an_interval_end_the_refinement_leaves_off_the_threshold_is_flagged():
     """Δχ²(β) = 3 (1 − e^{−(50 − β)/5}) + ((20 − β)₊)² below the fit at β = 50: nearly flat at 2.99 down to
     β = 20, then a wall; the exact lower end is β = 19.08 (3 (1 − e^{−6}) + 0.92² = 3.841).  The bracket closes

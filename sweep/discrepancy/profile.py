@@ -402,7 +402,8 @@ class _Profile:
 
 def _smoothed(out: dict, pts: list, thr: float, level: float, p) -> None:
     """The interval from a quadratic through the noisy profile points with the Monte-Carlo-adjusted cutoff
-    (stats.quadratic_profile_interval), clipped to the parameter's bounds; the raw one kept as "raw"."""
+    (stats.quadratic_profile_interval), clipped to the parameter's bounds (a clipped end is open there, as a
+    raw side that never crosses); the raw one kept as "raw", its open sides as "raw_open" (lower, upper)."""
     q = stats.quadratic_profile_interval([r["value"] for r in pts], [r["delta_chi2"] for r in pts], thr, level,
                                          cap=6.0)
     out["raw"] = [out["lower"], out["upper"]]
@@ -410,6 +411,8 @@ def _smoothed(out: dict, pts: list, thr: float, level: float, p) -> None:
     if q is not None:
         out["lower"] = float(max(q["lower"], p.lower))
         out["upper"] = float(min(q["upper"], p.upper))
+        out["raw_open"] = [out["lower_open"], out["upper_open"]]
+        out["lower_open"], out["upper_open"] = bool(q["lower"] < p.lower), bool(q["upper"] > p.upper)
 
 
 def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEmulator:
