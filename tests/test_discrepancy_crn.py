@@ -300,9 +300,10 @@ def test_a_correction_that_follows_the_calibrated_parameter_removes_its_bias():
     by the profile) leave k̄ where the fixed point of "correct, then refit" stopped; the fine − coarse
     difference moves with k̄ (∝ 1/k̄ in p_inj) and the fit never sees that.  The exact answer is the fine
     model (the data's own) fitted to the data directly.  Measured (BIAS = 40, spread 0, the library's one
-    refresh pass): with the strength alone k̄ is 5.0 of its sd low (sd: the exact fit's Wald sd of log10 k̄,
-    0.0013 decades); with ``correction_follows = "all"`` 0.05 sd, and β 0.07 sd (1.2 with the strength
-    alone).  Without the evaluation of c at each refit's trial k̄ (the model frozen at the fit's k̄ in the
+    refresh pass): with the strength alone k̄ is 1.2 of its sd low and β 1.2 sd high (sd: the exact fit's Wald
+    sd, 0.0013 decades of k̄; 5.0 sd low before a profile side still falling when its doublings ran out was
+    explored to its range's end instead of ending at its last point); with ``correction_follows = "all"``
+    0.05 sd, and β 0.07 sd.  Without the evaluation of c at each refit's trial k̄ (the model frozen at the fit's k̄ in the
     profile's refits and the settling), "all" leaves k̄ 7.2 sd low (and the residual test flags the named model)."""
     from sweep.discrepancy.evidence import wald_bounds
 
@@ -316,7 +317,7 @@ def test_a_correction_that_follows_the_calibrated_parameter_removes_its_bias():
     for follows in ("strength", "all"):
         f = _kbar_workflow(data, fine, follows)
         z[follows] = (np.asarray(f.x, float) - exact.x) / sd
-    assert z["strength"][0] < -3.0                                  # the premise: k̄ biased by > 3 sd
+    assert z["strength"][0] < -1.0 and z["strength"][1] > 1.0      # the premise: both biased by > 1 sd
     assert abs(z["all"][0]) < 0.5 and abs(z["all"][1]) < 0.5
 
 

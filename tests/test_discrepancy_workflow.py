@@ -1072,42 +1072,121 @@ def test_six_realizations_leave_an_out_of_catalogue_effect_unexplained_with_the_
     assert run_workflow(data, _spec_with({}), ToyForward({}, h=8.0), fine_forward=fines)["verdict"] == "no_missing_effect"
 
 
+class _Profile1D:
+    """Just what profile_interval asks of a Problem: one residual whose square is the profile ``dchi2(β)`` of the
+    strength held in ``fixed``, nothing else fitted."""
+    series = np.zeros(1, int)
+
+    def __init__(self, spec, dchi2):
+        self.spec, self.dchi2, self.fixed = spec, dchi2, {}
+
+    def mask(self, ids):
+        return np.ones(1, bool)
+
+    def fit(self, params, x0s, ids):
+        from sweep.discrepancy.problem import Fit
+
+        return Fit(params, np.zeros(0), np.array([np.sqrt(self.dchi2(self.fixed["effect:damage_viscosity"]))]),
+                   np.zeros((1, 0)), 0.0, 1)
+
+
+def _profile_1d(dchi2, at: float, profile: dict | None = None) -> dict:
+    """profile_interval of the 1-D profile ``dchi2`` (β in [0, 100] kPa·s, linear) about a fit at β = ``at`` with
+    Wald sd 1 (the residual's derivative 1)."""
+    from sweep.discrepancy.problem import Fit
+    from sweep.discrepancy.profile import profile_interval
+    from sweep.discrepancy.spec import CalibParam
+
+    cp = CalibParam("effect:damage_viscosity", 0.0, 100.0, at, scale="linear")
+    at_fit = Fit((cp,), np.array([at]), np.array([0.0]), np.array([[1.0]]), 0.0, 1)
+    return profile_interval(_Profile1D(_spec_with({"profile": profile or {}}), dchi2), at_fit, 0, ["a"])
+
+
 def test_profile_bounds_are_refined_to_the_threshold():
     """A bound interpolated from one bracketing point assumes a quadratic profile.  On a profile that is not,
     Δχ²(β) = u² (1 + u²) with u = β − 10 (exact 95 % bounds 10 ± 1.2338; Wald sd 1, so the bracket closes at
     u = 1.96 where Δχ² = 18.6 and the √-interpolation alone gives u = 0.891), two regula-falsi evaluations bring
     each bound to within 0.03 of the exact one."""
-    from sweep.discrepancy.spec import CalibParam
-    from sweep.discrepancy.problem import Fit
-    from sweep.discrepancy.profile import profile_interval
-
-    cp = CalibParam("effect:damage_viscosity", 0.0, 100.0, 10.0, scale="linear")
-
-    class Profile1D:
-        """Just what profile_interval asks of a Problem: one residual whose square is the profile."""
-        series = np.zeros(1, int)
-        fixed: dict = {}
-
-        def __init__(self, spec):
-            self.spec = spec
-
-        def mask(self, ids):
-            return np.ones(1, bool)
-
-        def fit(self, params, x0s, ids):
-            u = self.fixed[cp.name] - 10.0
-            return Fit(params, np.zeros(0), np.array([u * np.sqrt(1 + u * u)]), np.zeros((1, 0)), 0.0, 1)
-
     exact = np.sqrt((-1 + np.sqrt(1 + 4 * 3.841)) / 2)
-    at_fit = Fit((cp,), np.array([10.0]), np.array([0.0]), np.array([[1.0]]), 0.0, 1)
     got = {}
     for refine in (0, 2):
-        prob = Profile1D(_spec_with({"profile": {"refine": refine}}))
-        pr = profile_interval(prob, at_fit, 0, ["a"])
+        pr = _profile_1d(lambda b: (b - 10.0) ** 2 * (1 + (b - 10.0) ** 2), 10.0, {"refine": refine})
         got[refine] = (pr["lower"], pr["upper"])
     assert got[0][1] - 10.0 == pytest.approx(1.96 * 1.96 / np.sqrt(1.96**2 * (1 + 1.96**2)), abs=1e-3)   # 0.891
     assert abs(got[2][1] - 10.0 - exact) < 0.03 and abs(10.0 - got[2][0] - exact) < 0.03
     assert abs(got[0][1] - 10.0 - exact) > 0.3
+
+
+def test_a_profile_side_that_never_crosses_is_open_to_the_parameters_bound():
+    """Δχ²(β) = 3 (1 − e^{−(50 − β)/5}) below the fit at β = 50 stays under the threshold 3.84 all the way to off
+    (Δχ²(0) = 3.0): off is inside the 95 % interval, whose lower end is the range's, open.  The bracket's
+    doublings from the Wald bound (sd 1) stop at β = 34.3, where Δχ² = 2.9: that point is no bound.  Above the
+    fit Δχ² = (β − 50)², closed at 50 + 1.96."""
+    pr = _profile_1d(lambda b: 3.0 * (1 - np.exp(-(50.0 - b) / 5.0)) if b < 50 else (b - 50.0) ** 2, 50.0)
+    assert pr["lower"] == 0.0 and pr["lower_open"]
+    assert pr["upper"] == pytest.approx(51.96, abs=1e-3) and not pr["upper_open"]
+    from sweep.discrepancy.report import _profile_lines
+    assert any(l.startswith("**Open interval**") and "lower end" in l for l in _profile_lines({"profiles": {"e": pr}}))
+    from sweep.discrepancy.report import _verdict_lines
+    rep = {"verdict": "named", "named_effect": "e", "strength": 50.0, "strength_interval": [0.0, 51.96],
+           "profiles": {"e": pr}}
+    assert "open at the lower end (the range's)" in _verdict_lines(rep)[2]
+    # flat beyond the doublings, crossing before the range's end (at β = 33.43, √Δχ² linear there): closed
+    pr = _profile_1d(lambda b: (b - 50.0) ** 2 if b > 50 else 3.0 * (1 - np.exp(-(50.0 - b) / 5.0)) if b > 34.32
+                     else (1.6944 + 0.3 * (34.32 - b)) ** 2, 50.0)
+    assert pr["lower"] == pytest.approx(33.43, abs=0.01) and not pr["lower_open"]
+
+
+def test_a_smoothed_interval_clipped_to_the_range_is_open_there():
+    """``[profile] smoothing = "quadratic"``: Δχ²(β) = (β − 96)²/4 (+ sin²(5β), a deterministic jitter) about a
+    fit at β = 96 in [0, 100].  Smooth, the quadratic's interval is 96 ± 3.92, inside the range, closed; with the
+    jitter its Monte-Carlo-widened upper end passes the range's end (100.1) and is clipped to 100: that end is
+    then the range's, open, as a raw side that never crosses (the data do not bound the strength there)."""
+    pr = _profile_1d(lambda b: (b - 96.0) ** 2 / 4, 96.0, {"smoothing": "quadratic"})
+    assert pr["upper"] == pytest.approx(99.92, abs=0.01) and not pr["upper_open"] and not pr["lower_open"]
+    pr = _profile_1d(lambda b: (b - 96.0) ** 2 / 4 + np.sin(5 * b) ** 2, 96.0, {"smoothing": "quadratic"})
+    assert pr["quadratic"]["upper"] > 100.0 and pr["raw"][1] < 100.0                      # the premise
+    assert pr["upper"] == 100.0 and pr["upper_open"] and not pr["lower_open"]
+
+
+def test_an_interval_end_the_refinement_leaves_off_the_threshold_is_flagged():
+    """Δχ²(β) = 3 (1 − e^{−(50 − β)/5}) + ((20 − β)₊)² below the fit at β = 50: nearly flat at 2.99 down to
+    β = 20, then a wall; the exact lower end is β = 19.08 (3 (1 − e^{−6}) + 0.92² = 3.841).  The bracket closes
+    at the range's end, Δχ² = 403 at off, and regula falsi in √Δχ² from there creeps: two refinements leave the
+    end near β = 34 with Δχ² 2.9 there, 15 kPa·s inside the exact end.  Such an end is reported with its
+    bracket and flagged, never as a converged crossing; a quadratic side, refined to the threshold, is not."""
+    pr = _profile_1d(lambda b: 3.0 * (1 - np.exp(-(50.0 - b) / 5.0)) + max(20.0 - b, 0.0) ** 2
+                     if b < 50 else (b - 50.0) ** 2, 50.0)
+    lo = pr["unconverged"]["lower"]
+    assert pr["lower"] > 30.0 and lo["bracket"][0] <= 19.08 < pr["lower"] <= lo["bracket"][1]
+    assert lo["delta_chi2"][1] < 0.85 * pr["threshold"] and "upper" not in pr["unconverged"]
+    from sweep.discrepancy.report import _profile_lines
+    assert any(l.startswith("**Unconverged interval end**") for l in _profile_lines({"profiles": {"e": pr}}))
+    from sweep.discrepancy.report import _verdict_lines
+    rep = {"verdict": "named", "named_effect": "e", "strength": 50.0, "strength_interval": [pr["lower"], pr["upper"]],
+           "profiles": {"e": pr}}
+    assert "lower end unconverged" in _verdict_lines(rep)[2]
+    pr = _profile_1d(lambda b: (b - 50.0) ** 2, 50.0)
+    assert pr["unconverged"] == {}
+
+
+@pytest.mark.parametrize("cand, msg", [
+    ({"probe": {"damage_viscosity": 0.0}}, "probe.damage_viscosity=0.0"),
+    ({"probe": {"damage_viscosity": -5.0}}, "probe.damage_viscosity=-5.0"),
+    ({"probe": {"damage_viscosity": 500.0}}, "probe.damage_viscosity=500.0"),
+    ({"probe": {"damage_viscosity": 40.0}, "upper": {"damage_viscosity": 30.0}}, "probe.damage_viscosity=40.0"),
+    ({"probe": {"damage_viscosity": float("nan")}}, "probe.damage_viscosity=nan"),
+    ({"upper": {"damage_viscosity": 0.0}}, "upper.damage_viscosity=0.0"),
+    ({"upper": {"damage_viscosity": float("inf")}}, "upper.damage_viscosity=inf")])
+def test_spec_refuses_a_probe_or_upper_strength_outside_off_to_upper(cand, msg):
+    """A candidate's signature is the model's change from off to its probe strength, its strength fitted in
+    [off, upper]: a probe at off gives no signature (the toy's hidden β = 40 then ends "unexplained_discrepancy"
+    instead of named), one below off the opposite one, one above upper a change the fit cannot reach; an upper
+    at or below off (or not finite) leaves no range.  Each is refused when the SPEC is read, naming the key."""
+    with pytest.raises(ValueError, match=f"candidates.{msg} is not allowed"):
+        _spec_with({"candidates": {"effects": ["damage_viscosity"], **cand}}, cands=["damage_viscosity"])
+    _spec_with({"candidates": {"effects": ["damage_viscosity"], "probe": {"damage_viscosity": 30.0},
+                               "upper": {"damage_viscosity": 30.0}}}, cands=["damage_viscosity"])    # probe = upper
 
 
 @pytest.mark.parametrize("key, value", [("refine", -1), ("refine", 1.5), ("refine_tol", 0.0),

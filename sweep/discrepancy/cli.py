@@ -143,7 +143,7 @@ def cmd_run(args) -> int:
     from .heldout import heldout_data
     from .forward import SolverForward, fine_forwards
     from .observables import ObservableUnavailable
-    from .report import ROUGH_NOTE
+    from .report import ROUGH_NOTE, interval_caveats
     from .spec import load_spec
     from .workflow import run_workflow
 
@@ -184,6 +184,7 @@ def cmd_run(args) -> int:
     print(f"verdict: {rep['verdict']}" + (f"; named effect {rep['named_effect']} = {rep['strength']:.4g} "
                                           f"{rep['strength_interval']}"
                                           + (f" ({ROUGH_NOTE})" if rep.get("strength_interval_rough") else "")
+                                          + (f" ({interval_caveats(rep)[2:]})" if interval_caveats(rep) else "")
                                           if rep["named_effect"] else ""))
     print(f"held-out gap (total): before {rep['gap_before'].get('total', float('nan')):.3g}, after "
           f"{rep['gap_after'].get('total', float('nan')):.3g}; report in {out / 'report.md'}")

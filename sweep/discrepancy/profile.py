@@ -77,6 +77,8 @@ class _Profile:
         self.points = [{"value": self.p.from_x(self.x_hat[j]), "delta_chi2": 0.0}]
         self.fines = realizations(fine_forward)
         self.checks: list = []
+        self.open: set = set()           # the sides (-1, +1) not crossed within the parameter's range
+        self.unconverged: dict = {}      # "lower"/"upper": a refined bound's bracket left off the threshold
         self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
         self.cm = None                   # with [profile] correction = "linear": the correction's model
         if self.fines and self.po.correction == "linear":
@@ -303,9 +305,19 @@ class _Profile:
                                 "deviation": dev, "emulator_sd": u, "agrees": agree})
             em.add([x], m[None, :])
             if agree:
+                self.check_end(sign, d_em)
                 break
             xb = self.side(sign)
         return xb
+
+    def check_end(self, sign: int, d_end: float) -> None:
+        """The profile evaluated at a reported end (Δχ² ``d_end``): within ``refine_tol`` of the threshold it
+        confirms the end (its side cleared from ``self.unconverged``), else that Δχ² is recorded there."""
+        side = "upper" if sign > 0 else "lower"
+        if abs(d_end - self.thr) <= self.po.refine_tol * self.thr:
+            self.unconverged.pop(side, None)
+        else:
+            self.unconverged.setdefault(side, {})["delta_chi2_at_end"] = float(d_end)
 
     def real_dchi2(self, m: np.ndarray) -> float:
         """Δχ² of a real run's model vector ``m`` at the last profile point, under the correction that point's
@@ -328,7 +340,9 @@ class _Profile:
     def refine(self, x_in: float, d_in: float, x_out: float, d_out: float) -> float:
         """The bound by regula falsi in √Δχ²: a bracket closed by a point far outside leaves the bound to the
         quadratic assumption, so the profile is evaluated at the interpolated bound and re-bracketed until Δχ²
-        there is within ``refine_tol`` of the threshold, at most ``refine`` times."""
+        there is within ``refine_tol`` of the threshold, at most ``refine`` times.  A bound whose final bracket
+        has neither end within ``refine_tol`` of the threshold is an interpolation the profile has not
+        confirmed: its bracket and Δχ² there are kept in ``self.unconverged`` (:meth:`mark_converged`)."""
         xb = self.cross(x_in, d_in, x_out, d_out)
         for _ in range(self.po.refine):
             db = self.dchi2(xb)
@@ -339,27 +353,39 @@ class _Profile:
             xb = self.cross(x_in, d_in, x_out, d_out)     # the tightest bracket's bound, also when stopping
             if abs(db - self.thr) <= self.po.refine_tol * self.thr:
                 break
+        self.mark_converged(x_in, d_in, x_out, d_out)
         return xb
+
+    def mark_converged(self, x_in: float, d_in: float, x_out: float, d_out: float) -> None:
+        """Record the side of the bracket (``x_in`` inside, ``x_out`` outside, fit coordinates) as unconverged
+        in ``self.unconverged`` (its bracket in the parameter's units, Δχ² at its ends) when neither end is
+        within ``refine_tol`` of the threshold, else clear it."""
+        side = "upper" if x_out > x_in else "lower"
+        if min(abs(d_in - self.thr), abs(d_out - self.thr)) <= self.po.refine_tol * self.thr:
+            self.unconverged.pop(side, None)
+            return
+        ends = sorted(((self.p.from_x(x_out), d_out), (self.p.from_x(x_in), d_in)))
+        self.unconverged[side] = {"bracket": [float(v) for v, _ in ends], "delta_chi2": [float(d) for _, d in ends]}
 
     def side(self, sign: int) -> float:
         """One bound: from the Wald bound, doubling the distance from the fit (``expand`` times) until the
-        threshold is crossed; the parameter's bound when it never is within it."""
+        threshold is crossed, then at the parameter's bound itself; where it is not crossed there either, the
+        parameter's bound, and the side is open (``self.open``: the range is all the profile excludes)."""
         xh = float(self.x_hat[self.j])
         bound = self.x_hi if sign > 0 else self.x_lo
         step = max(abs(self.p.to_x(self.wald[1] if sign > 0 else self.wald[0]) - xh), 1e-6 * (self.x_hi - self.x_lo))
         x_in, d_in = xh, 0.0
-        for _ in range(self.po.expand + 1):
-            xt = float(np.clip(xh + sign * step, self.x_lo, self.x_hi))
+        for k in range(self.po.expand + 2):
+            xt = float(np.clip(xh + sign * step, self.x_lo, self.x_hi)) if k <= self.po.expand else bound
             if xt == x_in:
-                return bound
+                break
             d = self.dchi2(xt)
             if d >= self.thr:
                 return self.refine(x_in, d_in, xt, d)
             x_in, d_in = xt, d
-            if xt == bound:
-                return bound
             step *= 2.0
-        return x_in   # not crossed within the bracket: the last point inside (a lower bound on the width)
+        self.open.add(sign)
+        return bound
 
     def widen(self, lo: float, hi: float) -> None:
         """``grid`` more points per side, evenly out to twice the raw bound's distance from the fit (where a
@@ -376,7 +402,8 @@ class _Profile:
 
 def _smoothed(out: dict, pts: list, thr: float, level: float, p) -> None:
     """The interval from a quadratic through the noisy profile points with the Monte-Carlo-adjusted cutoff
-    (stats.quadratic_profile_interval), clipped to the parameter's bounds; the raw one kept as "raw"."""
+    (stats.quadratic_profile_interval), clipped to the parameter's bounds (a clipped end is open there, as a
+    raw side that never crosses); the raw one kept as "raw", its open sides as "raw_open" (lower, upper)."""
     q = stats.quadratic_profile_interval([r["value"] for r in pts], [r["delta_chi2"] for r in pts], thr, level,
                                          cap=6.0)
     out["raw"] = [out["lower"], out["upper"]]
@@ -384,6 +411,8 @@ def _smoothed(out: dict, pts: list, thr: float, level: float, p) -> None:
     if q is not None:
         out["lower"] = float(max(q["lower"], p.lower))
         out["upper"] = float(min(q["upper"], p.upper))
+        out["raw_open"] = [out["lower_open"], out["upper_open"]]
+        out["lower_open"], out["upper_open"] = bool(q["lower"] < p.lower), bool(q["upper"] > p.upper)
 
 
 def emulator_for(problem: Problem, fit: Fit, ids, reach: float = 2.5) -> CurveEmulator:
@@ -406,8 +435,9 @@ def profile_interval(problem: Problem, fit: Fit, j: int, ids, level: float = 3.8
     """Profile-likelihood interval of parameter ``j`` of ``fit`` (see the module docstring).
 
     Each side starts at the Wald bound and doubles its distance from the fit until the threshold is crossed,
-    then the crossing is interpolated and refined (:class:`_Profile`); a side that never crosses ends at the
-    parameter's bound.  ``fine_forward`` (the fine check models): the discretization correction is a constant
+    then the crossing is interpolated and refined (:class:`_Profile`); a side that does not cross within the
+    doublings is evaluated at the parameter's bound, and where it does not cross there either it ends at that
+    bound, open ("lower_open", "upper_open": the data do not bound the strength on that side).  ``fine_forward`` (the fine check models): the discretization correction is a constant
     vector estimated at the fit, so without them the profile has the coarse model's shape away from the fit;
     with them each point is corrected where it is.  ``emulator`` (:func:`emulator_for`): the refits run on it
     and each end is confirmed with real runs (:meth:`_Profile.confirm`).  Returns lower/upper (parameter
@@ -436,7 +466,8 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
            "threshold_dof": pf.dof if math.isfinite(pf.dof) else None,
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing,
-           "reference_offset": float(pf.chi2_hat - pf.chi2_fit)}
+           "reference_offset": float(pf.chi2_hat - pf.chi2_fit),
+           "lower_open": -1 in pf.open, "upper_open": +1 in pf.open, "unconverged": pf.unconverged}
     low = min(points, key=lambda q: q["delta_chi2"])
     out["monotone_fall"] = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
                                                    low["value"])

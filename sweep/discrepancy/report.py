@@ -284,9 +284,18 @@ def _verdict_lines(report: dict) -> list[str]:
          f"**Verdict: {report['verdict']}**" + (f" — named effect `{report['named_effect']}`, strength "
                                                 f"{report['strength']:.4g} (95 % interval {_f(report['strength_interval'])}"
                                                 f"{', scaled by √C' if report.get('strength_scaling') == 'sqrt_cement' else ''}"
-                                                f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''})"
+                                                f"{'; ' + ROUGH_NOTE if report.get('strength_interval_rough') else ''}"
+                                                f"{interval_caveats(report)})"
                                                 if report["named_effect"] else ""), ""]
     return L
+
+
+def interval_caveats(report: dict) -> str:
+    """What the named strength's profile says of its interval's ends beyond their values: an end open at the
+    strength's range (the data do not bound it there); an end the profile's refinement left off the threshold."""
+    pr = (report.get("profiles") or {}).get(report.get("named_effect")) or {}
+    return ("".join(f"; open at the {s} end (the range's)" for s in ("lower", "upper") if pr.get(f"{s}_open"))
+            + "".join(f"; {s} end unconverged" for s in (pr.get("unconverged") or {})))
 
 
 def _caveat_lines(report: dict) -> list[str]:
@@ -418,6 +427,20 @@ def _profile_lines(report: dict) -> list[str]:
                           f"Ionides et al. 2017): centre {qd['center']:.4g}, statistical se {qd['se_stat']:.3g}, "
                           f"Monte-Carlo se {qd['se_mc']:.3g} (points' scatter about the quadratic {qd['residual_sd']:.3g} "
                           f"in Δχ²); interval {_f([pr['lower'], pr['upper']])} (raw crossings {_f(pr['raw'])})."]
+        opened = [s for s in ("lower", "upper") if pr.get(f"{s}_open")]
+        if opened:
+            L += ["", f"**Open interval**: Δχ² stays below the threshold out to the strength's range at the "
+                      f"{' and '.join(opened)} end, so that end is the range's ({', '.join(f'{pr[s]:.4g}' for s in opened)}): the "
+                      "data do not bound the strength there."]
+        for side, u in (pr.get("unconverged") or {}).items():
+            L += ["", f"**Unconverged interval end**: the {side} end "
+                      f"{(pr.get('raw') or [pr['lower'], pr['upper']])[side == 'upper']:.4g} is interpolated, not a crossing the "
+                      f"profile confirmed (the `[profile] refine` evaluations did not bring Δχ² within"
+                      f" `refine_tol` of the threshold {pr['threshold']:.3g}): "
+                      + (f"the crossing lies in {_f(u['bracket'])}, Δχ² {_f(u['delta_chi2'])} there" if "bracket" in u
+                         else "")
+                      + (f"; Δχ² at the end itself {u['delta_chi2_at_end']:.3g}" if "delta_chi2_at_end" in u else "")
+                      + "."]
         if pr.get("rough"):
             L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
                       f"(more than `[profile] rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "

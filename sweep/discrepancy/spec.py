@@ -317,6 +317,19 @@ def _check_shapes(d: dict) -> None:
                 _bad(f"candidates.{key}.{k}", v, "a number")
 
 
+def _check_strengths(name: str, upper: dict, probe: dict) -> None:
+    """Candidate ``name``'s upper strength (finite, above off) and probe strength (in (off, upper]: the
+    signature is the model's change from off to the probe, the strength fitted in [off, upper]), each the
+    SPEC's or the catalogue's."""
+    e = get_effect(name)
+    up, pr = upper.get(name, e.upper), probe.get(name, e.probe)
+    if not (math.isfinite(up) and up > e.off):
+        _bad(f"candidates.upper.{name}", up, f"a finite number above the effect's off value {e.off!r}")
+    if not (math.isfinite(pr) and e.off < pr <= up):
+        _bad(f"candidates.probe.{name}", pr, f"a number in ({e.off!r}, {up!r}]: above off (the signature is the "
+             "change from off to the probe) and at most the upper strength")
+
+
 def _independent(effect: str, v) -> tuple[float, float]:
     """An independent estimate of ``effect``'s strength, "value ± sigma" (also "+-") or [value, sigma], as
     (value, sigma) in the effect's unit; sigma > 0 and both finite."""
@@ -369,7 +382,7 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     upper = {k: float(v) for k, v in cand.get("upper", {}).items()}
     probe = {k: float(v) for k, v in cand.get("probe", {}).items()}
     for k in list(upper) + list(probe):
-        get_effect(k)
+        _check_strengths(k, upper, probe)
     independent = {k: _independent(k, v) for k, v in cand.get("independent", {}).items()}
     ho = d.get("holdout", {})
     if not isinstance(ho, dict):
