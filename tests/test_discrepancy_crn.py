@@ -19,7 +19,8 @@ from sweep.discrepancy.coverage import NOISE, SETUPS, TIMES, _spec
 from sweep.discrepancy.data import load_measured
 from sweep.discrepancy.noise import add_discretization_error
 from sweep.discrepancy.problem import Problem
-from sweep.discrepancy.profile import StrengthCorrection, _Profile, profile_recentred
+from sweep.discrepancy.profile import StrengthCorrection, _Profile
+from sweep.discrepancy.recentre import profile_recentred
 from sweep.discrepancy.spec import spec_from_dict
 from sweep.discrepancy.toy import MeshToy
 from sweep.discrepancy.twin import make_twin

@@ -649,14 +649,15 @@ def test_a_profile_refit_on_the_emulator_is_the_optimum_of_its_predictive_likeli
 def test_the_named_model_after_an_emulated_linear_profile_is_a_real_fit_under_its_own_correction(tmp_path):
     """With ``[profile] correction = "linear"`` the profile measures every Δχ² from the model at the fit's
     strength under the modelled correction c(x̂) (StrengthCorrection) with the others refitted.  The model the
-    workflow then reports (residual test, held-out gap: profile.settled_fit) is that one, from real runs, also
+    workflow then reports (residual test, held-out gap: recentre.settled_fit) is that one, from real runs, also
     when the others' refit ran on the emulator: the correction in use is the line through the anchors' real
     corrections (fine − real coarse) at x̂, the others are the real refit's at x̂ under it (the known answer:
     real least squares to convergence, to its tolerance, from the emulated refit's point) and the residuals
     are the real model's there.  The toy's mesh error grows with β, so the fit's own correction (made at
     β = 20) is not c(x̂)."""
     from sweep.discrepancy.noise import correction_at
-    from sweep.discrepancy.profile import StrengthCorrection, emulator_for, settled_fit
+    from sweep.discrepancy.profile import StrengthCorrection, emulator_for
+    from sweep.discrepancy.recentre import settled_fit
     from sweep.discrepancy.emulator import fit_on_emulator
 
     prob, fine, fit, train = _mesh_dependent_toy_fit(tmp_path, {"emulator": "gp", "fine": True,

@@ -289,7 +289,7 @@ def test_recentring_ignores_a_dip_within_the_profiles_scatter():
     """A smoothed profile whose lowest point lies below the fit by less than twice the points' scatter about
     the quadratic is noise: no re-centring.  The same dip without smoothing, or a dip deeper than the scatter,
     re-centres."""
-    from sweep.discrepancy.profile import recentre_target
+    from sweep.discrepancy.recentre import recentre_target
 
     v = np.linspace(0.6, 1.1, 11)
     d = 40.0 * (v - 0.85) ** 2 + np.array([0.0, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5, 0.5, 0.0])

@@ -782,7 +782,8 @@ def test_profile_recentres_a_fit_that_stopped_short_of_the_minimum(tmp_path):
     from dataclasses import replace
 
     from sweep.discrepancy.problem import Problem
-    from sweep.discrepancy.profile import profile_interval, profile_recentred
+    from sweep.discrepancy.profile import profile_interval
+    from sweep.discrepancy.recentre import profile_recentred
 
     data = _twin(tmp_path, {"beta": 40.0})
     spec = _spec_with({"fit": {"max_nfev": 2}}, cands=["damage_viscosity"], calibrate=("E",))

@@ -39,7 +39,7 @@ from .evidence import compare_passing, free_columns, gap, localize, refit, rival
 from .ledger import RunLedger
 from .noise import add_discretization_error, add_model_jitter, rms_per_observable
 from .problem import Fit, Problem, random_starts
-from .profile import profile_recentred
+from .recentre import profile_recentred
 from .realizations import realizations
 from .report import build_report, jsonable, write_report
 from .spec import DiscrepancySpec
