@@ -102,3 +102,43 @@ def test_cli_writes_the_summary_and_refuses_bad_columns(root, tmp_path, capsys):
     assert cli_main(["compare", str(root / "a"), str(root / "b"), "--results", str(root),
                      "--label", "regme"]) == 2
     assert "no column 'regme'" in capsys.readouterr().err
+
+
+def runner_seed(params, options, run_dir):
+    """Fracturing iff the porosity draw's seed is odd: the label of a run is its seed's, in either campaign."""
+    _write_series(run_dir)
+    frac = int(params["seed"]) % 2 == 1
+    return {"status": "ok", "classification": {"regime": "invasive_fracturing" if frac else "viscous_fingering",
+                                               "fracturing": frac}}
+
+
+@pytest.fixture(scope="module")
+def replicated(tmp_path_factory):
+    """Two campaigns of 2 points x 2 porosity draws (seeds 0, 1) with identical labels run by run, and a third
+    that sweeps eta_o where the first two hold it at 0.29 kPa s."""
+    root = tmp_path_factory.mktemp("compare_rep")
+    opts = {"h": 4.0, "snapshot_times": [0.5, 1.0]}
+    for name in ("ra", "rb"):
+        s = spec_from_dict({"name": name, "base": {"w_i": 10.0}, "options": opts, "axes": {"cement": [1.0, 2.0]},
+                            "replicates": {"porosity_seed": 2}})
+        run_campaign(s, root, runner=runner_seed, jobs=1, code_hash=VERSION, progress=None)
+    s = spec_from_dict({"name": "rc", "base": {"w_i": 10.0}, "options": opts,
+                        "axes": {"cement": [1.0, 2.0], "eta_o": [0.29, 0.5]}})
+    run_campaign(s, root, runner=runner_seed, jobs=1, code_hash=VERSION, progress=None)
+    return root
+
+
+def test_replicates_are_matched_draw_by_draw(replicated):
+    # 2 points x 2 draws: 4 runs in each campaign, each with the same label in both; matching on the swept values
+    # alone would pair every draw of a point with every draw of the other campaign's point (8 pairs, 4 agreeing)
+    c = compare_campaigns(replicated / "ra", replicated / "rb")
+    assert len(c.pairs) == 4 and len(c.only_a) == 0 and len(c.only_b) == 0
+    assert c.agreement() == (4, 4)
+
+
+def test_a_parameter_swept_in_one_campaign_is_matched_on_the_others_value(replicated):
+    # rc sweeps eta_o over 0.29 and 0.5; ra holds it at 0.29 (2 draws): the rc runs at eta_o = 0.5 have no
+    # counterpart, and each rc run at 0.29 (seed 0) matches ra's run of seed 0 only
+    c = compare_campaigns(replicated / "rc", replicated / "ra")
+    assert len(c.pairs) == 2 and len(c.only_a) == 2 and len(c.only_b) == 2
+    assert c.agreement() == (2, 2)

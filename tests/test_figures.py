@@ -113,3 +113,28 @@ def test_reference_fields_volumetric_strain_is_white_at_zero(tmp_path, monkeypat
     for title in ("volumetric strain ε_v (-)", "hoop stress σ'θθ (kPa)"):
         lo, hi = axes[title].collections[0].get_clim()
         assert lo == -hi and hi > 0
+
+
+def _label_runner(params, options, run_dir):
+    """Fracturing iff eta_o > 0.5; the run at C = 2, eta_o = 1 finishes but its classifier fails (no label)."""
+    if params["cement"] == 2.0 and params["eta_o"] == 1.0:
+        return {"status": "ok", "metrics": {"classify_error": "ValueError: no snapshot"}}
+    frac = params["eta_o"] > 0.5
+    return {"status": "ok", "classification": {"regime": "invasive_fracturing" if frac else "viscous_fingering",
+                                               "fracturing": frac}}
+
+
+def test_phase_diagram_names_the_finished_runs_it_leaves_out(tmp_path, capsys):
+    # 4 finished runs, one without a fracturing label: the Ca*-C diagram draws 3 and says which run it left out
+    spec = spec_from_dict({"name": "lab", "axes": {"cement": [1.0, 2.0], "eta_o": [0.25, 1.0]},
+                           "diagrams": [{"kind": "ca_star_vs_cement", "fit": False}]})
+    run_campaign(spec, tmp_path, runner=_label_runner, jobs=1, code_hash=VERSION, progress=None)
+    from sweep.campaign.table import build_table
+
+    t = build_table(spec, tmp_path, code_hash=VERSION)
+    (key,) = t.loc[t["fracturing"].isna(), "key"]
+    capsys.readouterr()
+    paths = plot_campaign(spec, tmp_path, code_hash=VERSION)
+    assert [p.name for p in paths] == ["ca_star_vs_cement.png", "ca_star_vs_cement.pdf"]
+    err = capsys.readouterr().err
+    assert f"ca_star_vs_cement.png leaves out 1 run(s)" in err and key in err

@@ -5,7 +5,8 @@ folders (``runs/`` is pruned or left out).  Such a run is *archived*: its row is
 written, and every reader (status, table, plots, report, loaders) uses it; ``campaign run`` reruns it only when
 asked.  A row belongs to a point of the spec by its run key, else by the point's swept values and blocks (the key
 hashes every parameter and option, so it changes when a parameter is added to the model; the swept values name
-the point the spec asked for).  Floats are compared to 10 significant digits.
+the point the spec asked for), provided the row holds the values the spec writes for its other fields (a row made
+before the spec's base changed is another point's).  Floats are compared to 10 significant digits.
 """
 from __future__ import annotations
 
@@ -64,6 +65,8 @@ def _norm(v):
         return v
     if isinstance(v, (int, float)):
         return round_sig(float(v), 10)
+    if isinstance(v, (list, tuple)):
+        return tuple(_norm(x) for x in v)
     return str(v)
 
 
@@ -98,12 +101,24 @@ def _row_identity(row: Mapping[str, Any], identity) -> tuple:
     return tuple(out)
 
 
+def _agrees(row: Mapping[str, Any], p, written) -> bool:
+    """Whether the row's values of the fields the spec writes ``written`` ((namespace, name) pairs) are the
+    point's: its column ``param_name`` / ``opt_name``, else ``name``; a field the row lacks (a table written
+    before the model had it) or holds no value of is not compared."""
+    for target, name in written:
+        col = next((c for c in (f"{'param' if target == 'params' else 'opt'}_{name}", name) if c in row), None)
+        v = row.get(col) if col else None
+        if v is not None and _norm(v) != _norm((p.params if target == "params" else p.options).get(name)):
+            return False
+    return True
+
+
 def _point_identity(p, identity) -> tuple:
     return tuple(_norm((p.params if target == "params" else p.options).get(name)) for target, name in identity)
 
 
 def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mapping[str, Any]], identity=(),
-                    held=()):
+                    held=(), written=()):
     """(matched, unmatched): ``matched`` {point key: committed row} for the points whose key is not in ``skip``
     (points with a record or a run folder), by run key first, then by swept values and blocks (rows in table
     order); ``unmatched``: the rows no point took (runs a sampler added, or points the spec no longer asks for).
@@ -112,7 +127,9 @@ def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mappi
     its swept values.  ``held``: (point, key) of the runs here (records); each takes the committed row of its own
     run first, by key, else by swept values, blocks and identity (a row of older code has another key), so that a
     rerun archived run replaces its row: the row is neither matched nor unmatched (a sampler's table shows its
-    unmatched rows)."""
+    unmatched rows).  ``written``: the (namespace, name) of the fields the spec sets (not swept): a row matched by
+    swept values holds the point's values of them too (:func:`_agrees`), else it was made for another point (the
+    spec's base changed since) and is not this point's result."""
     by_key = {r.get("key"): i for i, r in enumerate(rows)}
     taken: set[int] = {by_key[k] for k in skip if k in by_key}
     matched: dict[str, dict] = {}
@@ -120,7 +137,7 @@ def match_committed(points, keys: Sequence[str], skip: set, rows: Sequence[Mappi
         if k not in skip and k in by_key and by_key[k] not in taken:
             matched[k] = rows[by_key[k]]
             taken.add(by_key[k])
-    find = _SweptIndex(rows, identity)
+    find = _SweptIndex(rows, identity, written)
     for p, k in held:
         if k not in by_key and p.swept and (i := find(p, taken)) is not None:
             taken.add(i)
@@ -135,8 +152,8 @@ class _SweptIndex:
     """The committed rows indexed by swept values (blocks, and without) and the replicated fields ``identity``;
     called with a point and the rows taken, it returns the first row of the point not taken, or None."""
 
-    def __init__(self, rows: Sequence[Mapping[str, Any]], identity):
-        self.rows, self.identity, self.index = rows, identity, {}
+    def __init__(self, rows: Sequence[Mapping[str, Any]], identity, written=()):
+        self.rows, self.identity, self.written, self.index = rows, identity, written, {}
 
     def _by_names(self, names: tuple) -> dict:
         if names not in self.index:
@@ -153,7 +170,7 @@ class _SweptIndex:
         index = self._by_names(tuple(sorted(p.swept)))
         pid = _point_identity(p, self.identity)
         for sig in (_signature(p.swept, ";".join(p.blocks)) + pid, _signature(p.swept, None) + pid):
-            cand = [i for i in index.get(sig, []) if i not in taken]
+            cand = [i for i in index.get(sig, []) if i not in taken and _agrees(self.rows[i], p, self.written)]
             if cand:
                 return cand[0]
         return None

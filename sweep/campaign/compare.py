@@ -6,8 +6,10 @@
     c.label_table      # cross-tabulation of the labels of the points finished in both (rows: a, columns: b)
     print(c.markdown())
 
-Points are matched on the swept parameters the two campaigns share (their values compared to 12 significant
-digits), never on derived columns such as N_f, whose scale (dp_cri) each campaign estimates from its own runs.
+Runs are matched on the swept parameters of both campaigns (their values compared to 12 significant digits; a
+parameter swept in one campaign only is matched on the value the other holds it at) and, with replicates, on their
+seeds, so that each run has at most one counterpart; never on derived columns such as N_f, whose scale (dp_cri)
+each campaign estimates from its own runs.
 Units are those of the compared columns (mm, s, kPa; ``columns.csv`` beside each table).
 """
 from __future__ import annotations
@@ -107,18 +109,21 @@ def _md_table(df) -> str:
 
 
 def _matching_key(table, on):
-    """One hashable key per row: the swept values rounded to ``_DIGITS`` significant digits."""
-    import numpy as np
-
-    cols = []
-    for n in on:
-        v = table[n].to_numpy()
-        try:
-            v = np.array([float(f"{float(x):.{_DIGITS - 1}e}") for x in v])
-        except (TypeError, ValueError):
-            v = v.astype(str)
-        cols.append(v)
+    """One hashable key per row: the values of ``on``, numbers rounded to ``_DIGITS`` significant digits, a missing
+    value (None, NaN, NA: e.g. the deterministic mesh's mesh_seed) as None, so that missing matches missing."""
+    cols = [[_key_value(x) for x in table[n].to_numpy()] for n in on]
     return list(zip(*cols)) if cols else []
+
+
+def _key_value(x):
+    import pandas as pd
+
+    if x is None or x is pd.NA or (isinstance(x, float) and x != x):
+        return None
+    try:
+        return float(f"{float(x):.{_DIGITS - 1}e}")
+    except (TypeError, ValueError):
+        return str(x)
 
 
 def _frame(source, root, label, columns):
@@ -136,28 +141,61 @@ def _frame(source, root, label, columns):
     return table, d.name, _swept_names(Path(d), table)
 
 
+def _column(table, name):
+    """The column of ``table`` holding ``name`` (bare, or prefixed where the name was taken), None if none."""
+    return next((c for c in (name, f"swept_{name}", f"param_{name}", f"opt_{name}") if c in table.columns), None)
+
+
+# the fields a point's replicates vary (sweep.campaign.replicates.REPLICATE_KEYS): runs of one point told apart
+_REPLICATE_FIELDS = ("seed", "mesh_seed")
+
+
+def _match_on(ta, tb, on_a, on_b, names) -> tuple:
+    """The names two campaign tables are matched on: the swept names of either campaign that both tables hold
+    (a name swept in one campaign is matched on the value the other holds it at), and, when runs of one
+    campaign still share those values (replicates), the replicated seeds.  ValueError when runs still share
+    them: pairing them would be arbitrary (every run of one with every run of the other)."""
+    on = tuple(dict.fromkeys(n for n in (*on_a, *on_b) if _column(ta, n) and _column(tb, n)))
+    for extra in ((), _REPLICATE_FIELDS):
+        on = tuple(dict.fromkeys((*on, *(n for n in extra if _column(ta, n) and _column(tb, n)))))
+        dup = [(n, len(t) - len(set(_matching_key(_named(t, on), on)))) for n, t in zip(names, (ta, tb))]
+        dup = [d for d in dup if d[1]]
+        if not dup:
+            return on
+    raise ValueError(f"campaign {dup[0][0]!r}: {dup[0][1]} run(s) share their values of {', '.join(on)} with another "
+                     "of its runs: they cannot be paired with the other campaign's runs one to one")
+
+
+def _named(table, names):
+    """The columns of ``names`` (bare or prefixed) under their bare names."""
+    import pandas as pd
+
+    return pd.DataFrame({n: table[_column(table, n)].to_numpy() for n in names}, index=table.index)
+
+
 def compare_campaigns(a, b, root="results", *, label: str = "regime", columns=()) -> CampaignComparison:
     """Match the runs of campaigns ``a`` and ``b`` point by point.
 
     a, b : campaign folders, spec TOML paths or CampaignSpecs (folders under ``root``).
     label : the categorical column compared (default ``regime``; e.g. ``fracturing``).
     columns : numeric columns compared too (e.g. ``("crack_length", "front_radius_mean")``, mm).
-    Raises ValueError when the campaigns share no swept parameter or lack a named column.
+    Runs are matched on the swept names of both campaigns (one swept in a single campaign on the value the other
+    holds it at) and, with replicates, on their seeds (``seed``, ``mesh_seed``): draw by draw.
+    Raises ValueError when the campaigns share no swept parameter, lack a named column, or hold runs that these
+    values do not tell apart.
     """
-    import pandas as pd
-
     columns = tuple(columns)
     ta, name_a, on_a = _frame(a, root, label, columns)
     tb, name_b, on_b = _frame(b, root, label, columns)
-    on = tuple(n for n in on_a if n in on_b)
-    if not on:
+    if not any(n in on_b for n in on_a):
         raise ValueError(f"campaigns {name_a!r} and {name_b!r} share no swept parameter "
                          f"({name_a}: {on_a or 'none'}; {name_b}: {on_b or 'none'}): nothing to match on")
+    on = _match_on(ta, tb, on_a, on_b, (name_a, name_b))
     keep = ["status", label, *columns]
-    left = ta[list(on) + keep].assign(_k=_matching_key(ta, on))
-    right = tb[keep].assign(_k=_matching_key(tb, on))
+    left = _named(ta, on).join(ta[keep]).assign(_k=_matching_key(_named(ta, on), on))
+    right = tb[keep].assign(_k=_matching_key(_named(tb, on), on))
     pairs = left.merge(right, on="_k", suffixes=("_a", "_b"), how="inner")
     only_a = left[~left["_k"].isin(set(right["_k"]))][list(on)].reset_index(drop=True)
-    only_b = tb[~right["_k"].isin(set(left["_k"]))][list(on)].reset_index(drop=True)
+    only_b = _named(tb, on)[~right["_k"].isin(set(left["_k"]))].reset_index(drop=True)
     pairs = pairs.drop(columns="_k").reset_index(drop=True)
     return CampaignComparison(name_a, name_b, on, label, columns, pairs, only_a, only_b)

@@ -171,9 +171,19 @@ def plan_campaign(spec, root=DEFAULT_ROOT, *, code_hash: str | None = None, poin
 
         identity = [REPLICATE_KEYS[k] for k in sorted(getattr(spec, "replicates", None) or {})]
         plan.archived_rows, unmatched = match_committed(pts, keys, set(recs), [r for r in rows if r.get("key") not in here],
-                                                        identity, _held(spec, store, pts, keys, recs))
+                                                        identity, _held(spec, store, pts, keys, recs), _written(spec))
         plan.unmatched_rows = unmatched
     return plan
+
+
+def _written(spec: CampaignSpec) -> list[tuple[str, str]]:
+    """(namespace, name) of the fields the spec sets: its and its blocks' parameters (a preset's and a model
+    file's included), ``[derived]`` and the run options that change a run's result (``solver.options.keyed``)."""
+    from solver.options import keyed
+
+    params = {k for t in (spec, *spec.blocks) for k in t.params} | set(spec.derived)
+    options = keyed({k: None for t in (spec, *spec.blocks) for k in t.options})
+    return sorted({("params", k) for k in params} | {("options", k) for k in options})
 
 
 def _held(spec: CampaignSpec, store: ResultsStore, pts, keys, recs) -> list[tuple[Point, str]]:
