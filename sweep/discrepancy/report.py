@@ -406,6 +406,73 @@ def _candidate_lines(report: dict) -> list[str]:
     return L
 
 
+def _profile_flags(pr: dict) -> list[str]:
+    """A profile's smoothing, open or unconverged ends, roughness and monotony, as report lines."""
+    L = []
+    qd = pr.get("quadratic")
+    if pr.get("smoothing") == "quadratic":
+        if qd is None:
+            L += ["", "Smoothing (`[profile] smoothing = \"quadratic\"`) not applied: fewer than 5 points in the "
+                      "quadratic region; the interval is the raw crossings'."]
+        elif qd.get("unbounded"):
+            L += ["", f"Smoothed profile (quadratic, MCAP): no minimum inside the points, so none of them is excluded: "
+                      f"interval {_f([pr['lower'], pr['upper']])} (their span; raw crossings {_f(pr['raw'])})."]
+        else:
+            L += ["", f"Smoothed profile (quadratic through {qd['n']} points with the Monte-Carlo-adjusted cutoff, MCAP, "
+                      f"Ionides et al. 2017): centre {qd['center']:.4g}, statistical se {qd['se_stat']:.3g}, "
+                      f"Monte-Carlo se {qd['se_mc']:.3g} (points' scatter about the quadratic {qd['residual_sd']:.3g} "
+                      f"in Δχ²); interval {_f([pr['lower'], pr['upper']])} (raw crossings {_f(pr['raw'])})."]
+    opened = [s for s in ("lower", "upper") if pr.get(f"{s}_open")]
+    if opened:
+        L += ["", f"**Open interval**: Δχ² stays below the threshold out to the strength's range at the "
+                  f"{' and '.join(opened)} end, so that end is the range's ({', '.join(f'{pr[s]:.4g}' for s in opened)}): the "
+                  "data do not bound the strength there."]
+    for side, u in (pr.get("unconverged") or {}).items():
+        L += ["", f"**Unconverged interval end**: the {side} end "
+                  f"{(pr.get('raw') or [pr['lower'], pr['upper']])[side == 'upper']:.4g} is interpolated, not a crossing the "
+                  f"profile confirmed (the `[profile] refine` evaluations did not bring Δχ² within"
+                  f" `refine_tol` of the threshold {pr['threshold']:.3g}): "
+                  + (f"the crossing lies in {_f(u['bracket'])}, Δχ² {_f(u['delta_chi2'])} there" if "bracket" in u
+                     else "")
+                  + (f"; Δχ² at the end itself {u['delta_chi2_at_end']:.3g}" if "delta_chi2_at_end" in u else "")
+                  + "."]
+    if pr.get("rough"):
+        L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
+                  f"(more than `[profile] rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
+                  "monotonically; this one jitters with the strength (the coarse model's outputs, typically the "
+                  "front radius, are not smooth in it), so the bounds are set by that jitter: read the interval "
+                  "as a lower bound on the uncertainty."]
+    if pr.get("non_monotone"):
+        L += ["", f"**Non-monotone profile**: walking away from its lowest point, Δχ² falls by up to "
+                  f"{pr['monotone_fall']:.3g} (more than {100 * stats.MONOTONE_TOL:.0f} % of the threshold): a second "
+                  "minimum or a likelihood that is not a smooth function of the strength.  The interval is the "
+                  "crossings' as evaluated; it is not smoothed or re-centred away."]
+    return L
+
+
+def _correction_model_lines(cm: dict | None) -> list[str]:
+    """The profile's linear discretization correction (``[profile] correction = "linear"``), as report lines."""
+    if not cm:
+        return []
+    L = []
+    follows = cm.get("follows")
+    L += ["", f"Discretization correction along the profile: linear in the strength (`[profile] correction = "
+              f"\"linear\"`), from the fine realizations at {_f(cm['anchors'])}; the same function for every point "
+              f"and re-centring (common random numbers).  "
+              + (f"Also linear in {', '.join(n for n in follows if not n.startswith('effect:'))} "
+                 "(`correction_follows = \"all\"`, anchors "
+                 + "; ".join(f"{n} {_f(v)}" for n, v in cm["parameter_anchors"].items() if not n.startswith("effect:"))
+                 + "), evaluated at each refit's own parameters.  " if follows else "")
+              + "Its change over the anchors, RMS: "
+              + ", ".join(f"{o} {v:.3g}" for o, v in (cm.get("change_over_anchors_rms") or {}).items())
+              + f"; the line's residual RMS {cm['line_residual_rms']:.3g}."
+              + (f"  The anchors after the first ran {cm['slope_realizations']} of the {cm['realizations']} "
+                 "realizations, the first's mean carried to them by those realizations' change "
+                 "(`correction_slope_realizations`)." if (cm.get("slope_realizations") or 0)
+                 < (cm.get("realizations") or 0) else "")]
+    return L
+
+
 def _profile_lines(report: dict) -> list[str]:
     """Each named strength's profile likelihood."""
     L = []
@@ -414,61 +481,8 @@ def _profile_lines(report: dict) -> list[str]:
               f"95 % interval {_f([pr['lower'], pr['upper']])} where Δχ² < {pr['threshold']:.3g}; "
               f"the linearized (Wald) interval was {_f(pr['wald'])}.", "", "| strength | Δχ² |", "|---|---|"]
         L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
-        qd = pr.get("quadratic")
-        if pr.get("smoothing") == "quadratic":
-            if qd is None:
-                L += ["", "Smoothing (`[profile] smoothing = \"quadratic\"`) not applied: fewer than 5 points in the "
-                          "quadratic region; the interval is the raw crossings'."]
-            elif qd.get("unbounded"):
-                L += ["", f"Smoothed profile (quadratic, MCAP): no minimum inside the points, so none of them is excluded: "
-                          f"interval {_f([pr['lower'], pr['upper']])} (their span; raw crossings {_f(pr['raw'])})."]
-            else:
-                L += ["", f"Smoothed profile (quadratic through {qd['n']} points with the Monte-Carlo-adjusted cutoff, MCAP, "
-                          f"Ionides et al. 2017): centre {qd['center']:.4g}, statistical se {qd['se_stat']:.3g}, "
-                          f"Monte-Carlo se {qd['se_mc']:.3g} (points' scatter about the quadratic {qd['residual_sd']:.3g} "
-                          f"in Δχ²); interval {_f([pr['lower'], pr['upper']])} (raw crossings {_f(pr['raw'])})."]
-        opened = [s for s in ("lower", "upper") if pr.get(f"{s}_open")]
-        if opened:
-            L += ["", f"**Open interval**: Δχ² stays below the threshold out to the strength's range at the "
-                      f"{' and '.join(opened)} end, so that end is the range's ({', '.join(f'{pr[s]:.4g}' for s in opened)}): the "
-                      "data do not bound the strength there."]
-        for side, u in (pr.get("unconverged") or {}).items():
-            L += ["", f"**Unconverged interval end**: the {side} end "
-                      f"{(pr.get('raw') or [pr['lower'], pr['upper']])[side == 'upper']:.4g} is interpolated, not a crossing the "
-                      f"profile confirmed (the `[profile] refine` evaluations did not bring Δχ² within"
-                      f" `refine_tol` of the threshold {pr['threshold']:.3g}): "
-                      + (f"the crossing lies in {_f(u['bracket'])}, Δχ² {_f(u['delta_chi2'])} there" if "bracket" in u
-                         else "")
-                      + (f"; Δχ² at the end itself {u['delta_chi2_at_end']:.3g}" if "delta_chi2_at_end" in u else "")
-                      + "."]
-        if pr.get("rough"):
-            L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
-                      f"(more than `[profile] rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
-                      "monotonically; this one jitters with the strength (the coarse model's outputs, typically the "
-                      "front radius, are not smooth in it), so the bounds are set by that jitter: read the interval "
-                      "as a lower bound on the uncertainty."]
-        if pr.get("non_monotone"):
-            L += ["", f"**Non-monotone profile**: walking away from its lowest point, Δχ² falls by up to "
-                      f"{pr['monotone_fall']:.3g} (more than {100 * stats.MONOTONE_TOL:.0f} % of the threshold): a second "
-                      "minimum or a likelihood that is not a smooth function of the strength.  The interval is the "
-                      "crossings' as evaluated; it is not smoothed or re-centred away."]
-        cm = pr.get("correction_model")
-        if cm:
-            follows = cm.get("follows")
-            L += ["", f"Discretization correction along the profile: linear in the strength (`[profile] correction = "
-                      f"\"linear\"`), from the fine realizations at {_f(cm['anchors'])}; the same function for every point "
-                      f"and re-centring (common random numbers).  "
-                      + (f"Also linear in {', '.join(n for n in follows if not n.startswith('effect:'))} "
-                         "(`correction_follows = \"all\"`, anchors "
-                         + "; ".join(f"{n} {_f(v)}" for n, v in cm["parameter_anchors"].items() if not n.startswith("effect:"))
-                         + "), evaluated at each refit's own parameters.  " if follows else "")
-                      + "Its change over the anchors, RMS: "
-                      + ", ".join(f"{o} {v:.3g}" for o, v in (cm.get("change_over_anchors_rms") or {}).items())
-                      + f"; the line's residual RMS {cm['line_residual_rms']:.3g}."
-                      + (f"  The anchors after the first ran {cm['slope_realizations']} of the {cm['realizations']} "
-                         "realizations, the first's mean carried to them by those realizations' change "
-                         "(`correction_slope_realizations`)." if (cm.get("slope_realizations") or 0)
-                         < (cm.get("realizations") or 0) else "")]
+        L += _profile_flags(pr)
+        L += _correction_model_lines(pr.get("correction_model"))
         if pr.get("points"):
             L += ["", f"![Profile likelihood of {eff}](profile_{eff}.png)"]
         L += _emulator_lines(pr.get("emulator"))
