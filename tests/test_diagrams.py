@@ -208,3 +208,26 @@ def test_plot_ca_star_does_not_draw_a_separatrix_no_better_than_the_base_rate(tm
     located = plot_ca_star_vs_cement(pd.DataFrame({"cement": C, "Ca_star": cs, "fracturing": moved}),
                                      tmp_path / "ok.png")
     assert located["fit"] is not None and located["no_fit_reason"] is None
+
+
+def test_one_placement_rule_for_every_diagram(tmp_path):
+    """The one-run and the replicate diagrams place the same rows (``placed_rows``) and name the rest by index."""
+    from sweep.regimes.diagrams import placed_rows
+    from sweep.regimes.probability import plot_nf_vs_nb_probabilities, plot_probability_diagram
+
+    ca = pd.DataFrame({"cement": [1.0, 2.0, np.nan, 1.5, 2.5, 1.0, 2.0, 3.0],
+                       "Ca_star": [1e6, 1e7, 1e6, 0.0, 1e6, -1.0, 1e5, 1e8],
+                       "fracturing": [True, False, True, True, None, True, False, True]},
+                      index=[10, 11, 12, 13, 14, 15, 16, 17])
+    expect = [12, 13, 14, 15]                 # C missing, Ca* = 0, no label, Ca* < 0
+    assert list(ca.index[~placed_rows(ca, "cement", "Ca_star", "fracturing")]) == expect
+    one = plot_ca_star_vs_cement(ca, tmp_path / "one", formats=())
+    rep = plot_probability_diagram(ca, tmp_path / "rep", formats=())
+    assert one["dropped"] == rep["dropped"] == expect and one["n_dropped"] == rep["n_dropped"] == 4
+    nf = pd.DataFrame({"N_b": [0.1, 10.0, 0.0, 5.0, 1.0, np.inf],
+                       "N_f": [2.0, 0.5, 1.0, -1.0, 1.0, 1.0],
+                       "regime": ["invasive_fracturing", "uniform_invasion", "uniform_invasion",
+                                  "uniform_invasion", "bogus", "uniform_invasion"]})
+    one = plot_nf_vs_nb(nf, tmp_path / "nf1", formats=())
+    rep = plot_nf_vs_nb_probabilities(nf, tmp_path / "nf2", formats=())
+    assert one["dropped"] == rep["dropped"] == [2, 3, 4, 5]   # N_b = 0, N_f < 0, unknown regime, N_b infinite

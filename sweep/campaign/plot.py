@@ -216,25 +216,17 @@ def _phase_diagram(spec, table, g, path) -> list[Path]:
     if replicate_count(spec) > 1:   # a point as in points.csv: distinct points can share (C, Ca*) or (N_b, N_f)
         kw["by"] = point_columns(ok, spec.axis_names)[1]
     res = fn(ok.reset_index(drop=True), path, **kw)
-    _warn_left_out(path, _unplaced(ok, need), f"no value of {'/'.join(need)}: unlabelled, or a number not computed")
+    _warn_left_out(path, _run_names(ok, res["dropped"]),
+                   f"no value of {'/'.join(need)}: unlabelled, or a number not computed")
     paths = res.get("paths") if isinstance(res, Mapping) else None
     return [Path(p) for p in paths] if paths else [path]
 
 
-def _unplaced(ok, need) -> list[str]:
-    """Keys of the finished runs a phase diagram leaves out (as ``sweep.regimes.diagrams`` does): a value of
-    ``need`` missing, a log-axis coordinate (Ca*, N_b, N_f) not > 0, or a regime the classifier does not name."""
-    import pandas as pd
-
-    from sweep.regimes.classify import REGIMES
-
-    out = ok[list(need)].isna().any(axis=1)
-    for c in ("Ca_star", "N_b", "N_f"):
-        if c in need:
-            out |= ~(pd.to_numeric(ok[c], errors="coerce") > 0)
-    if "regime" in need:
-        out |= ~ok["regime"].isin(REGIMES)
-    return [str(k) for k in ok.loc[out, "key"]] if "key" in ok.columns else [f"row {i}" for i in ok.index[out]]
+def _run_names(ok, positions) -> list[str]:
+    """Keys of the rows at ``positions`` of ``ok`` (the runs a phase diagram left out), else "row i"."""
+    if "key" in ok.columns:
+        return [str(k) for k in ok["key"].to_numpy()[list(positions)]]
+    return [f"row {ok.index[i]}" for i in positions]
 
 
 def _boundary_figure(spec, store: ResultsStore, table):

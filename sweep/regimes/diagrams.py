@@ -11,8 +11,9 @@ Required columns
     Optional: ``source`` (e.g. "simulation" / "experiment"; one colour per source).
 ``plot_nf_vs_nb``: ``N_b`` (-), ``N_f`` (-), ``regime`` (one of sweep.regimes.classify.REGIMES).
     Optional: ``run_dir`` (run folder, for thumbnails).
-Rows with missing / non-positive numbers or an unknown regime are dropped with a
-count reported in the returned dict (``n_dropped``).
+Rows with missing / non-positive numbers or an unknown regime are dropped (:func:`placed_rows`, the one rule of
+every phase diagram here and in ``sweep.regimes.probability``); the returned dict counts them (``n_dropped``) and
+names them by their index labels in ``df`` (``dropped``).
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ __all__ = [
     "plot_nf_vs_nb",
     "plot_boundary_sampling",
     "regime_style",
+    "placed_rows",
     "separatrix_test",
     "SEPARATRIX_P_MAX",
 ]
@@ -77,6 +79,30 @@ def regime_style(label: Any) -> dict[str, Any]:
 # fitted separatrices are drawn only when they explain the labels better than a constant fracturing rate at
 # this level (likelihood-ratio test, 2 degrees of freedom: the C and ln Ca* slopes)
 # --------------------------------------------------------------------------- helpers
+def placed_rows(df: Any, x: str, y: str, label: str, *, log_x: bool = False, log_y: bool = True) -> np.ndarray:
+    """Boolean mask of the rows of ``df`` a phase diagram places: both coordinates finite numbers, > 0 on a log
+    axis (Ca*, N_b, N_f are drawn on log axes), and a label the diagram draws: for ``label == "regime"`` a regime
+    the classifier names (``REGIMES``), else a truth value (True / False or 1 / 0).  Units: the columns' own."""
+    import pandas as pd
+
+    ok = np.ones(len(df), bool)
+    for col, log in ((x, log_x), (y, log_y)):
+        v = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
+        ok &= np.isfinite(v) & ((v > 0) if log else True)
+    lab = df[label].to_numpy()
+    if label == "regime":
+        ok &= np.isin(lab.astype(str), REGIMES) & pd.notna(lab)
+    else:
+        ok &= np.array([isinstance(v, (bool, np.bool_)) or (isinstance(v, (int, float, np.integer, np.floating))
+                                                            and v in (0, 1)) for v in lab], bool)
+    return ok
+
+
+def _dropped(df: Any, ok: np.ndarray) -> list:
+    """Index labels of the rows of ``df`` not placed (``~ok``)."""
+    return list(df.index[~ok])
+
+
 def _require(df: Any, cols: Sequence[str], fn: str) -> None:
     import pandas as pd
 
@@ -139,13 +165,14 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     (``fit_exponential_separatrix``) and drawn with A, B and their 1-sigma in the legend, unless the labels do
     not locate it (``unlocated_reason``: its significance is :func:`separatrix_test`, the rule of the replicated
     diagram too).
-    Writes ``out_path`` as PNG plus ``formats``; returns {"paths", "fit", "n_dropped"}.
+    Writes ``out_path`` as PNG plus ``formats``; returns {"paths", "fit", "band", "no_fit_reason", "n_dropped",
+    "dropped"}.
     """
     _require(df, ("cement", "Ca_star", "fracturing"), "plot_ca_star_vs_cement")
     C = df["cement"].to_numpy(dtype=float)
     cs = df["Ca_star"].to_numpy(dtype=float)
     fr = df["fracturing"].to_numpy()
-    ok = np.isfinite(C) & np.isfinite(cs) & (cs > 0) & np.array([v in (True, False, 0, 1) for v in fr])
+    ok = placed_rows(df, "cement", "Ca_star", "fracturing")
     n_drop = int((~ok).sum())
     C, cs, fr = C[ok], cs[ok], fr[ok].astype(bool)
     src = df["source"].astype(str).to_numpy()[ok] if "source" in df.columns else np.full(len(C), "simulation")
@@ -194,7 +221,8 @@ def plot_ca_star_vs_cement(df: Any, out_path: str | Path, *, fit: bool = True,
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2,
               frameon=False)
     paths = _save(fig, out_path, formats)
-    return {"paths": paths, "fit": sep, "band": band, "no_fit_reason": no_fit, "n_dropped": n_drop}
+    return {"paths": paths, "fit": sep, "band": band, "no_fit_reason": no_fit, "n_dropped": n_drop,
+            "dropped": _dropped(df, ok)}
 
 
 def _draw_separatrix_band(ax, C, cs, fr, level: float = 0.95):
@@ -401,13 +429,13 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k:
     and "xy": (N_b, N_f)), "pos": (x, y) axes fraction of the inset centre,
     "size": axes fraction (0.18), "at": snapshot selector (default "last")}.
     ``dp_cri`` (kPa) is written in the title when given. Writes PNG plus ``formats``;
-    returns {"paths", "n_dropped", "counts"}.
+    returns {"paths", "n_dropped", "dropped", "counts"}.
     """
     _require(df, ("N_b", "N_f", "regime"), "plot_nf_vs_nb")
     nb = df["N_b"].to_numpy(dtype=float)
     nf = df["N_f"].to_numpy(dtype=float)
     rg = df["regime"].astype(str).to_numpy()
-    ok = np.isfinite(nb) & np.isfinite(nf) & (nb > 0) & (nf > 0) & np.isin(rg, REGIMES)
+    ok = placed_rows(df, "N_b", "N_f", "regime", log_x=True)
     n_drop = int((~ok).sum())
     nb, nf, rg = nb[ok], nf[ok], rg[ok]
     if not isinstance(grid, (int, np.integer)) or grid < 10:
@@ -456,7 +484,7 @@ def plot_nf_vs_nb(df: Any, out_path: str | Path, *, shade: bool | str = True, k:
             wrap=True)
     _place_thumbnails(fig, ax, df, thumbnails or ())
     paths = _save(fig, out_path, formats)
-    return {"paths": paths, "n_dropped": n_drop, "counts": counts}
+    return {"paths": paths, "n_dropped": n_drop, "dropped": _dropped(df, ok), "counts": counts}
 
 
 def _shade_regimes(ax, shade, lx, ly, rg, bounds, grid: int, k: int) -> None:

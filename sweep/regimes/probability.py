@@ -115,22 +115,23 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
     """Ca*-C diagram of label probabilities from replicate runs.
 
     df: one row per run with columns ``x`` (C, %), ``y`` (Ca*, > 0) and ``label`` (bool); rows with a missing
-    value are dropped (``n_dropped``). Each point is coloured by its fraction of fracturing replicates (blue 0
+    value are dropped (``n_dropped``, ``dropped``: their index labels; the rule of every diagram,
+    :func:`sweep.regimes.diagrams.placed_rows`). Each point is coloured by its fraction of fracturing replicates (blue 0
     to orange 1), its size grows with the replicate count, and a black ring marks the points whose replicates
     disagree. The background is the smooth classifier's P(fracturing) with its 0.5 contour (dashed) and the edge of
     that contour's 95 % band (dotted), when ``smooth``. The separatrix and its ``level`` band are drawn only when the fit is significant at ``alpha``
     (:func:`separatrix_test`, the rule of the one-run diagram too); otherwise the figure says why. ``truth``: optional callable C -> Ca*_c
     drawn dotted (a known boundary). ``by``: the columns that name a point (a campaign's axes; default ``x`` and
     ``y``): runs at one (C, Ca*) of distinct points are not one point's replicates. Writes PNG plus ``formats``;
-    returns {"paths", "points", "band", "no_fit_reason", "n_dropped"}.
+    returns {"paths", "points", "band", "no_fit_reason", "n_dropped", "dropped"}.
     """
     from matplotlib.colors import LinearSegmentedColormap
 
-    from .diagrams import BLUE, ORANGE, _new_figure, _require, _save
+    from .diagrams import BLUE, ORANGE, _dropped, _new_figure, _require, _save, placed_rows
 
     _require(df, (x, y, label, *(by or ())), "plot_probability_diagram")
     lab = df[label]
-    ok = df[x].notna() & df[y].notna() & lab.notna() & (df[y].astype(float) > 0)
+    ok = placed_rows(df, x, y, label)
     C, cs, fr = df[x][ok].to_numpy(float), df[y][ok].to_numpy(float), lab[ok].astype(bool).to_numpy()
     ids = list(df.loc[ok, list(by)].itertuples(index=False, name=None)) if by else None
     pts = replicate_points(C, cs, fr, level, point=ids)
@@ -172,7 +173,7 @@ def plot_probability_diagram(df: Any, out_path: str | Path, *, x: str = "cement"
                  fontsize=8)
     ax.legend(fontsize=6.5, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, frameon=False)
     return {"paths": _save(fig, out_path, formats), "points": pts, "band": band, "no_fit_reason": why,
-            "n_dropped": int((~ok).sum())}
+            "n_dropped": int((~ok).sum()), "dropped": _dropped(df, ok)}
 
 
 def _band_or_reason(C, cs, fr, level, alpha):
@@ -223,17 +224,17 @@ def plot_nf_vs_nb_probabilities(df: Any, out_path: str | Path, *, dp_cri: float 
     that regime's share of the replicates, a black ring when the replicates' regimes disagree and the label
     "k/n" (replicates in the most probable regime). Dashed lines N_f = 1 and N_b = 1. ``dp_cri`` (kPa) goes in the
     title. Writes PNG plus ``formats``; returns {"paths", "points" (DataFrame: N_b, N_f, n, top, p_top, mixed),
-    "n_dropped"}.
+    "n_dropped", "dropped"}.
     """
     import pandas as pd
 
     from .classify import REGIMES
-    from .diagrams import REGIME_STYLE, _new_figure, _require, _save
+    from .diagrams import REGIME_STYLE, _dropped, _new_figure, _require, _save, placed_rows
 
     by = list(by or ())
     _require(df, ("N_b", "N_f", "regime", *by), "plot_nf_vs_nb_probabilities")
     nb, nf = df["N_b"].astype(float), df["N_f"].astype(float)
-    ok = nb.gt(0) & nf.gt(0) & df["regime"].isin(REGIMES)
+    ok = placed_rows(df, "N_b", "N_f", "regime", log_x=True)
     d = pd.DataFrame({"N_b": nb[ok].round(12), "N_f": nf[ok].round(12), "regime": df["regime"][ok].astype(str)})
     for i, c in enumerate(by):
         d[f"_by{i}"] = df.loc[ok, c].map(_sig12)
@@ -268,4 +269,5 @@ def plot_nf_vs_nb_probabilities(df: Any, out_path: str | Path, *, dp_cri: float 
     t = (title or "") + ("" if dp_cri is None else f"\n$\\delta p_{{cri}}$ = {dp_cri:.3g} kPa")
     ax.set_title(t.strip() + "\nsymbol: most probable regime; opacity: its share of the replicates", fontsize=8)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
-    return {"paths": _save(fig, out_path, formats), "points": pts, "n_dropped": int((~ok).sum())}
+    return {"paths": _save(fig, out_path, formats), "points": pts, "n_dropped": int((~ok).sum()),
+            "dropped": _dropped(df, ok)}
