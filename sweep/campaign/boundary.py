@@ -65,8 +65,8 @@ from scipy.spatial import cKDTree
 
 from sweep.regimes.regime_model import AxisScale, RegimeModel, boundary_band, boundary_uncertainty, fit_regime_model
 from sweep.campaign import replicate_sampler
-from sweep.campaign.boundary_picks import (COORD_DIGITS, MIN_SPACING, BoundaryState, axis_column, coord_key, picks,
-                                           point_coords, tol_coords)
+from sweep.campaign.boundary_picks import (COORD_DIGITS, MIN_SPACING, BoundaryState, axis_column, coord_key,
+                                           missing_label, picks, point_coords, tol_coords)
 from sweep.campaign.sampler import Point, resolve_point
 from sweep.campaign.spec_model import CampaignSpec, SpecError, expand_block, round_sig
 
@@ -330,7 +330,7 @@ def _observations(table, cfg: _Config) -> dict[tuple, str | None]:
     ok = table["status"].to_numpy() == "ok" if "status" in table.columns else np.ones(len(table), bool)
     for i in range(len(table)):
         v = labels[i]
-        good = ok[i] and v is not None and not (isinstance(v, float) and math.isnan(v))
+        good = ok[i] and not missing_label(v)
         out[coord_key([c[i] for c in cols])] = str(v) if good else None
     return out
 

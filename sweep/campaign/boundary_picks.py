@@ -15,8 +15,8 @@ import numpy as np
 from sweep.campaign.spec_model import SpecError, round_sig
 from sweep.regimes.regime_model import AxisScale, RegimeModel
 
-__all__ = ["BoundaryState", "COORD_DIGITS", "MIN_SPACING", "axis_column", "coord_key", "picks", "point_coords",
-           "tol_coords"]
+__all__ = ["BoundaryState", "COORD_DIGITS", "MIN_SPACING", "axis_column", "coord_key", "missing_label", "picks",
+           "point_coords", "tol_coords"]
 
 COORD_DIGITS = 6        # significant digits of the chosen axis values (clean run keys)
 MIN_SPACING = 0.5       # tolerance units between a new point and any sampled point
@@ -60,6 +60,13 @@ def coord_key(coords) -> tuple:
 def point_coords(axes, u) -> tuple[float, ...]:
     """Axis values (axis units, COORD_DIGITS significant digits) of unit coordinates ``u`` in [-1, 1]."""
     return tuple(round_sig(float(a.from_u(np.clip(ui, -1.0, 1.0))), COORD_DIGITS) for a, ui in zip(axes, u))
+
+
+def missing_label(v) -> bool:
+    """Whether a table cell holds no label: None, pandas' NA or a float NaN (a failed or unlabelled run)."""
+    import pandas as pd
+
+    return v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v))
 
 
 def axis_column(table, name: str):

@@ -30,7 +30,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from sweep.campaign.boundary_picks import BoundaryState, axis_column, coord_key
+from sweep.campaign.boundary_picks import BoundaryState, axis_column, coord_key, missing_label
 from sweep.campaign.replicate_allocation import ReplicateSettings, decide_round
 from sweep.campaign.spec_model import SpecError
 
@@ -100,15 +100,9 @@ def _observed(table, cfg, positive, base_seed: int) -> dict:
     ok = table["status"].to_numpy() == "ok" if "status" in table.columns else np.ones(len(table), bool)
     for i in range(len(table)):
         v = lab[i]
-        good = ok[i] and not _missing(v)
+        good = ok[i] and not missing_label(v)
         out[(coord_key([c[i] for c in cols]), int(seeds[i]) - base_seed)] = positive(v) if good else None
     return out
-
-
-def _missing(v) -> bool:
-    import pandas as pd
-
-    return v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v))
 
 
 def _replay(sampler, spec, table) -> dict:
@@ -205,7 +199,7 @@ def replay(sampler, spec, table):
         return out
     ok = (table["status"] == "ok").to_numpy() if "status" in table.columns else np.ones(len(table), bool)
     lab = table[cfg.settings.label].to_numpy()
-    keep = ok & np.array([not _missing(v) for v in lab])
+    keep = ok & np.array([not missing_label(v) for v in lab])
     X = np.stack([axis_column(table, a.name).to_numpy(float) for a in cfg.axes], axis=1)[keep]
     y = [str(v) for v in lab[keep]]
     votes: dict = {}

@@ -119,12 +119,15 @@ def _separatrix_lines(spec, table) -> list[str]:
     ok = table[table["status"] == "ok"] if "status" in table.columns else table
     if any(c not in ok.columns for c in need):
         return []
-    ok = ok.dropna(subset=list(need))
-    ok = ok[ok["Ca_star"].astype(float) > 0]
+    from sweep.regimes.diagrams import placed_rows
     from sweep.regimes.probability import separatrix_summary
 
+    placed = placed_rows(ok, "cement", "Ca_star", "fracturing")   # the runs the diagram places: the fit's runs
+    left = int((~placed).sum())
+    ok = ok[placed]
     s = separatrix_summary(ok["cement"], ok["Ca_star"], ok["fracturing"].astype(bool))
-    L = ["## The separatrix", "", f"{s['runs']} finished runs, {s['fracturing']} fracturing."]
+    L = ["## The separatrix", "", f"{s['runs']} finished runs with a label, {s['fracturing']} fracturing"
+         + (f" ({left} finished run(s) without a fracturing label or a positive Ca* left out)." if left else ".")]
     if s.get("p_value") is not None:
         L.append(f"Against a constant fracturing probability the penalized likelihood ratio is {s['lr']:.3g} "
                  f"(p = {s['p_value']:.2g}).")

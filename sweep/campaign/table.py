@@ -25,19 +25,22 @@ _numbers_cache: dict[str, dict] = {}
 
 
 def _numbers(params: Mapping[str, Any]) -> dict:
-    """Dimensionless numbers of a run from sweep.regimes.numbers (empty if that module is unavailable)."""
+    """Dimensionless numbers of a run from sweep.regimes.numbers; empty for parameters that are not the solver's
+    (a custom runner's: ``solver.params.Parameters`` refuses them with ValueError).  A failure of the numbers
+    themselves on the solver's parameters is a bug and is raised, never turned into an empty row."""
     key = json.dumps(params, sort_keys=True, default=str)
     if key in _numbers_cache:
         return _numbers_cache[key]
-    out: dict = {}
-    try:
-        from solver.params import Parameters
-        from sweep.regimes.numbers import dimensionless_numbers
+    from solver.params import Parameters
+    from sweep.regimes.numbers import dimensionless_numbers
 
-        res = dimensionless_numbers(_numbers_input(Parameters.from_dict(dict(params)).to_dict()))
+    try:
+        p = Parameters.from_dict(dict(params))
+    except ValueError:
+        out: dict = {}
+    else:
+        res = dimensionless_numbers(_numbers_input(p.to_dict()))
         out = {k: v for k, v in dict(res).items() if _is_scalar(v)}
-    except Exception:  # noqa: BLE001 - the table must build without the numbers module
-        out = {}
     _numbers_cache[key] = out
     return out
 

@@ -403,7 +403,9 @@ def separatrix_band(C: Any, ca_star: Any, fracturing: Any, *, level: float = 0.9
         def rise(v, c0=c0):  # the line through (c0, v): theta_3 = v theta_1 - c0 theta_2
             return sep_min(X, y, np.array([[1.0, 0.0], [0.0, 1.0], [v, -c0]]))[0] - full - thr
         (lo[i], hi[i]), (lo_ok[i], hi_ok[i]) = _profile_search(rise, float(center[i]), step)
-    return SeparatrixBand(grid, center, lo, hi, level, simultaneous, float(math.exp(lnA)), float(B), float(th[0]),
+    with np.errstate(over="ignore"):   # a sharpness th[0] near 0 puts A beyond floats: A = inf, said as such
+        A = float(np.exp(lnA))
+    return SeparatrixBand(grid, center, lo, hi, level, simultaneous, A, float(B), float(th[0]),
                           test.lr, test.p_value, test.significant, int(y.size), lo_ok, hi_ok)
 
 
