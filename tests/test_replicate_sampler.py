@@ -125,7 +125,6 @@ def test_a_rerun_archived_run_replaces_its_committed_row(tmp_path):
     sampler asks for again (round 0, matched to their rows by swept values and seed), and each new run replaces its
     committed row.  The old row was left unmatched, and a sampler's table shows its unmatched rows: the table held
     two rows of each rerun run (24 rows for 15 runs, points.csv counted 24 replicates)."""
-    import shutil
 
     from sweep.campaign.table import build_table
 
@@ -203,3 +202,25 @@ def test_cli_status_of_a_replicated_boundary_campaign(tmp_path, capsys):
     assert f"boundary sampler: round {st['round']}, 15 of 15 runs used, 0 pending" in out
     assert f"15 labelled runs at {len(st['points'])} points (at most 5 each), 0 pending" in out
     assert "stopped: budget spent" in out
+
+
+def test_a_campaign_committed_part_way_resumes_on_another_machine(tmp_path):
+    """The table of a replicated boundary campaign copied part-way, without its run folders (another machine):
+    ``run`` replays the sampler's rounds from the committed rows, runs only the rest and ends with the runs of the
+    uninterrupted campaign.  A committed row must stand for its own replicate: matched by swept values alone, a
+    point's replicate 1 took its replicate 0's row and the campaign stopped with a round pending."""
+
+    spec = _spec(budget=40)
+    run_campaign(spec, tmp_path / "whole", runner=oracle_runner, jobs=1, code_hash="test-rb", progress=None)
+    whole = pd.read_csv(tmp_path / "whole" / "rep_boundary" / "table.csv")
+    assert whole.groupby(["cement", "eta_o"])["seed"].max().max() >= 1          # replicates were made
+    cut = int(whole["index"][whole["seed"] >= 1].min()) + 1                     # just after a first replicate
+    part = tmp_path / "other" / "rep_boundary"
+    part.mkdir(parents=True)
+    kept = whole[whole["index"] < cut]
+    kept.to_csv(part / "table.csv", index=False)
+    res = run_campaign(spec, tmp_path / "other", runner=oracle_runner, jobs=1, code_hash="test-rb", progress=None)
+    again = pd.read_csv(part / "table.csv")
+    st = json.loads((part / "sampler.json").read_text())
+    assert res.n_executed == len(whole) - len(kept) and st["stopped"] and st["pending"] == 0
+    assert sorted(again["key"]) == sorted(whole["key"])
