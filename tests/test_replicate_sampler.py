@@ -3,6 +3,7 @@
 with a fake runner writes the per-point table."""
 import json
 import math
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -125,7 +126,6 @@ def test_a_rerun_archived_run_replaces_its_committed_row(tmp_path):
     sampler asks for again (round 0, matched to their rows by swept values and seed), and each new run replaces its
     committed row.  The old row was left unmatched, and a sampler's table shows its unmatched rows: the table held
     two rows of each rerun run (24 rows for 15 runs, points.csv counted 24 replicates)."""
-
     from sweep.campaign.table import build_table
 
     spec = _spec(budget=15)
