@@ -2,7 +2,6 @@
 (cement, eta_o) plane: replicates go near the boundary, it stops by the band's width, it resumes, and a campaign
 with a fake runner writes the per-point table."""
 import json
-import math
 import shutil
 
 import numpy as np
