@@ -22,7 +22,7 @@ def test_paired_keeps_the_sampler_runs_at_the_mesh_stage_points_then_the_stage()
 
 @pytest.mark.parametrize("argv, msg", [
     (["judge", "draws", "RES/ca_star_boundary_h2_draws", "RES/ca_star_boundary_h2_pockets"],
-     "only the pockets protocol takes a second campaign"),
+     "only these protocols take a second campaign: pockets (its mesh stage); experiment_lines"),
     (["judge", "draws", "RES/no_such_campaign"], "no_such_campaign: no table.csv"),
 ])
 def test_bad_input_is_one_line_and_exit_2(argv, msg, capsys):

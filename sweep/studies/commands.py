@@ -15,7 +15,7 @@ from pathlib import Path
 __all__ = ["add_closure_command", "add_cracks_command", "add_judge_command", "PROTOCOL_NAMES"]
 
 #: the judging protocols of ``dchfrac judge`` (sweep.studies.protocols.PROTOCOLS)
-PROTOCOL_NAMES = ("draws", "pockets", "pockets_tip")
+PROTOCOL_NAMES = ("draws", "pockets", "pockets_tip", "experiment_lines")
 
 
 def _deferred(module: str, name: str):
@@ -75,7 +75,8 @@ def add_judge_command(subparsers):
                               description=_doc_head(mod))
     j.add_argument("protocol", choices=sorted(PROTOCOL_NAMES))
     j.add_argument("campaign_dir", type=Path, help="the campaign folder (results/<name>/ or the store's)")
-    j.add_argument("second_dir", type=Path, nargs="?", help="pockets only: the mesh stage's campaign folder")
+    j.add_argument("second_dir", type=Path, nargs="?", help="pockets: the mesh stage's campaign folder; "
+                   "experiment_lines: the w_i line's campaign folder (pooled with the first)")
     j.add_argument("--out", type=Path, help="summary JSON (also printed)")
     j.add_argument("--figure", type=Path, help="PNG: the labels per realization and the share fracturing")
     j.add_argument("--crack-map", type=Path, help="pockets: PNG of the crack length over the Ca*-C plane per mesh")

@@ -12,7 +12,12 @@ a JSON-able summary built from :mod:`sweep.studies.label_agreement`; ``dchfrac j
   lengths; the longest-crack record (not the protocol, reported whole); with the mesh stage, agreement between
   the deterministic mesh (``mesh_seed`` 0) and the perturbed one and the pooled fit;
 * ``pockets_tip`` (campaigns/studies/ca_star_boundary_h2_pockets_tip.toml): the separatrix at L_min = 6 mm (the
-  verdict), the fit over 4-10 mm for the judged and the longest crack, their lengths and rank correlations.
+  verdict), the fit over 4-10 mm for the judged and the longest crack, their lengths and rank correlations;
+* ``experiment_lines`` (campaigns/studies/experiment_ca_star_eta_line.toml, with the w_i line
+  ``experiment_ca_star_rate_line.toml`` as the second folder): per line and pooled, the separatrix at
+  L_min = 4 mm (the verdict: "B > 0 at 2 sigma", or the evidence that there is none) and over 2-6 mm, every run
+  with its time reached and front radius beside its label, and the failed runs, which carry no label
+  (:mod:`sweep.studies.experiment_lines`).
 
 Units: lengths mm, C in %, eta_o in kPa s, Ca* dimensionless.
 """
@@ -140,16 +145,29 @@ def _run_pockets_tip(a) -> dict:
     return judge_pockets_tip(ok_runs(a.campaign_dir))
 
 
+def _run_experiment_lines(a) -> dict:
+    from sweep.studies import experiment_lines as el
+
+    lines = {Path(d).name: load_campaign(d) for d in filter(None, (a.campaign_dir, a.second_dir))}
+    out = el.judge(lines)
+    if a.figure:
+        el.figure(lines, out, a.figure)
+    return out
+
+
 #: what each protocol of ``dchfrac judge`` (sweep.studies.commands.PROTOCOL_NAMES) runs
-PROTOCOLS = dict(zip(PROTOCOL_NAMES, (_run_draws, _run_pockets, _run_pockets_tip)))
+PROTOCOLS = dict(zip(PROTOCOL_NAMES, (_run_draws, _run_pockets, _run_pockets_tip, _run_experiment_lines)))
+#: the protocols that take a second campaign folder, and what it is
+SECOND_DIR = {"pockets": "its mesh stage", "experiment_lines": "the w_i line"}
 
 
 def cmd_judge(a) -> int:
     import sys
 
-    if a.second_dir and a.protocol != "pockets":
-        print(f"dchfrac judge: SECOND_DIR={a.second_dir}: only the pockets protocol takes a second campaign "
-              "(its mesh stage)", file=sys.stderr)
+    if a.second_dir and a.protocol not in SECOND_DIR:
+        allowed = "; ".join(f"{k} ({v})" for k, v in SECOND_DIR.items())
+        print(f"dchfrac judge: SECOND_DIR={a.second_dir}: only these protocols take a second campaign: {allowed}",
+              file=sys.stderr)
         return 2
     for d in filter(None, (a.campaign_dir, a.second_dir)):
         if not (Path(d) / "table.csv").is_file():

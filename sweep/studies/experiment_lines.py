@@ -1,0 +1,144 @@
+"""The experiment model's Ca*–C lines judged by the protocol declared in their headers (issue #47 item 7).
+
+Two held-out lines (campaigns/studies/experiment_ca_star_eta_line.toml: η_o alone at the measured w_i;
+experiment_ca_star_rate_line.toml: w_i alone at η_o = 0.29 kPa·s) are judged each and pooled:
+
+* the label is rule 1 of ``sweep.regimes.classify`` at L_min = 4 mm (``sweep.studies.label_agreement``), the
+  separatrix Ca*_c = A exp(B C) its profile-likelihood fit with Jeffreys' prior, and the verdict "B > 0 at
+  2 sigma" (the 95 % interval of B above 0) on the pooled runs (on the one line when only one is given);
+* the evidence that there is none is named: every label equal along Ca* at each C (:func:`labels_along_ca_star`),
+  or an interval of B that contains 0, or the reason no fit can be made;
+* the fracturing label over L_min = 2–6 mm is reported whole, beside the verdict, not instead of it;
+* every run's label stands beside its time of judgement and front radius (the line stops at a 45 mm front or at
+  t_end, so a run judged at t_end with a short front is judged earlier in its life than one that got there);
+* a failed run carries no label: it is listed with the time it reached and its reason, and counted, never
+  dropped silently.
+
+Units: lengths mm, times s, C in %, η_o in kPa·s, w_i in mm/s, Ca* dimensionless.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from sweep.figio import write_figure
+from sweep.studies import label_agreement as la
+
+__all__ = ["L_MIN", "L_SCAN", "judge", "judge_line", "labels_along_ca_star", "verdict", "figure"]
+
+L_MIN, L_SCAN = 4.0, (2.0, 3.0, 4.0, 5.0, 6.0)  # mm: the headers' label and scan
+QUANTILES = [0.0, 0.25, 0.5, 0.75, 1.0]
+RUN_COLUMNS = ["cement", "eta_o", "w_i", "Ca_star", "t_reached", "front_radius_max", "crack_length"]
+
+
+def _labelled(df: pd.DataFrame) -> pd.DataFrame:
+    """The runs that carry a label: status ok with a crack length (mm)."""
+    return df[(df["status"] == "ok") & df["crack_length"].notna()]
+
+
+def labels_along_ca_star(ok: pd.DataFrame, l_min: float = L_MIN) -> dict:
+    """Per cement ratio C (%, key as text), the labels at L_min (mm) along Ca*: "fracturing" or "porous" (every
+    run the same), "mixed", or "one run: ..." (no line to read at that C), and whether every C with two runs or
+    more is unmixed, with at least one such C (then no run's label depends on Ca*: the evidence of no separatrix
+    along these lines)."""
+    per_c, lines = {}, []
+    for c, d in ok.groupby("cement"):
+        f = la.fracturing(d, l_min)
+        label = "fracturing" if f.all() else "porous" if not f.any() else "mixed"
+        per_c[f"{float(c):g}"] = label if len(d) > 1 else f"one run: {label}"
+        if len(d) > 1:
+            lines.append(label)
+    return {"per_cement": per_c, "every_cement_unmixed": bool(lines) and "mixed" not in lines}
+
+
+def verdict(fit: dict, along: dict) -> str:
+    """The protocol's verdict from a :func:`sweep.studies.label_agreement.separatrix` row and
+    :func:`labels_along_ca_star`."""
+    if fit.get("B_positive_at_95"):
+        return "B > 0 at 2 sigma"
+    if along["every_cement_unmixed"]:
+        return "no separatrix: every label equal along Ca* at each C"
+    if "B_interval" in fit:
+        lo, hi = fit["B_interval"]
+        return f"B > 0 not shown: the 95 % interval of B, [{lo:.3g}, {hi:.3g}] /%, contains 0"
+    return f"no separatrix: {fit.get('error', 'no fit')}"
+
+
+def _run_rows(df: pd.DataFrame) -> list[dict]:
+    """Every run as a JSON row: swept values, time reached (s), front radius (mm), crack length (mm) and the
+    label at L_min, or for a failed run its reason and no label."""
+    rows = []
+    for _, r in df.sort_values(["cement", "Ca_star"]).iterrows():
+        row = {c: (None if pd.isna(r.get(c)) else float(r[c])) for c in RUN_COLUMNS}
+        row["status"] = str(r["status"])
+        if r["status"] == "ok" and not pd.isna(r["crack_length"]):
+            row["fracturing_at_L4"] = bool(r["crack_length"] > L_MIN)
+        else:
+            row["reason"] = None if pd.isna(r.get("reason")) else str(r["reason"])
+        rows.append(row)
+    return rows
+
+
+def judge_line(df: pd.DataFrame) -> dict:
+    """One line (or the pooled lines): all its runs, ok or failed.  The fit at L_min, the scan, the labels
+    along Ca*, the verdict and the runs."""
+    ok = _labelled(df)
+    fit = la.separatrix(ok, L_MIN) if len(ok) else {"runs": 0, "fracturing": 0, "error": "no labelled run"}
+    along = labels_along_ca_star(ok)
+    return {"runs": int(len(df)), "labelled": int(len(ok)), "failed_or_unlabelled": int(len(df) - len(ok)),
+            f"at_L{L_MIN:g}": fit, "verdict": verdict(fit, along), "labels_along_ca_star": along,
+            "L_scan": {str(l): la.separatrix(ok, l) if len(ok) else None for l in L_SCAN},
+            "judged_time_s_quantiles_0_25_50_75_100": [float(v) for v in ok["t_reached"].quantile(QUANTILES)],
+            "crack_length_mm": la.crack_summary(ok) if len(ok) else None,
+            "run_rows": _run_rows(df)}
+
+
+def judge(lines: dict[str, pd.DataFrame]) -> dict:
+    """The protocol on the named lines (name -> every run of the campaign, ok or failed): each line, and with
+    two lines the pooled runs; the verdict is the pooled one (the one line's alone)."""
+    if not lines:
+        raise ValueError("experiment_lines: no line given (allowed: the η_o line and optionally the w_i line)")
+    out = {"L_min_mm": L_MIN, "lines": {name: judge_line(df) for name, df in lines.items()}}
+    if len(lines) > 1:
+        out["pooled"] = judge_line(pd.concat(list(lines.values()), ignore_index=True))
+    out["verdict"] = (out["pooled"] if "pooled" in out else next(iter(out["lines"].values())))["verdict"]
+    return out
+
+
+def figure(lines: dict[str, pd.DataFrame], out: dict, path: Path) -> None:
+    """PNG at ``path``: one panel per line and one pooled, the labels at L_min over the Ca*–C plane (failed runs
+    as grey crosses, at their Ca*), the fitted separatrix where there is one.  Axes: C (%), Ca* (-, log)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = dict(lines)
+    if "pooled" in out:
+        panels["pooled"] = pd.concat(list(lines.values()), ignore_index=True)
+    fig, axes = plt.subplots(1, len(panels), figsize=(max(5.6, 4.4 * len(panels)), 4.2), sharey=True, squeeze=False)
+    for ax, (name, df) in zip(axes[0], panels.items()):
+        res = out["pooled"] if name == "pooled" else out["lines"][name]
+        _label_panel(ax, df, res)
+        ax.set_title(f"{name}\n{res['verdict']}", fontsize=8)
+    axes[0][0].set_ylabel("modified capillary number Ca* (-)")
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    fig.suptitle(f"Experiment model, Ca*-C lines: labels at L_min = {L_MIN:g} mm", fontsize=10)
+    fig.tight_layout()
+    write_figure(fig, path, dpi=110)
+    plt.close(fig)
+
+
+def _label_panel(ax, df: pd.DataFrame, res: dict) -> None:
+    """One panel of :func:`figure`: porous, fracturing and failed runs, and the separatrix if fitted."""
+    ok = _labelled(df)
+    y = la.fracturing(ok, L_MIN)
+    bad = df.drop(ok.index)
+    ax.scatter(ok["cement"][~y], ok["Ca_star"][~y], facecolors="none", edgecolors="C0", label="porous invasion")
+    ax.scatter(ok["cement"][y], ok["Ca_star"][y], marker="^", color="C3", label="fracturing")
+    ax.scatter(bad["cement"], bad["Ca_star"], marker="x", color="0.5", label="failed (no label)")
+    if len(df):
+        la._separatrix_line(ax, res[f"at_L{L_MIN:g}"], df["cement"].to_numpy(dtype=float), color="k")
+    ax.set_yscale("log")
+    ax.set_xlabel("cement volume ratio C (%)")

@@ -1,0 +1,91 @@
+"""sweep.studies.experiment_lines / `dchfrac judge experiment_lines`: the experiment model's Ca*-C lines judged by
+their declared protocol (issue #47 item 7).  Known answers: labels drawn from a known rising separatrix give
+B > 0 at 2 sigma with the true B inside its interval; labels equal along Ca* at every C give the named evidence of
+no separatrix; a failed run is listed with its reason and never labelled."""
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sweep.cli import main
+from sweep.studies import experiment_lines as el
+
+CEMENT = (0.5, 1.2, 2.0, 3.0)  # %
+CA_STAR = np.logspace(6.0, 8.5, 7)  # -
+
+
+def _line(crack, cement=CEMENT, ca_star=CA_STAR, **fixed) -> pd.DataFrame:
+    """Every (C, Ca*) of a line, ok, with crack_length = crack(C, Ca*) (mm)."""
+    rows = [dict(cement=c, Ca_star=a, eta_o=0.29, w_i=27.07, t_reached=4.0, front_radius_max=30.0,
+                 crack_length=float(crack(c, a)), status="ok", reason=pd.NA) for c in cement for a in ca_star]
+    return pd.DataFrame(rows).assign(**fixed)
+
+
+def _rising(B=1.5, A=2e5):
+    """Cracks of 10 mm above Ca*_c = A exp(B C) and 1 mm below: a separatrix rising with C."""
+    return lambda c, a: 10.0 if a > A * np.exp(B * c) else 1.0
+
+
+def test_labels_from_a_rising_separatrix_give_B_positive_at_2_sigma():
+    out = el.judge({"eta": _line(_rising()), "rate": _line(_rising(), ca_star=CA_STAR * 1.3)})
+    fit = out["pooled"]["at_L4"]
+    assert out["verdict"] == "B > 0 at 2 sigma"
+    assert fit["runs"] == 2 * len(CEMENT) * len(CA_STAR)
+    assert fit["B_interval"][0] > 0 and fit["B_interval"][0] <= 1.5 <= fit["B_interval"][1]
+    assert out["pooled"]["labels_along_ca_star"]["every_cement_unmixed"] is False
+
+
+def test_every_label_equal_along_ca_star_is_the_named_evidence_of_no_separatrix():
+    out = el.judge({"eta": _line(lambda c, a: 30.0)})
+    line = out["lines"]["eta"]
+    assert out["verdict"] == line["verdict"] == "no separatrix: every label equal along Ca* at each C"
+    assert set(line["labels_along_ca_star"]["per_cement"].values()) == {"fracturing"}
+    assert "error" in line["at_L4"]  # no fit with one outcome
+
+
+def test_an_interval_of_B_containing_zero_is_said_so():
+    # labels independent of C: a threshold flat in C at Ca* = 1e7
+    out = el.judge({"eta": _line(lambda c, a: 10.0 if a > 1e7 else 1.0)})
+    lo, hi = out["lines"]["eta"]["at_L4"]["B_interval"]
+    assert lo < 0 < hi
+    assert out["verdict"].startswith("B > 0 not shown: the 95 % interval of B")
+
+
+def test_one_run_at_a_cement_ratio_is_no_line_to_read():
+    along = el.labels_along_ca_star(_line(lambda c, a: 30.0, cement=(0.5,), ca_star=(1e7,)))
+    assert along == {"per_cement": {"0.5": "one run: fracturing"}, "every_cement_unmixed": False}
+
+
+def test_a_failed_run_is_listed_with_its_reason_and_carries_no_label():
+    ok = _line(_rising())
+    failed = ok.iloc[[0]].assign(status="failed", crack_length=np.nan, t_reached=2.32,
+                                 reason="time step below dt_min=1e-07 at t = 2.32084 s")
+    line = el.judge_line(pd.concat([ok, failed], ignore_index=True))
+    assert (line["runs"], line["labelled"], line["failed_or_unlabelled"]) == (len(ok) + 1, len(ok), 1)
+    assert line["at_L4"]["runs"] == len(ok)
+    bad = [r for r in line["run_rows"] if r["status"] == "failed"]
+    assert len(bad) == 1 and "fracturing_at_L4" not in bad[0]
+    assert bad[0]["reason"].startswith("time step below") and bad[0]["t_reached"] == 2.32
+
+
+def _campaign(tmp_path, name, df):
+    d = tmp_path / name
+    d.mkdir()
+    df.to_csv(d / "table.csv", index=False)
+    return d
+
+
+def test_cli_judges_two_lines_pooled_with_a_figure(tmp_path, capsys):
+    eta = _campaign(tmp_path, "eta_line", _line(_rising()))
+    rate = _campaign(tmp_path, "rate_line", _line(_rising(), ca_star=CA_STAR * 1.3))
+    out, fig = tmp_path / "summary.json", tmp_path / "lines.png"
+    assert main(["judge", "experiment_lines", str(eta), str(rate), "--out", str(out), "--figure", str(fig)]) == 0
+    s = json.loads(out.read_text())
+    assert set(s["lines"]) == {"eta_line", "rate_line"} and s["verdict"] == s["pooled"]["verdict"]
+    assert fig.stat().st_size > 0
+
+
+def test_no_line_is_refused():
+    with pytest.raises(ValueError, match="no line given"):
+        el.judge({})
