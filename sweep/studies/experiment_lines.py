@@ -139,6 +139,6 @@ def _label_panel(ax, df: pd.DataFrame, res: dict) -> None:
     ax.scatter(ok["cement"][y], ok["Ca_star"][y], marker="^", color="C3", label="fracturing")
     ax.scatter(bad["cement"], bad["Ca_star"], marker="x", color="0.5", label="failed (no label)")
     if len(df):
-        la._separatrix_line(ax, res[f"at_L{L_MIN:g}"], df["cement"].to_numpy(dtype=float), color="k")
+        la.separatrix_line(ax, res[f"at_L{L_MIN:g}"], df["cement"].to_numpy(dtype=float), color="k")
     ax.set_yscale("log")
     ax.set_xlabel("cement volume ratio C (%)")

@@ -30,8 +30,8 @@ from sweep.regimes.separatrix import separatrix_profile_interval
 from sweep.campaign.store import write_json_atomic
 from sweep.figio import write_figure
 
-__all__ = ["fracturing", "agreement", "separatrix", "judge", "figure", "report", "longest", "crack_summary",
-           "rank_correlations"]
+__all__ = ["fracturing", "agreement", "separatrix", "separatrix_line", "judge", "figure", "report", "longest",
+           "crack_summary", "rank_correlations"]
 
 POINT = ["cement", "eta_o"]  # a Ca*–C point: cement ratio (%) and oil viscosity (kPa·s)
 
@@ -102,7 +102,7 @@ def judge(df: pd.DataFrame, by: str, l_min: float, l_scan: Sequence[float]) -> d
             "pooled_L_scan": {str(float(l)): separatrix(df, l) for l in l_scan}}
 
 
-def _separatrix_line(ax, fit: dict, C: np.ndarray, **kw) -> None:
+def separatrix_line(ax, fit: dict, C: np.ndarray, **kw) -> None:
     """Draw Ca*_c = A exp(B C) (A, B from a :func:`separatrix` row) over the cement range C (%), if fitted."""
     if "B" in fit:
         c = np.linspace(C.min(), C.max(), 50)
@@ -134,13 +134,13 @@ def figure(df: pd.DataFrame, out: dict, by: str, l_min: float, path: Path, title
         ax.scatter(d["cement"][~y], d["Ca_star"][~y], facecolors="none", edgecolors="C0", label="porous invasion")
         ax.scatter(d["cement"][y], d["Ca_star"][y], marker="^", color="C3", label="fracturing")
         fit = out[f"per_{by}_at_{tag}"][int(s)]
-        _separatrix_line(ax, fit, C, color="k")
+        separatrix_line(ax, fit, C, color="k")
         ax.set_title(_fit_title(f"{by} {s}", fit), fontsize=9)
     share = df.assign(f=fracturing(df, l_min)).groupby(POINT).agg(
         f=("f", "mean"), Ca_star=("Ca_star", "first")).reset_index()
     sc = axes[-1].scatter(share["cement"], share["Ca_star"], c=share["f"], cmap="coolwarm", vmin=0, vmax=1)
     fig.colorbar(sc, ax=axes[-1], label=f"share of {by} values fracturing")
-    _separatrix_line(axes[-1], out[f"pooled_at_{tag}"], C, color="k")
+    separatrix_line(axes[-1], out[f"pooled_at_{tag}"], C, color="k")
     axes[-1].set_title(_fit_title("pooled", out[f"pooled_at_{tag}"]), fontsize=9)
     for ax in axes:
         ax.set_yscale("log")
