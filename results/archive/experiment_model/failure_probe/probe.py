@@ -6,7 +6,7 @@ this is a probe, not a result of the campaign.
     python probe.py CONFIG.toml CHECKPOINT.npz OUT_DIR [name=value ...]
 
 CONFIG: the run's [parameters]/[options] (dchfrac run --config); CHECKPOINT: a copy of its checkpoint.npz; the
-name=value pairs override run options (Python literals).  Writes OUT_DIR as a run folder and prints the summary.
+name=value pairs override run options or model parameters (Python literals).  Writes OUT_DIR as a run folder and prints the summary.
 Units mm, s, kPa.
 """
 import ast
@@ -28,7 +28,7 @@ def main(argv):
     pdict, odict = _load_config(config)
     for kv in argv[3:]:
         k, v = kv.split("=", 1)
-        odict[k] = ast.literal_eval(v)
+        (odict if k in RunOptions.__dataclass_fields__ else pdict)[k] = ast.literal_eval(v)
     odict.setdefault("frames", 20)  # as the dchfrac run that wrote the checkpoint
     params, options = Parameters.from_dict(pdict), RunOptions.from_dict(odict)
     out = Path(out)
