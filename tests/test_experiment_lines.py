@@ -89,3 +89,17 @@ def test_cli_judges_two_lines_pooled_with_a_figure(tmp_path, capsys):
 def test_no_line_is_refused():
     with pytest.raises(ValueError, match="no line given"):
         el.judge({})
+
+
+@pytest.mark.parametrize("t_reached, front, kind", [
+    (4.0, 32.0, "t_end"), (2.78, 45.3, "front"), (2.78, 44.2, "front"), (2.78, 29.5, "front_jump"),
+])
+def test_stop_kind_tells_the_front_s_arrival_from_a_jump(t_reached, front, kind):
+    assert el.stop_kind(t_reached, front) == kind
+
+
+def test_the_stops_are_counted_beside_the_verdict():
+    df = _line(_rising())
+    df.loc[:2, "t_reached"] = 2.5  # three runs stopped early, one with its front at 45 mm
+    df.loc[0, "front_radius_max"] = 46.0
+    assert el.judge_line(df)["stops"] == {"t_end": len(df) - 3, "front": 1, "front_jump": 2}

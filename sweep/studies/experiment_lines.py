@@ -11,6 +11,10 @@ experiment_ca_star_rate_line.toml: w_i alone at η_o = 0.29 kPa·s) are judged e
 * the fracturing label over L_min = 2–6 mm is reported whole, beside the verdict, not instead of it;
 * every run's label stands beside its time of judgement and front radius (the line stops at a 45 mm front or at
   t_end, so a run judged at t_end with a short front is judged earlier in its life than one that got there);
+* a run the 45 mm rule stopped before t_end while the classifier's front (the S = 0.5 region connected to the
+  inlet at the judged snapshot, its largest radius) is short of 45 mm was stopped by something else than the
+  front's arrival (the saturation jumping along an open crack, results/experiment_ca_star_eta_line/README.md):
+  :func:`stop_kind` names it "front_jump", and the count is reported beside the verdict;
 * a failed run carries no label: it is listed with the time it reached and its reason, and counted, never
   dropped silently.
 
@@ -25,9 +29,10 @@ import pandas as pd
 from sweep.figio import write_figure
 from sweep.studies import label_agreement as la
 
-__all__ = ["L_MIN", "L_SCAN", "judge", "judge_line", "labels_along_ca_star", "verdict", "figure"]
+__all__ = ["L_MIN", "L_SCAN", "judge", "judge_line", "labels_along_ca_star", "stop_kind", "verdict", "figure"]
 
 L_MIN, L_SCAN = 4.0, (2.0, 3.0, 4.0, 5.0, 6.0)  # mm: the headers' label and scan
+STOP_FRONT_MM, T_END_S = 45.0, 4.0  # the headers' time of judgement: front at 45 mm (stop_front_radius) or t_end
 QUANTILES = [0.0, 0.25, 0.5, 0.75, 1.0]
 RUN_COLUMNS = ["cement", "eta_o", "w_i", "Ca_star", "t_reached", "front_radius_max", "crack_length"]
 
@@ -65,6 +70,15 @@ def verdict(fit: dict, along: dict) -> str:
     return f"no separatrix: {fit.get('error', 'no fit')}"
 
 
+def stop_kind(t_reached: float, front_mm: float) -> str:
+    """How a labelled run's time of judgement came: "t_end" (it ran to T_END_S), "front" (stopped early with the
+    classifier's front at STOP_FRONT_MM or beyond, to 1 mm: the front's arrival) or "front_jump" (stopped early
+    with the classifier's front short of it).  t_reached in s, front_mm in mm."""
+    if t_reached >= T_END_S - 1e-9:
+        return "t_end"
+    return "front" if front_mm >= STOP_FRONT_MM - 1.0 else "front_jump"
+
+
 def _run_rows(df: pd.DataFrame) -> list[dict]:
     """Every run as a JSON row: swept values, time reached (s), front radius (mm), crack length (mm) and the
     label at L_min, or for a failed run its reason and no label."""
@@ -74,6 +88,7 @@ def _run_rows(df: pd.DataFrame) -> list[dict]:
         row["status"] = str(r["status"])
         if r["status"] == "ok" and not pd.isna(r["crack_length"]):
             row["fracturing_at_L4"] = bool(r["crack_length"] > L_MIN)
+            row["stop"] = stop_kind(float(r["t_reached"]), float(r["front_radius_max"]))
         else:
             row["reason"] = None if pd.isna(r.get("reason")) else str(r["reason"])
         rows.append(row)
@@ -86,12 +101,15 @@ def judge_line(df: pd.DataFrame) -> dict:
     ok = _labelled(df)
     fit = la.separatrix(ok, L_MIN) if len(ok) else {"runs": 0, "fracturing": 0, "error": "no labelled run"}
     along = labels_along_ca_star(ok)
+    rows = _run_rows(df)
+    stops = pd.Series([r["stop"] for r in rows if "stop" in r], dtype=object)
     return {"runs": int(len(df)), "labelled": int(len(ok)), "failed_or_unlabelled": int(len(df) - len(ok)),
+            "stops": {k: int((stops == k).sum()) for k in ("t_end", "front", "front_jump")},
             f"at_L{L_MIN:g}": fit, "verdict": verdict(fit, along), "labels_along_ca_star": along,
             "L_scan": {str(l): la.separatrix(ok, l) if len(ok) else None for l in L_SCAN},
             "judged_time_s_quantiles_0_25_50_75_100": [float(v) for v in ok["t_reached"].quantile(QUANTILES)],
             "crack_length_mm": la.crack_summary(ok) if len(ok) else None,
-            "run_rows": _run_rows(df)}
+            "run_rows": rows}
 
 
 def judge(lines: dict[str, pd.DataFrame]) -> dict:
