@@ -103,3 +103,17 @@ def test_the_stops_are_counted_beside_the_verdict():
     df.loc[:2, "t_reached"] = 2.5  # three runs stopped early, one with its front at 45 mm
     df.loc[0, "front_radius_max"] = 46.0
     assert el.judge_line(df)["stops"] == {"t_end": len(df) - 3, "front": 1, "front_jump": 2}
+
+
+def test_an_interval_of_B_below_zero_is_not_said_to_contain_it():
+    along = {"per_cement": {}, "every_cement_unmixed": False}
+    assert el.verdict({"B_interval": [-5.0, -1.0], "B_positive_at_95": False}, along).endswith("lies below 0")
+    assert el.verdict({"error": "need both outcomes"}, along) == "no separatrix: need both outcomes"
+
+
+def test_a_line_without_a_labelled_run_is_judged_without_a_fit():
+    failed = _line(_rising()).assign(status="failed", crack_length=np.nan, reason="max_wall_time exceeded")
+    line = el.judge_line(failed)
+    assert line["labelled"] == 0 and line["at_L4"]["error"] == "no labelled run"
+    assert line["judged_time_s_quantiles_0_25_50_75_100"] is None and line["stops"]["t_end"] == 0
+    assert line["verdict"] == "no separatrix: no labelled run"

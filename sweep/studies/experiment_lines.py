@@ -66,7 +66,8 @@ def verdict(fit: dict, along: dict) -> str:
         return "no separatrix: every label equal along Ca* at each C"
     if "B_interval" in fit:
         lo, hi = fit["B_interval"]
-        return f"B > 0 not shown: the 95 % interval of B, [{lo:.3g}, {hi:.3g}] /%, contains 0"
+        where = "contains 0" if lo <= 0.0 <= hi else "lies below 0"
+        return f"B > 0 not shown: the 95 % interval of B, [{lo:.3g}, {hi:.3g}] /%, {where}"
     return f"no separatrix: {fit.get('error', 'no fit')}"
 
 
@@ -87,7 +88,7 @@ def _run_rows(df: pd.DataFrame) -> list[dict]:
         row = {c: (None if pd.isna(r.get(c)) else float(r[c])) for c in RUN_COLUMNS}
         row["status"] = str(r["status"])
         if r["status"] == "ok" and not pd.isna(r["crack_length"]):
-            row["fracturing_at_L4"] = bool(r["crack_length"] > L_MIN)
+            row[f"fracturing_at_L{L_MIN:g}"] = bool(r["crack_length"] > L_MIN)
             row["stop"] = stop_kind(float(r["t_reached"]), float(r["front_radius_max"]))
         else:
             row["reason"] = None if pd.isna(r.get("reason")) else str(r["reason"])
@@ -107,7 +108,8 @@ def judge_line(df: pd.DataFrame) -> dict:
             "stops": {k: int((stops == k).sum()) for k in ("t_end", "front", "front_jump")},
             f"at_L{L_MIN:g}": fit, "verdict": verdict(fit, along), "labels_along_ca_star": along,
             "L_scan": {str(l): la.separatrix(ok, l) if len(ok) else None for l in L_SCAN},
-            "judged_time_s_quantiles_0_25_50_75_100": [float(v) for v in ok["t_reached"].quantile(QUANTILES)],
+            "judged_time_s_quantiles_0_25_50_75_100": [float(v) for v in ok["t_reached"].quantile(QUANTILES)]
+            if len(ok) else None,
             "crack_length_mm": la.crack_summary(ok) if len(ok) else None,
             "run_rows": rows}
 
