@@ -453,3 +453,24 @@ def test_dry_run_prices_each_run_on_its_own_mesh_path_and_time(tmp_path):
     (gg,) = gr["by_mesh"]
     assert gg["estimate"].nodes == budget.mesh_counts(2.0, h_outer=0.25)[0] > 2 * g["estimate"].nodes
     assert gr["cpu_s"] > one["cpu_s"]
+
+
+def test_measured_wall_is_the_finished_runs_own_cost_beside_the_estimate(capsys):
+    from types import SimpleNamespace
+
+    from sweep.campaign.cli import _print_estimate
+    from sweep.campaign.cost import measured_wall
+
+    plan = SimpleNamespace(records={"a": {"status": "ok", "wall_time_s": 900.0},
+                                    "b": {"status": "failed", "wall_time_s": 2700.0}, "c": None},
+                           archived_rows={"d": {"status": "ok", "wall_time_s": 1300.0},
+                                          "e": {"status": "ok", "wall_time_s": float("nan")}})
+    m = measured_wall(plan)
+    assert m == {"runs": 3, "median_s": 1300.0, "min_s": 900.0, "max_s": 2700.0}
+    assert measured_wall(SimpleNamespace(records={}, archived_rows={})) is None
+    est = {"grid_size": 5, "done": 2, "failed": 0, "archived": 1, "pending": 2, "stale": 0, "stale_kept": 0,
+           "damaged": 0, "by_mesh": [], "runs_to_do": 2, "cpu_s": 400.0, "wall_s": 400.0, "measured": m}
+    _print_estimate(SimpleNamespace(name="toy"), est, jobs=1)
+    out = capsys.readouterr().out
+    assert "measured: this campaign's 3 finished run(s) took 21m40s each (median; 15m00s to 45m00s)" in out
+    assert "at that pace the 2 to do take about 43m20s CPU" in out

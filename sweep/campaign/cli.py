@@ -250,6 +250,11 @@ def _print_estimate(spec, est, jobs: int) -> None:
               f"{est['shared_run_factor_source']})")
     print(f"estimated cost of the {est['runs_to_do']} run(s) to do: {_fmt_s(est['cpu_s'])} CPU, about "
           f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s)")
+    m = est.get("measured")
+    if m and est["runs_to_do"]:
+        print(f"measured: this campaign's {m['runs']} finished run(s) took {_fmt_s(m['median_s'])} each (median; "
+              f"{_fmt_s(m['min_s'])} to {_fmt_s(m['max_s'])}); at that pace the {est['runs_to_do']} to do take "
+              f"about {_fmt_s(m['median_s'] * est['runs_to_do'])} CPU")
 
 
 def _avail(e) -> str:

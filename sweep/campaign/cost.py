@@ -16,7 +16,7 @@ from typing import Any, Mapping
 from sweep.campaign.paths import DEFAULT_ROOT, results_root
 from sweep.campaign.plan import _todo, as_spec, plan_campaign
 
-__all__ = ["estimate_cost", "run_budgets", "shared_run_factor", "estimated_sim_time", "DEFAULT_SHARED_RUN_FACTOR"]
+__all__ = ["estimate_cost", "measured_wall", "run_budgets", "shared_run_factor", "estimated_sim_time", "DEFAULT_SHARED_RUN_FACTOR"]
 
 # With more than one job each run shares the machine (one core, one BLAS/MKL thread each): a lone run's wall time
 # is multiplied by the factor ``dchfrac bench`` measures with one run per core (bench.json key
@@ -103,6 +103,23 @@ def run_budgets(points, jobs: int = 1, machine_factor: float | None = None) -> l
     return sorted(groups.values(), key=lambda g: -g["h"])
 
 
+def measured_wall(plan) -> dict | None:
+    """The wall times (s) this campaign's finished runs took, ok or failed, from their records and the committed
+    table's archived rows: count, median, min and max; None when no run has finished.  Beside the model's
+    estimate in the dry run, it shows how far the estimate is from what the campaign's runs cost here."""
+    import math
+
+    rows = [r for r in (*plan.records.values(), *plan.archived_rows.values()) if r]
+    walls = sorted(float(r["wall_time_s"]) for r in rows
+                   if r.get("status") in ("ok", "failed") and r.get("wall_time_s") is not None
+                   and math.isfinite(float(r["wall_time_s"])))
+    if not walls:
+        return None
+    n = len(walls)
+    median = walls[n // 2] if n % 2 else 0.5 * (walls[n // 2 - 1] + walls[n // 2])
+    return {"runs": n, "median_s": median, "min_s": walls[0], "max_s": walls[-1]}
+
+
 def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | None = None,
                   retry_failed: bool = False, rerun_stale: bool = False, rerun_archived: bool = False,
                   machine_factor: float | None = None) -> dict:
@@ -113,7 +130,8 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
     Per run: its wall time alone from :func:`run_budgets` (its mesh, the path that will run, this machine's
     calibration, or ``machine_factor``) times :func:`shared_run_factor` (a run beside others is slower than
     alone).  ``cpu_s`` is their sum and ``wall_s`` that over ``jobs`` (perfect packing: a lower bound when runs
-    differ much in cost).  ``by_mesh``: the :func:`run_budgets` groups (memory, refusals)."""
+    differ much in cost).  ``by_mesh``: the :func:`run_budgets` groups (memory, refusals).  ``measured``:
+    :func:`measured_wall` of the runs already finished, or None."""
     spec = as_spec(spec)
     root = results_root(spec, root)
     plan = plan_campaign(spec, root, code_hash=code_hash, rerun_stale=rerun_stale)
@@ -121,7 +139,7 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
     todo = _todo(plan, retry_failed, rerun_archived)
     groups = run_budgets([p for p, _ in todo], jobs, machine_factor)
     cpu = shared * sum(g["wall_s"] for g in groups)
-    return {
+    out = {
         "name": spec.name,
         "grid_size": len(plan.points),
         "done": len(plan.done),
@@ -139,3 +157,5 @@ def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | No
         "shared_run_factor": shared,
         "shared_run_factor_source": shared_src,
     }
+    out["measured"] = measured_wall(plan)
+    return out
