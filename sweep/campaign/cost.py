@@ -16,7 +16,8 @@ from typing import Any, Mapping
 from sweep.campaign.paths import DEFAULT_ROOT, results_root
 from sweep.campaign.plan import _todo, as_spec, plan_campaign
 
-__all__ = ["estimate_cost", "measured_wall", "run_budgets", "shared_run_factor", "estimated_sim_time", "DEFAULT_SHARED_RUN_FACTOR"]
+__all__ = ["estimate_cost", "measured_wall", "run_budgets", "shared_run_factor", "estimated_sim_time",
+           "DEFAULT_SHARED_RUN_FACTOR"]
 
 # With more than one job each run shares the machine (one core, one BLAS/MKL thread each): a lone run's wall time
 # is multiplied by the factor ``dchfrac bench`` measures with one run per core (bench.json key
@@ -108,6 +109,7 @@ def measured_wall(plan) -> dict | None:
     table's archived rows: count, median, min and max; None when no run has finished.  Beside the model's
     estimate in the dry run, it shows how far the estimate is from what the campaign's runs cost here."""
     import math
+    import statistics
 
     rows = [r for r in (*plan.records.values(), *plan.archived_rows.values()) if r]
     walls = sorted(float(r["wall_time_s"]) for r in rows
@@ -115,9 +117,7 @@ def measured_wall(plan) -> dict | None:
                    and math.isfinite(float(r["wall_time_s"])))
     if not walls:
         return None
-    n = len(walls)
-    median = walls[n // 2] if n % 2 else 0.5 * (walls[n // 2 - 1] + walls[n // 2])
-    return {"runs": n, "median_s": median, "min_s": walls[0], "max_s": walls[-1]}
+    return {"runs": len(walls), "median_s": statistics.median(walls), "min_s": walls[0], "max_s": walls[-1]}
 
 
 def estimate_cost(spec, root=DEFAULT_ROOT, *, jobs: int = 1, code_hash: str | None = None,
