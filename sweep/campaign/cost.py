@@ -105,16 +105,21 @@ def run_budgets(points, jobs: int = 1, machine_factor: float | None = None) -> l
 
 
 def measured_wall(plan) -> dict | None:
-    """The wall times (s) this campaign's finished runs took, ok or failed, from their records and the committed
-    table's archived rows: count, median, min and max; None when no run has finished.  Beside the model's
-    estimate in the dry run, it shows how far the estimate is from what the campaign's runs cost here."""
+    """The wall times (s) this campaign's finished runs took, ok or failed: a record's over all its pieces
+    (:func:`sweep.campaign.table.record_wall_time`, the table's own rule) and an archived row's table value;
+    count, median, min and max; None when no run has finished.  Beside the model's estimate in the dry run, it
+    shows how far the estimate is from what the campaign's runs cost here."""
     import math
     import statistics
 
-    rows = [r for r in (*plan.records.values(), *plan.archived_rows.values()) if r]
-    walls = sorted(float(r["wall_time_s"]) for r in rows
-                   if r.get("status") in ("ok", "failed") and r.get("wall_time_s") is not None
-                   and math.isfinite(float(r["wall_time_s"])))
+    from sweep.campaign.table import record_wall_time
+
+    def finished(r) -> bool:
+        return bool(r) and r.get("status") in ("ok", "failed")
+
+    walls = [record_wall_time(r) for r in plan.records.values() if finished(r)]
+    walls += [r.get("wall_time_s") for r in plan.archived_rows.values() if finished(r)]
+    walls = sorted(float(w) for w in walls if w is not None and math.isfinite(float(w)))
     if not walls:
         return None
     return {"runs": len(walls), "median_s": statistics.median(walls), "min_s": walls[0], "max_s": walls[-1]}
