@@ -117,3 +117,48 @@ def test_a_line_without_a_labelled_run_is_judged_without_a_fit():
     assert line["labelled"] == 0 and line["at_L4"]["error"] == "no labelled run"
     assert line["judged_time_s_quantiles_0_25_50_75_100"] is None and line["stops"]["t_end"] == 0
     assert line["verdict"] == "no separatrix: no labelled run"
+
+
+def _failed_at(df: pd.DataFrame, rows) -> pd.DataFrame:
+    """``df`` with the runs at ``rows`` failed (no crack length, stopped at 2.3 s)."""
+    out = df.copy()
+    out.loc[rows, ["status", "crack_length", "t_reached", "reason"]] = ["failed", np.nan, 2.3, "dt_min"]
+    return out
+
+
+def test_the_fallback_fills_the_failed_points_only_and_keeps_the_primary_verdict():
+    full = _line(_rising())
+    line = _failed_at(full, [3, 4, 5])  # C = 0.5 %: the three highest Ca*, fracturing in the full line
+    fallback = full.loc[[3, 4, 5]].assign(t_reached=2.5, front_radius_max=30.0)  # rerun, stopped by a jump
+    out = el.judge({"eta": line}, {"eta": fallback})
+    primary, secondary = out["lines"]["eta"], out["secondary"]["lines"]["eta"]
+    assert primary["labelled"] == len(full) - 3 and secondary["labelled"] == len(full)
+    assert out["secondary"]["fallback_runs"] == {"eta": 3}
+    assert out["verdict"] == primary["verdict"]  # the primary verdict is the headers' answer
+    rows = [r for r in secondary["run_rows"] if r.get("fallback")]
+    assert len(rows) == 3 and {r["stop"] for r in rows} == {"front_jump"}
+    assert all(r["fracturing_at_L4"] for r in rows)
+    # the secondary judgement is the full line's: the rows reordered walk the same brackets, and only the inner
+    # minimum (trust-exact, gtol 1e-8) moves with the summation order, far inside 1e-6
+    assert secondary["at_L4"]["B_interval"] == pytest.approx(el.judge_line(full)["at_L4"]["B_interval"], rel=1e-6)
+
+
+def test_a_fallback_run_where_the_line_did_not_fail_is_refused():
+    full = _line(_rising())
+    with pytest.raises(ValueError, match="no failed run there"):
+        el.judge({"eta": _failed_at(full, [3])}, {"eta": full.loc[[3, 4]]})
+    with pytest.raises(ValueError, match="no such line"):
+        el.judge({"eta": full}, {"rate": full.loc[[3]]})
+
+
+def test_cli_takes_a_fallback_folder_named_for_its_line(tmp_path, capsys):
+    full = _line(_rising())
+    eta = _campaign(tmp_path, "eta_line", _failed_at(full, [3]))
+    fb = _campaign(tmp_path, "eta_line_upwind_fallback", full.loc[[3]])
+    out = tmp_path / "summary.json"
+    assert main(["judge", "experiment_lines", str(eta), "--fallback", str(fb), "--out", str(out)]) == 0
+    assert json.loads(out.read_text())["secondary"]["fallback_runs"] == {"eta_line": 1}
+    wrong = _campaign(tmp_path, "other_upwind_fallback", full.loc[[3]])
+    assert main(["judge", "experiment_lines", str(eta), "--fallback", str(wrong)]) == 2
+    assert "must be named <line>_upwind_fallback" in capsys.readouterr().err
+    assert main(["judge", "draws", str(eta), "--fallback", str(fb)]) == 2

@@ -79,6 +79,8 @@ def add_judge_command(subparsers):
                    "experiment_lines: the w_i line's campaign folder (pooled with the first)")
     j.add_argument("--out", type=Path, help="summary JSON (also printed)")
     j.add_argument("--figure", type=Path, help="PNG: the labels per realization and the share fracturing")
+    j.add_argument("--fallback", type=Path, action="append", help="experiment_lines: a line's fallback campaign "
+                   "folder, named <line>_upwind_fallback (its failed points rerun; the secondary verdict); repeatable")
     j.add_argument("--crack-map", type=Path, help="pockets: PNG of the crack length over the Ca*-C plane per mesh")
     j.set_defaults(func=_deferred(mod, "cmd_judge"))
     return j

@@ -16,7 +16,11 @@ experiment_ca_star_rate_line.toml: w_i alone at η_o = 0.29 kPa·s) are judged e
   front's arrival (the saturation jumping along an open crack, results/experiment_ca_star_eta_line/README.md):
   :func:`stop_kind` names it "front_jump", and the count is reported beside the verdict;
 * a failed run carries no label: it is listed with the time it reached and its reason, and counted, never
-  dropped silently.
+  dropped silently;
+* the headers' label-blind fallback (declared 29 Nov 2026): a line's failed points, and only those, are rerun in
+  a companion campaign ``<line>_upwind_fallback`` with transport = "upwind".  :func:`judge` with ``fallback``
+  gives the SECONDARY verdict, the failed runs replaced by the companion's runs at the same point
+  (:func:`with_fallback`), beside the PRIMARY one, which stays the headers' answer.
 
 Units: lengths mm, times s, C in %, η_o in kPa·s, w_i in mm/s, Ca* dimensionless.
 """
@@ -24,17 +28,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from sweep.figio import write_figure
 from sweep.studies import label_agreement as la
 
-__all__ = ["L_MIN", "L_SCAN", "judge", "judge_line", "labels_along_ca_star", "stop_kind", "verdict", "figure"]
+__all__ = ["L_MIN", "L_SCAN", "judge", "judge_line", "labels_along_ca_star", "stop_kind", "verdict", "with_fallback",
+           "figure"]
 
 L_MIN, L_SCAN = 4.0, (2.0, 3.0, 4.0, 5.0, 6.0)  # mm: the headers' label and scan
 STOP_FRONT_MM, T_END_S = 45.0, 4.0  # the headers' time of judgement: front at 45 mm (stop_front_radius) or t_end
 QUANTILES = [0.0, 0.25, 0.5, 0.75, 1.0]
 RUN_COLUMNS = ["cement", "eta_o", "w_i", "Ca_star", "t_reached", "front_radius_max", "crack_length"]
+POINT = ("cement", "eta_o", "w_i", "Ca_star")  # a point of a line: C (%), eta_o (kPa s), w_i (mm/s), Ca* (-)
+FALLBACK_SUFFIX = "_upwind_fallback"  # a companion campaign's name: <line><FALLBACK_SUFFIX>
 
 
 def _labelled(df: pd.DataFrame) -> pd.DataFrame:
@@ -87,6 +95,8 @@ def _run_rows(df: pd.DataFrame) -> list[dict]:
     for _, r in df.sort_values(["cement", "Ca_star"]).iterrows():
         row = {c: (None if pd.isna(r.get(c)) else float(r[c])) for c in RUN_COLUMNS}
         row["status"] = str(r["status"])
+        if bool(r.get("fallback", False)):
+            row["fallback"] = True
         if r["status"] == "ok" and not pd.isna(r["crack_length"]):
             row[f"fracturing_at_L{L_MIN:g}"] = bool(r["crack_length"] > L_MIN)
             row["stop"] = stop_kind(float(r["t_reached"]), float(r["front_radius_max"]))
@@ -114,15 +124,59 @@ def judge_line(df: pd.DataFrame) -> dict:
             "run_rows": rows}
 
 
-def judge(lines: dict[str, pd.DataFrame]) -> dict:
-    """The protocol on the named lines (name -> every run of the campaign, ok or failed): each line, and with
-    two lines the pooled runs; the verdict is the pooled one (the one line's alone)."""
-    if not lines:
-        raise ValueError("experiment_lines: no line given (allowed: the η_o line and optionally the w_i line)")
-    out = {"L_min_mm": L_MIN, "lines": {name: judge_line(df) for name, df in lines.items()}}
+def _point_rows(df: pd.DataFrame, at: pd.Series) -> pd.Series:
+    """Which rows of ``df`` are at the point of row ``at`` (its POINT values to 1e-9 relative)."""
+    hit = pd.Series(True, index=df.index)
+    for c in POINT:
+        hit &= np.isclose(df[c].to_numpy(dtype=float), float(at[c]), rtol=1e-9, atol=0.0)
+    return hit
+
+
+def with_fallback(line: pd.DataFrame, fallback: pd.DataFrame) -> tuple[pd.DataFrame, int]:
+    """The line with each failed run replaced by the fallback campaign's run at its point (column ``fallback``
+    True on those rows), and how many were replaced.  A fallback run at a point where the line has no failed
+    run, or two at one point, is refused: the declared rule reruns the failed points and only those."""
+    failed = line["status"] != "ok"
+    out, used = line.copy(), 0
+    out["fallback"] = False
+    for _, r in fallback.iterrows():
+        at = _point_rows(line, r)
+        where = ", ".join(f"{c} = {float(r[c]):g}" for c in POINT)
+        if not (at & failed).any() or _point_rows(fallback, r).sum() > 1:
+            raise ValueError(f"experiment_lines: fallback run at {where}: the line has no failed run there, or the "
+                             "fallback has two (allowed: one fallback run per failed point of the line)")
+        out = out.drop(index=line.index[at & failed])
+        out = pd.concat([out, r.to_frame().T.assign(fallback=True)], ignore_index=False)
+        used += 1
+    return out.reset_index(drop=True).infer_objects(), used
+
+
+def _judge_lines(lines: dict[str, pd.DataFrame]) -> dict:
+    """Each line judged, with two lines the pooled runs too; the verdict is the pooled one (the one line's
+    alone)."""
+    out = {"lines": {name: judge_line(df) for name, df in lines.items()}}
     if len(lines) > 1:
         out["pooled"] = judge_line(pd.concat(list(lines.values()), ignore_index=True))
     out["verdict"] = (out["pooled"] if "pooled" in out else next(iter(out["lines"].values())))["verdict"]
+    return out
+
+
+def judge(lines: dict[str, pd.DataFrame], fallback: dict[str, pd.DataFrame] | None = None) -> dict:
+    """The protocol on the named lines (name -> every run of the campaign, ok or failed): each line, and with
+    two lines the pooled runs; the verdict is the pooled one (the one line's alone).  ``fallback`` (line name ->
+    its companion's runs, :data:`FALLBACK_SUFFIX`) adds ``secondary``: the same judgement with each line's
+    failed runs replaced by :func:`with_fallback`, and the runs replaced per line."""
+    if not lines:
+        raise ValueError("experiment_lines: no line given (allowed: the η_o line and optionally the w_i line)")
+    unknown = sorted(set(fallback or {}) - set(lines))
+    if unknown:
+        raise ValueError(f"experiment_lines: fallback for {unknown}: no such line (allowed: {sorted(lines)})")
+    out = {"L_min_mm": L_MIN, **_judge_lines(lines)}
+    if fallback:
+        filled = {name: with_fallback(df, fallback[name]) if name in fallback else (df, 0)
+                  for name, df in lines.items()}
+        out["secondary"] = {"fallback_runs": {name: n for name, (_, n) in filled.items()},
+                            **_judge_lines({name: df for name, (df, _) in filled.items()})}
     return out
 
 

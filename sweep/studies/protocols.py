@@ -16,8 +16,9 @@ a JSON-able summary built from :mod:`sweep.studies.label_agreement`; ``dchfrac j
 * ``experiment_lines`` (campaigns/studies/experiment_ca_star_eta_line.toml, with the w_i line
   ``experiment_ca_star_rate_line.toml`` as the second folder): per line and pooled, the separatrix at
   L_min = 4 mm (the verdict: "B > 0 at 2 sigma", or the evidence that there is none) and over 2-6 mm, every run
-  with its time reached and front radius beside its label, and the failed runs, which carry no label
-  (:mod:`sweep.studies.experiment_lines`).
+  with its time reached and front radius beside its label, and the failed runs, which carry no label; with
+  ``--fallback <line>_upwind_fallback`` folders, the secondary verdict with the failed runs rerun by the
+  headers' fallback (:mod:`sweep.studies.experiment_lines`).
 
 Units: lengths mm, C in %, eta_o in kPa s, Ca* dimensionless.
 """
@@ -145,11 +146,34 @@ def _run_pockets_tip(a) -> dict:
     return judge_pockets_tip(ok_runs(a.campaign_dir))
 
 
+def _fallback_line(d) -> str:
+    """The line a fallback folder belongs to: its name without ``experiment_lines.FALLBACK_SUFFIX``."""
+    from sweep.studies.experiment_lines import FALLBACK_SUFFIX
+
+    return Path(d).name.removesuffix(FALLBACK_SUFFIX)
+
+
+def _check_fallback(a) -> str | None:
+    """Why ``--fallback`` cannot be judged (another protocol, a folder not named <line>_upwind_fallback for a
+    line judged here), or None."""
+    from sweep.studies.experiment_lines import FALLBACK_SUFFIX
+
+    if a.protocol != "experiment_lines":
+        return f"--fallback {a.fallback[0]}: only experiment_lines takes a fallback campaign"
+    names = {Path(d).name for d in filter(None, (a.campaign_dir, a.second_dir))}
+    for d in a.fallback:
+        if not Path(d).name.endswith(FALLBACK_SUFFIX) or _fallback_line(d) not in names:
+            return (f"--fallback {d}: its folder must be named <line>{FALLBACK_SUFFIX} for a line judged here "
+                    f"(allowed lines: {sorted(names)})")
+    return None
+
+
 def _run_experiment_lines(a) -> dict:
     from sweep.studies import experiment_lines as el
 
     lines = {Path(d).name: load_campaign(d) for d in filter(None, (a.campaign_dir, a.second_dir))}
-    out = el.judge(lines)
+    fallback = {_fallback_line(d): load_campaign(d) for d in a.fallback or ()}
+    out = el.judge(lines, fallback or None)
     if a.figure:
         el.figure(lines, out, a.figure)
     return out
@@ -169,7 +193,11 @@ def cmd_judge(a) -> int:
         print(f"dchfrac judge: SECOND_DIR={a.second_dir}: only these protocols take a second campaign: {allowed}",
               file=sys.stderr)
         return 2
-    for d in filter(None, (a.campaign_dir, a.second_dir)):
+    why = _check_fallback(a) if a.fallback else None
+    if why:
+        print(f"dchfrac judge: {why}", file=sys.stderr)
+        return 2
+    for d in filter(None, (a.campaign_dir, a.second_dir, *(a.fallback or ()))):
         if not (Path(d) / "table.csv").is_file():
             print(f"dchfrac judge: {d}: no table.csv (allowed: a campaign folder with its table)", file=sys.stderr)
             return 2
