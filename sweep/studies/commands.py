@@ -15,7 +15,7 @@ from pathlib import Path
 __all__ = ["add_closure_command", "add_cracks_command", "add_judge_command", "PROTOCOL_NAMES"]
 
 #: the judging protocols of ``dchfrac judge`` (sweep.studies.protocols.PROTOCOLS)
-PROTOCOL_NAMES = ("draws", "pockets", "pockets_tip", "experiment_lines")
+PROTOCOL_NAMES = ("draws", "pockets", "pockets_tip", "experiment_lines", "nf_nb_draws")
 
 
 def _deferred(module: str, name: str):

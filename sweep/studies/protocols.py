@@ -18,7 +18,10 @@ a JSON-able summary built from :mod:`sweep.studies.label_agreement`; ``dchfrac j
   L_min = 4 mm (the verdict: "B > 0 at 2 sigma", or the evidence that there is none) and over 2-6 mm, every run
   with its time reached and front radius beside its label, and the failed runs, which carry no label; with
   ``--fallback <line>_upwind_fallback`` folders, the secondary verdict with the failed runs rerun by the
-  headers' fallback (:mod:`sweep.studies.experiment_lines`).
+  headers' fallback (:mod:`sweep.studies.experiment_lines`);
+* ``nf_nb_draws`` (campaigns/studies/nf_vs_nb_probabilities_h2.toml): the share of points whose porosity draws
+  give one regime, over the grid and on each side of N_f = 1 and N_b = 1, and near each delimiter against
+  farther away (:mod:`sweep.studies.nf_nb_draws`).
 
 Units: lengths mm, C in %, eta_o in kPa s, Ca* dimensionless.
 """
@@ -179,8 +182,15 @@ def _run_experiment_lines(a) -> dict:
     return out
 
 
+def _run_nf_nb_draws(a) -> dict:
+    from sweep.studies import nf_nb_draws
+
+    return nf_nb_draws.judge_dir(a.campaign_dir)
+
+
 #: what each protocol of ``dchfrac judge`` (sweep.studies.commands.PROTOCOL_NAMES) runs
-PROTOCOLS = dict(zip(PROTOCOL_NAMES, (_run_draws, _run_pockets, _run_pockets_tip, _run_experiment_lines)))
+PROTOCOLS = dict(zip(PROTOCOL_NAMES, (_run_draws, _run_pockets, _run_pockets_tip, _run_experiment_lines,
+                                      _run_nf_nb_draws)))
 #: the protocols that take a second campaign folder, and what it is
 SECOND_DIR = {"pockets": "its mesh stage", "experiment_lines": "the w_i line"}
 
@@ -201,5 +211,10 @@ def cmd_judge(a) -> int:
         if not (Path(d) / "table.csv").is_file():
             print(f"dchfrac judge: {d}: no table.csv (allowed: a campaign folder with its table)", file=sys.stderr)
             return 2
-    la.report(PROTOCOLS[a.protocol](a), a.out)
+    try:
+        out = PROTOCOLS[a.protocol](a)
+    except ValueError as e:  # an input the protocol cannot judge: named, nothing written
+        print(f"dchfrac judge: {e}", file=sys.stderr)
+        return 2
+    la.report(out, a.out)
     return 0
