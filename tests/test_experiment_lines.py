@@ -155,9 +155,11 @@ def test_cli_takes_a_fallback_folder_named_for_its_line(tmp_path, capsys):
     full = _line(_rising())
     eta = _campaign(tmp_path, "eta_line", _failed_at(full, [3]))
     fb = _campaign(tmp_path, "eta_line_upwind_fallback", full.loc[[3]])
-    out = tmp_path / "summary.json"
-    assert main(["judge", "experiment_lines", str(eta), "--fallback", str(fb), "--out", str(out)]) == 0
+    out, fig = tmp_path / "summary.json", tmp_path / "lines.png"
+    assert main(["judge", "experiment_lines", str(eta), "--fallback", str(fb), "--out", str(out),
+                 "--figure", str(fig)]) == 0
     assert json.loads(out.read_text())["secondary"]["fallback_runs"] == {"eta_line": 1}
+    assert fig.stat().st_size > 0
     wrong = _campaign(tmp_path, "other_upwind_fallback", full.loc[[3]])
     assert main(["judge", "experiment_lines", str(eta), "--fallback", str(wrong)]) == 2
     assert "must be named <line>_upwind_fallback" in capsys.readouterr().err

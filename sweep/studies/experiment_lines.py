@@ -180,38 +180,53 @@ def judge(lines: dict[str, pd.DataFrame], fallback: dict[str, pd.DataFrame] | No
     return out
 
 
-def figure(lines: dict[str, pd.DataFrame], out: dict, path: Path) -> None:
+def figure(lines: dict[str, pd.DataFrame], out: dict, path: Path,
+           fallback: dict[str, pd.DataFrame] | None = None) -> None:
     """PNG at ``path``: one panel per line and one pooled, the labels at L_min over the Ca*–C plane (failed runs
-    as grey crosses, at their Ca*), the fitted separatrix where there is one.  Axes: C (%), Ca* (-, log)."""
+    as grey crosses, at their Ca*), the fitted separatrix (primary) where there is one.  With ``fallback`` (as
+    :func:`judge`), the fallback's labels are drawn as squares over the failed runs and the secondary verdict is
+    in each title.  Axes: C (%), Ca* (-, log)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = dict(lines)
+    fallback = fallback or {}
+    panels = {name: (df, fallback.get(name)) for name, df in lines.items()}
     if "pooled" in out:
-        panels["pooled"] = pd.concat(list(lines.values()), ignore_index=True)
+        fb = [f for f in fallback.values() if f is not None]
+        panels["pooled"] = (pd.concat(list(lines.values()), ignore_index=True),
+                            pd.concat(fb, ignore_index=True) if fb else None)
     fig, axes = plt.subplots(1, len(panels), figsize=(max(5.6, 4.4 * len(panels)), 4.2), sharey=True, squeeze=False)
-    for ax, (name, df) in zip(axes[0], panels.items()):
+    for ax, (name, (df, fb)) in zip(axes[0], panels.items()):
         res = out["pooled"] if name == "pooled" else out["lines"][name]
-        _label_panel(ax, df, res)
-        ax.set_title(f"{name}\n{res['verdict']}", fontsize=8)
+        _label_panel(ax, df, res, fb)
+        title = f"{name}\n{res['verdict']}"
+        if "secondary" in out:
+            sec = out["secondary"]["pooled"] if name == "pooled" else out["secondary"]["lines"][name]
+            title += f"\nwith the upwind fallback: {sec['verdict']}"
+        ax.set_title(title, fontsize=8)
     axes[0][0].set_ylabel("modified capillary number Ca* (-)")
-    axes[0][0].legend(fontsize=7, loc="lower right")
+    axes[0][0].legend(fontsize=7, loc="best")
     fig.suptitle(f"Experiment model, Ca*-C lines: labels at L_min = {L_MIN:g} mm", fontsize=10)
     fig.tight_layout()
     write_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
-def _label_panel(ax, df: pd.DataFrame, res: dict) -> None:
-    """One panel of :func:`figure`: porous, fracturing and failed runs, and the separatrix if fitted."""
+def _label_panel(ax, df: pd.DataFrame, res: dict, fallback: pd.DataFrame | None = None) -> None:
+    """One panel of :func:`figure`: porous, fracturing and failed runs, the fallback's labels if given, and the
+    separatrix if fitted."""
     ok = _labelled(df)
     y = la.fracturing(ok, L_MIN)
     bad = df.drop(ok.index)
     ax.scatter(ok["cement"][~y], ok["Ca_star"][~y], facecolors="none", edgecolors="C0", label="porous invasion")
     ax.scatter(ok["cement"][y], ok["Ca_star"][y], marker="^", color="C3", label="fracturing")
     ax.scatter(bad["cement"], bad["Ca_star"], marker="x", color="0.5", label="failed (no label)")
+    if fallback is not None and len(fb := _labelled(fallback)):
+        f = la.fracturing(fb, L_MIN)
+        ax.scatter(fb["cement"], fb["Ca_star"], marker="s", s=80, facecolors="none",
+                   edgecolors=["C3" if v else "C0" for v in f], label="upwind fallback (red: fracturing)")
     if len(df):
         la.separatrix_line(ax, res[f"at_L{L_MIN:g}"], df["cement"].to_numpy(dtype=float), color="k")
     ax.set_yscale("log")

@@ -178,7 +178,7 @@ def _run_experiment_lines(a) -> dict:
     fallback = {_fallback_line(d): load_campaign(d) for d in a.fallback or ()}
     out = el.judge(lines, fallback or None)
     if a.figure:
-        el.figure(lines, out, a.figure)
+        el.figure(lines, out, a.figure, fallback)
     return out
 
 
