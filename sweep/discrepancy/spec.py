@@ -349,15 +349,32 @@ def _independent(effect: str, v) -> tuple[float, float]:
 
 def spec_from_dict(d: dict) -> DiscrepancySpec:
     """Validate a parsed TOML spec (see the module docstring)."""
-    from solver import Parameters, RunOptions
-
     known = {"baseline", "calibrate", "alternative", "candidates", "holdout", "options", "discretization",
              *OPTION_TABLES}
     extra = sorted(set(d) - known - {"workflow"})      # [workflow]: refused by parse_options, naming its keys
     if extra:
         _bad("tables", extra, f"only {sorted(known)}")
     _check_shapes(d)
-    base = dict(d.get("baseline", {}))
+    base, off = _check_baseline(d.get("baseline", {}))
+    cal = tuple(_param_table("calibrate", c, base) for c in d.get("calibrate", []))
+    alt = tuple(_param_table("alternative", c, base) for c in d.get("alternative", []))
+    _check_alternatives(cal, alt)
+    names, scaling, upper, probe, independent = _check_candidates(d.get("candidates", {}), off)
+    ids, every, hobs = _check_holdout(d.get("holdout", {}))
+    opts, disc = _check_run_tables(dict(d.get("options", {})), d.get("discretization"))
+    wo = parse_options(d)
+    return DiscrepancySpec(base, off, cal, names, scaling, upper, probe,
+                           tuple(ids) if ids is not None else None, every, opts,
+                           dict(disc) if disc is not None else None, alt, independent,
+                           tuple(hobs) if hobs is not None else (), wo.fit, wo.acceptance, wo.noise, wo.profile)
+
+
+def _check_baseline(baseline: dict) -> tuple[dict, tuple]:
+    """[baseline]: its parameters (solver.Parameters, units as there) without ``effects_off``, and the effects
+    it switches off (each a catalogue effect)."""
+    from solver import Parameters
+
+    base = dict(baseline)
     off = tuple(base.pop("effects_off", ()))
     for e in off:
         get_effect(e)
@@ -365,10 +382,12 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
         Parameters.from_dict(base)
     except ValueError as exc:
         raise ValueError(f"discrepancy spec [baseline]: {exc}") from None
-    cal = tuple(_param_table("calibrate", c, base) for c in d.get("calibrate", []))
-    alt = tuple(_param_table("alternative", c, base) for c in d.get("alternative", []))
-    _check_alternatives(cal, alt)
-    cand = d.get("candidates", {})
+    return base, off
+
+
+def _check_candidates(cand: dict, off: tuple) -> tuple:
+    """[candidates]: the effects (off in the baseline; default all of ``off``), their scalings, upper bounds
+    and probe strengths (each effect's own unit), and independent estimates."""
     names = tuple(cand.get("effects", off))
     for e in names:
         get_effect(e)
@@ -384,7 +403,11 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
     for k in list(upper) + list(probe):
         _check_strengths(k, upper, probe)
     independent = {k: _independent(k, v) for k, v in cand.get("independent", {}).items()}
-    ho = d.get("holdout", {})
+    return names, scaling, upper, probe, independent
+
+
+def _check_holdout(ho) -> tuple:
+    """[holdout]: (ids, every, observables): whole conditions by id or every n-th, or held-out observables."""
     if not isinstance(ho, dict):
         _bad("holdout", ho, "a table: ids = [...] or every = n")
     ids = ho.get("ids")
@@ -403,12 +426,17 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
         _bad("holdout", ho, "ids = [...], every = n (whole conditions are held out) or observables = [...]")
     if every is not None and (not isinstance(every, int) or every < 2):
         _bad("holdout.every", every, "an integer >= 2")
-    opts = dict(d.get("options", {}))
+    return ids, every, hobs
+
+
+def _check_run_tables(opts: dict, disc) -> tuple[dict, dict | None]:
+    """[options] and [discretization]: each a valid solver.RunOptions (mm, s) on its own and over the other."""
+    from solver import RunOptions
+
     try:
         RunOptions.from_dict(opts)
     except ValueError as exc:
         raise ValueError(f"discrepancy spec [options]: {exc}") from None
-    disc = d.get("discretization")
     if disc is not None:
         if "mesh_seeds" in disc:
             _check_mesh_seeds(disc)
@@ -416,11 +444,7 @@ def spec_from_dict(d: dict) -> DiscrepancySpec:
             RunOptions.from_dict({**opts, **{k: v for k, v in disc.items() if k != "mesh_seeds"}})
         except ValueError as exc:
             raise ValueError(f"discrepancy spec [discretization]: {exc}") from None
-    wo = parse_options(d)
-    return DiscrepancySpec(base, off, cal, names, scaling, upper, probe,
-                           tuple(ids) if ids is not None else None, every, opts,
-                           dict(disc) if disc is not None else None, alt, independent,
-                           tuple(hobs) if hobs is not None else (), wo.fit, wo.acceptance, wo.noise, wo.profile)
+    return opts, disc
 
 
 def load_spec(path) -> DiscrepancySpec:
