@@ -313,8 +313,24 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
     if isolate == "auto":
         isolate = "process" if cfg.timeout is not None else "none"
     started = time.time()
+    out, tmp, tries = _attempts(task, cfg, store, isolate)
+    record = _record(task, cfg, out, tries, started, isolate)
+    from solver import checkpoint
+
+    checkpoint.remove(tmp)  # left by a run the timeout killed: a recorded run is final, a rerun starts at t = 0
+    record["files"] = file_manifest(tmp)
+    if "traceback" in out:
+        record["traceback"] = out["traceback"]
+    write_json_atomic(tmp / "record.json", record)
+    store.finalize(tmp, task.key)
+    return record
+
+
+def _attempts(task: RunTask, cfg: ExecConfig, store, isolate: str) -> tuple[dict, Path, dict]:
+    """Run ``task`` until it is ok or its retries are spent: the last attempt's output, its folder, and the
+    attempts (``attempt``, ``wall`` s of the last attempt with its resumed pieces, ``earlier`` s resumed from a
+    checkpoint, ``reasons`` of the failed attempts, whose folders are removed)."""
     reasons = []
-    attempt = 0
     for attempt in range(1, cfg.retries + 2):
         # an execution killed part-way left a checkpoint: the first attempt resumes it (solver.checkpoint)
         tmp = (attempt == 1 and store.resumable_tmp_dir(task.key)) or store.new_tmp_dir(task.key)
@@ -335,6 +351,11 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         import shutil
 
         shutil.rmtree(tmp, ignore_errors=True)
+    return out, tmp, {"attempt": attempt, "wall": wall, "earlier": earlier, "reasons": reasons}
+
+
+def _record(task: RunTask, cfg: ExecConfig, out: dict, tries: dict, started: float, isolate: str) -> dict:
+    """A run's record (record.json) from its last attempt's output; times in s, clock times local ISO 8601."""
     record = {
         "key": task.key,
         "campaign": cfg.campaign,
@@ -345,11 +366,11 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         "code_hash": cfg.code_hash,
         "metrics": out.get("metrics", {}),
         "classification": out.get("classification", {}),
-        "wall_time_s": wall,
-        "resumed_wall_s": earlier,
-        "total_wall_time_s": time.time() - started + earlier,
-        "attempts": attempt,
-        "previous_failures": reasons,
+        "wall_time_s": tries["wall"],
+        "resumed_wall_s": tries["earlier"],
+        "total_wall_time_s": time.time() - started + tries["earlier"],
+        "attempts": tries["attempt"],
+        "previous_failures": tries["reasons"],
         "started_at": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(started)),
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
         "host": socket.gethostname(),
@@ -359,14 +380,6 @@ def execute_task(task: RunTask, cfg: ExecConfig) -> dict:
         record["classifier_hash"] = out["classifier_hash"]
     if "numbers" in out:
         record["numbers"] = out["numbers"]
-    from solver import checkpoint
-
-    checkpoint.remove(tmp)  # left by a run the timeout killed: a recorded run is final, a rerun starts at t = 0
-    record["files"] = file_manifest(tmp)
-    if "traceback" in out:
-        record["traceback"] = out["traceback"]
-    write_json_atomic(tmp / "record.json", record)
-    store.finalize(tmp, task.key)
     return record
 
 
