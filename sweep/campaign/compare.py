@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CampaignComparison", "compare_campaigns"]
+__all__ = ["CampaignComparison", "compare_campaigns", "matching_key"]
 
 _DIGITS = 12
 
@@ -108,7 +108,7 @@ def _md_table(df) -> str:
                       *["| " + " | ".join(r) + " |" for r in rows]])
 
 
-def _matching_key(table, on):
+def matching_key(table, on):
     """One hashable key per row: the values of ``on``, numbers rounded to ``_DIGITS`` significant digits, a missing
     value (None, NaN, NA: e.g. the deterministic mesh's mesh_seed) as None, so that missing matches missing."""
     cols = [[_key_value(x) for x in table[n].to_numpy()] for n in on]
@@ -158,7 +158,7 @@ def _match_on(ta, tb, on_a, on_b, names) -> tuple:
     on = tuple(dict.fromkeys(n for n in (*on_a, *on_b) if _column(ta, n) and _column(tb, n)))
     for extra in ((), _REPLICATE_FIELDS):
         on = tuple(dict.fromkeys((*on, *(n for n in extra if _column(ta, n) and _column(tb, n)))))
-        dup = [(n, len(t) - len(set(_matching_key(_named(t, on), on)))) for n, t in zip(names, (ta, tb))]
+        dup = [(n, len(t) - len(set(matching_key(_named(t, on), on)))) for n, t in zip(names, (ta, tb))]
         dup = [d for d in dup if d[1]]
         if not dup:
             return on
@@ -192,8 +192,8 @@ def compare_campaigns(a, b, root="results", *, label: str = "regime", columns=()
                          f"({name_a}: {on_a or 'none'}; {name_b}: {on_b or 'none'}): nothing to match on")
     on = _match_on(ta, tb, on_a, on_b, (name_a, name_b))
     keep = ["status", label, *columns]
-    left = _named(ta, on).join(ta[keep]).assign(_k=_matching_key(_named(ta, on), on))
-    right = tb[keep].assign(_k=_matching_key(_named(tb, on), on))
+    left = _named(ta, on).join(ta[keep]).assign(_k=matching_key(_named(ta, on), on))
+    right = tb[keep].assign(_k=matching_key(_named(tb, on), on))
     pairs = left.merge(right, on="_k", suffixes=("_a", "_b"), how="inner")
     only_a = left[~left["_k"].isin(set(right["_k"]))][list(on)].reset_index(drop=True)
     only_b = _named(tb, on)[~right["_k"].isin(set(left["_k"]))].reset_index(drop=True)

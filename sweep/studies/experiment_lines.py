@@ -124,31 +124,24 @@ def judge_line(df: pd.DataFrame) -> dict:
             "run_rows": rows}
 
 
-def _point_rows(df: pd.DataFrame, at: pd.Series) -> pd.Series:
-    """Which rows of ``df`` are at the point of row ``at`` (its POINT values to 1e-9 relative)."""
-    hit = pd.Series(True, index=df.index)
-    for c in POINT:
-        hit &= np.isclose(df[c].to_numpy(dtype=float), float(at[c]), rtol=1e-9, atol=0.0)
-    return hit
-
-
 def with_fallback(line: pd.DataFrame, fallback: pd.DataFrame) -> tuple[pd.DataFrame, int]:
-    """The line with each failed run replaced by the fallback campaign's run at its point (column ``fallback``
-    True on those rows), and how many were replaced.  A fallback run at a point where the line has no failed
-    run, or two at one point, is refused: the declared rule reruns the failed points and only those."""
-    failed = line["status"] != "ok"
-    out, used = line.copy(), 0
-    out["fallback"] = False
-    for _, r in fallback.iterrows():
-        at = _point_rows(line, r)
-        where = ", ".join(f"{c} = {float(r[c]):g}" for c in POINT)
-        if not (at & failed).any() or _point_rows(fallback, r).sum() > 1:
-            raise ValueError(f"experiment_lines: fallback run at {where}: the line has no failed run there, or the "
-                             "fallback has two (allowed: one fallback run per failed point of the line)")
-        out = out.drop(index=line.index[at & failed])
-        out = pd.concat([out, r.to_frame().T.assign(fallback=True)], ignore_index=False)
-        used += 1
-    return out.reset_index(drop=True).infer_objects(), used
+    """The line with each failed run replaced by the fallback campaign's run at its point (POINT values matched as
+    :func:`sweep.campaign.compare.matching_key` matches campaigns; column ``fallback`` True on those rows), and
+    how many were replaced.  A fallback run at a point where the line has no failed run, or two at one point, is
+    refused: the declared rule reruns the failed points and only those."""
+    from sweep.campaign.compare import matching_key
+
+    keys, fkeys = matching_key(line, POINT), matching_key(fallback, POINT)
+    failed = {k for k, status in zip(keys, line["status"]) if status != "ok"}
+    wrong = [k for k in fkeys if k not in failed or fkeys.count(k) > 1]
+    if wrong:
+        where = ", ".join(f"{c} = {v}" for c, v in zip(POINT, wrong[0]))
+        raise ValueError(f"experiment_lines: fallback run at {where}: the line has no failed run there, or the "
+                         "fallback has two (allowed: one fallback run per failed point of the line)")
+    replaced = [k in set(fkeys) and status != "ok" for k, status in zip(keys, line["status"])]
+    out = pd.concat([line[~np.array(replaced, dtype=bool)].assign(fallback=False), fallback.assign(fallback=True)],
+                    ignore_index=True)
+    return out, len(fkeys)
 
 
 def _judge_lines(lines: dict[str, pd.DataFrame]) -> dict:
