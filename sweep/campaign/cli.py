@@ -11,6 +11,8 @@
     dchfrac campaign prune SPEC [--results DIR]        (keep of each finished run what its label was read from)
     dchfrac campaign tables [SPEC...] [--all]         (table.parquet with units, columns.csv, from committed tables)
     dchfrac campaign redraw [SPEC...] [--all]         (every figure of committed campaigns, from their tables)
+    dchfrac campaign companion SPEC --set KEY=VALUE --suffix S [--results DIR] [--out FILE]
+                                                      (its failed points rerun with changed options: a new spec)
 
 ``run`` runs the pending points and reruns damaged runs; runs made by other solver code (stale) only with
 ``--rerun-stale``, archived runs (committed rows without a run folder here) only with ``--rerun-archived``,
@@ -54,7 +56,8 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     Each leaf parser sets ``func`` (``func(args) -> int`` exit code)."""
     camp = subparsers.add_parser("campaign", help="parameter campaigns: run, status, plot, report",
                                  description="Run and inspect parameter campaigns (campaigns/*.toml).")
-    sub = camp.add_subparsers(dest="campaign_command", metavar="{run,status,plot,report,classify,columns,compare,prune,tables,redraw}")
+    sub = camp.add_subparsers(dest="campaign_command",
+                              metavar="{run,status,plot,report,classify,columns,compare,prune,tables,redraw,companion}")
     sub.required = True
 
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
@@ -124,7 +127,23 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                    help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
     q.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown summary to FILE")
     q.set_defaults(func=cmd_compare)
+    _add_companion(sub)
     return camp
+
+
+def _add_companion(sub) -> None:
+    q = sub.add_parser("companion", help="write a campaign spec that reruns a campaign's failed points, and only "
+                                         "those, with changed options (sweep.campaign.companion)")
+    q.add_argument("spec", help="the campaign whose failed runs are rerun (spec TOML); it must have ended")
+    q.add_argument("--set", dest="sets", action="append", required=True, metavar="KEY=VALUE",
+                   help="an option changed in the companion, VALUE a TOML literal (e.g. transport='\"upwind\"' or "
+                        "transport=upwind); repeatable")
+    q.add_argument("--suffix", required=True, help="the companion's name is the campaign's name + SUFFIX "
+                                                   "(the experiment lines' fallback: _upwind_fallback)")
+    q.add_argument("--results", default=None, metavar="DIR",
+                   help="results root holding the campaign's committed table (default: results/ of the spec's project)")
+    q.add_argument("--out", default=None, metavar="FILE", help="spec to write (default: <spec folder>/<name><SUFFIX>.toml)")
+    q.set_defaults(func=cmd_companion)
 
 
 def _guarded(fn):
@@ -550,6 +569,33 @@ def cmd_compare(args) -> int:
     print(text)
     if args.out is not None:
         write_text_atomic(args.out, text + "\n")
+    return 0
+
+
+def _set_value(item: str) -> tuple[str, object]:
+    """``KEY=VALUE`` of ``--set``: VALUE read as a TOML literal, else as a string."""
+    from solver.tomlio import tomllib
+
+    key, eq, text = item.partition("=")
+    if not eq or not key.strip():
+        raise UsageError(f"--set {item!r}: expected KEY=VALUE (e.g. transport=upwind)")
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    return key.strip(), value
+
+
+@_guarded
+def cmd_companion(args) -> int:
+    from sweep.campaign.companion import write_companion
+
+    options = dict(_set_value(s) for s in args.sets)
+    try:
+        out = write_companion(args.spec, args.results, options=options, suffix=args.suffix, out=args.out)
+    except (ValueError, FileExistsError) as e:
+        raise UsageError(str(e)) from None
+    print(f"wrote {out}")
     return 0
 
 
