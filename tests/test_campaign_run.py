@@ -312,7 +312,10 @@ def test_cli_dry_run_run_status_plot_report(tmp_path, capsys, monkeypatch):
 
     assert cli_main(["run", str(spec), "--results", str(root), "--jobs", "2", "--quiet"]) == 1  # failures
     out = capsys.readouterr().out
-    assert "6 executed now (2 ok, 4 failed)" in out
+    assert "6 executed now (2 ok, 4 failed)" in out and "measured:" not in out   # no run had finished
+    assert cli_main(["run", str(spec), "--results", str(root), "--retry-failed", "--quiet"]) == 1
+    out = capsys.readouterr().out   # the start line gives the finished runs' own cost beside the estimate
+    assert "campaign clitoy: 4 run(s) to do" in out and "  measured: this campaign's 6 finished run(s) took" in out
 
     assert cli_main(["status", str(spec), "--results", str(root)]) == 0
     out = capsys.readouterr().out

@@ -269,11 +269,19 @@ def _print_estimate(spec, est, jobs: int) -> None:
               f"{est['shared_run_factor_source']})")
     print(f"estimated cost of the {est['runs_to_do']} run(s) to do: {_fmt_s(est['cpu_s'])} CPU, about "
           f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s)")
+    if text := _measured_text(est):
+        print(f"measured: {text}")
+
+
+def _measured_text(est) -> str:
+    """What the campaign's finished runs took and the runs to do at that pace ("" when none finished): beside
+    the model's estimate, which does not know how a run's time steps shrink (a crack's growth, a failure)."""
     m = est.get("measured")
-    if m and est["runs_to_do"]:
-        print(f"measured: this campaign's {m['runs']} finished run(s) took {_fmt_s(m['median_s'])} each (median; "
-              f"{_fmt_s(m['min_s'])} to {_fmt_s(m['max_s'])}); at that pace the {est['runs_to_do']} to do take "
-              f"about {_fmt_s(m['median_s'] * est['runs_to_do'])} CPU")
+    if not (m and est["runs_to_do"]):
+        return ""
+    return (f"this campaign's {m['runs']} finished run(s) took {_fmt_s(m['median_s'])} each (median; "
+            f"{_fmt_s(m['min_s'])} to {_fmt_s(m['max_s'])}); at that pace the {est['runs_to_do']} to do take "
+            f"about {_fmt_s(m['median_s'] * est['runs_to_do'])} CPU")
 
 
 def _avail(e) -> str:
@@ -303,6 +311,8 @@ def cmd_run(args) -> int:
     if est["runs_to_do"]:  # what is about to be spent, before any run starts
         print(f"campaign {spec.name}: {est['runs_to_do']} run(s) to do, estimated {_fmt_s(est['cpu_s'])} CPU, about "
               f"{_fmt_s(est['wall_s'])} wall on {jobs} job(s) (`--dry-run` details them)", flush=True)
+        if text := _measured_text(est):
+            print(f"  measured: {text}", flush=True)
     elif est["archived"] or est["stale_kept"]:
         print(f"campaign {spec.name}: nothing to rerun: {est['archived']} archived and {est['stale_kept']} stale "
               f"run(s) kept (`--rerun-archived`, `--rerun-stale` rerun them)", flush=True)
