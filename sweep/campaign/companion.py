@@ -46,13 +46,19 @@ def _is_table_array(v) -> bool:
     return isinstance(v, list) and bool(v) and all(isinstance(x, Mapping) for x in v)
 
 
+def _table_lines(head: str, table: Mapping[str, Any]) -> list[str]:
+    return ["", head] + [f"{_key(k)} = {_literal(v)}" for k, v in table.items()]
+
+
 def _toml_text(d: Mapping[str, Any]) -> str:
     """``d`` as TOML: its scalars first, then each table (``[name]``) and array of tables (``[[name]]``)."""
     lines = [f"{_key(k)} = {_literal(v)}" for k, v in d.items() if not (isinstance(v, Mapping) or _is_table_array(v))]
     for k, v in d.items():
-        for table, head in ([(v, f"[{_key(k)}]")] if isinstance(v, Mapping) else
-                            [(t, f"[[{_key(k)}]]") for t in v] if _is_table_array(v) else []):
-            lines += ["", head] + [f"{_key(a)} = {_literal(b)}" for a, b in table.items()]
+        if isinstance(v, Mapping):
+            lines += _table_lines(f"[{_key(k)}]", v)
+        elif _is_table_array(v):
+            for table in v:
+                lines += _table_lines(f"[[{_key(k)}]]", table)
     return "\n".join(lines) + "\n"
 
 
@@ -75,6 +81,7 @@ def failed_points(plan: Plan) -> list[tuple[Point, str]]:
 
 
 def _check_line(spec: CampaignSpec) -> None:
+    """A companion zips the failed points of one grid block; other campaigns are refused, saying why."""
     if len(spec.blocks) != 1 or spec.sampler["kind"] != "grid" or spec.replicates:
         raise ValueError(f"campaign {spec.name!r}: a companion is written for a one-block grid campaign without "
                          f"replicates (this one: {len(spec.blocks)} block(s), sampler {spec.sampler['kind']!r}, "
