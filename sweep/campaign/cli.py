@@ -136,8 +136,8 @@ def _add_companion(sub) -> None:
                                          "those, with changed options (sweep.campaign.companion)")
     q.add_argument("spec", help="the campaign whose failed runs are rerun (spec TOML); it must have ended")
     q.add_argument("--set", dest="sets", action="append", required=True, metavar="KEY=VALUE",
-                   help="an option changed in the companion, VALUE a TOML literal (e.g. transport='\"upwind\"' or "
-                        "transport=upwind); repeatable")
+                   help="an option changed in the companion; VALUE a TOML literal (h=1.0, transport='upwind') or a "
+                        "bare string (transport=upwind); repeatable")
     q.add_argument("--suffix", required=True, help="the companion's name is the campaign's name + SUFFIX "
                                                    "(the experiment lines' fallback: _upwind_fallback)")
     q.add_argument("--results", default=None, metavar="DIR",
