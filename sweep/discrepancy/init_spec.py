@@ -9,12 +9,12 @@ Units: mm, s, kPa.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import fields
 from pathlib import Path
 
 from solver.effects import EFFECTS
+from solver.tomlio import toml_value as _toml
 
 from .data import MeasuredData, load_measured
 from .observables import REGISTRY
@@ -24,17 +24,6 @@ __all__ = ["starting_spec", "write_starting_spec", "DEFAULT_CALIBRATE"]
 
 # the baseline parameters calibrated by default: name -> (lower, upper, scale); units those of solver.Parameters
 DEFAULT_CALIBRATE = {"E": (150.0, 700.0, "log"), "kbar": (5e-4, 5e-3, "log")}
-
-
-def _toml(v) -> str:
-    """A TOML literal of a number, bool, string or list of them."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml(x) for x in v) + "]"
-    if isinstance(v, str):
-        return json.dumps(v)
-    return repr(v)
 
 
 def _header(data: MeasuredData, folder: Path) -> list[str]:
