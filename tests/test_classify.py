@@ -458,3 +458,16 @@ def test_run_metrics_keep_the_longest_open_crack():
     m = _timeseries_metrics(ts)
     assert m["open_tip_radius_max"] == RI + 9.0 and m["open_tip_radius_final"] == RI + 3.0
     assert m["p_inj_max"] == 3.0 and m["n_steps"] == 4
+    assert "front_radius_max_last_step" not in m   # no front recorded, no step of it
+
+
+def test_run_metrics_give_the_front_s_move_in_the_last_step():
+    """front_radius_max_last_step (mm) is the last step's change of the front's angular maximum: 26.4 -> 41.6 mm
+    in one step, as the eta line's C = 2 %, eta_o = 0.29 run ended; a single step has none."""
+    import pandas as pd
+
+    from sweep.campaign.scheduler import _timeseries_metrics
+
+    ts = pd.DataFrame({"t": [1.8136, 1.8140, 1.8142], "front_radius_max": [26.36, 26.358, 41.593]})
+    assert _timeseries_metrics(ts)["front_radius_max_last_step"] == pytest.approx(41.593 - 26.358)
+    assert "front_radius_max_last_step" not in _timeseries_metrics(ts.iloc[:1])

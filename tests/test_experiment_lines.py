@@ -98,6 +98,18 @@ def test_stop_kind_tells_the_front_s_arrival_from_a_jump(t_reached, front, kind)
     assert el.stop_kind(t_reached, front) == kind
 
 
+@pytest.mark.parametrize("t_reached, front, last_step, kind", [
+    (1.81, 45.7, 15.2, "front_jump"),   # the eta line's C = 2 %, eta_o = 0.29 run: 26.4 -> 41.6 mm in one step
+    (2.78, 45.3, 0.3, "front"),         # an arrival the steps follow: less than an element a step
+    (2.78, 45.3, 2.0, "front"),         # one element exactly is still resolved
+    (2.78, 29.5, 0.1, "front_jump"),    # the classifier's front short of 45 mm decides alone
+    (4.0, 46.0, 20.0, "t_end"),         # a run that reached t_end was not stopped by its front
+])
+def test_stop_kind_calls_an_arrival_in_one_step_of_more_than_an_element_a_jump(t_reached, front, last_step, kind):
+    assert el.stop_kind(t_reached, front, last_step, 2.0) == kind
+    assert el.stop_kind(t_reached, front, None, 2.0) == el.stop_kind(t_reached, front)   # not recorded: as before
+
+
 def test_the_stops_are_counted_beside_the_verdict():
     df = _line(_rising())
     df.loc[:2, "t_reached"] = 2.5  # three runs stopped early, one with its front at 45 mm

@@ -71,6 +71,8 @@ TABLE_COLUMNS: dict[str, tuple[str, str, str]] = {
     # sweep.campaign.scheduler (records)
     "t_reached": ("s", "Float64", "last simulated time"),
     "n_steps": ("", "Int64", "accepted time steps"),
+    "front_radius_max_last_step": ("mm", "Float64", "how far the front's angular maximum moved in the last accepted "
+                                                    "step (more than an element: a jump the step did not resolve)"),
     "solver_wall_time_s": ("s", "Float64", "wall time of the simulation"),
     "wall_time_s": ("s", "Float64", "wall time of the run (simulation, classification, bookkeeping), summed over the "
                     "pieces of a run resumed from its checkpoint"),

@@ -99,7 +99,8 @@ class DefaultRunner:
 
     Metrics (from the solver's time series): t_reached (s), p_inj_max (kPa), p_inj_final (kPa),
     front_radius_mean_final / front_radius_max_final (mm), mean_damage_final (-),
-    max_hoop_stress_max (kPa), mass_error_max (-), n_steps.
+    max_hoop_stress_max (kPa), mass_error_max (-), n_steps, front_radius_max_last_step (mm: how far the front's
+    angular maximum moved in the last accepted step).
     """
 
     def __init__(self, classify_options: Mapping[str, Any] | None = None, classifier_hash: str | None = None):
@@ -167,6 +168,8 @@ def _timeseries_metrics(ts) -> dict:
     for c in ("front_radius_mean", "front_radius_max", "mean_damage", "open_tip_radius"):
         if c in cols:
             put(f"{c}_final", last[c])
+    if "front_radius_max" in cols and len(ts) > 1:  # how the run's last step moved the front (a jump or not)
+        put("front_radius_max_last_step", ts["front_radius_max"].iloc[-1] - ts["front_radius_max"].iloc[-2])
     if "open_tip_radius" in cols:  # the longest open crack of the run (crack_closure: cracks can close)
         put("open_tip_radius_max", ts["open_tip_radius"].max())
     if "max_hoop_stress" in cols:

@@ -13,8 +13,10 @@ experiment_ca_star_rate_line.toml: w_i alone at η_o = 0.29 kPa·s) are judged e
   t_end, so a run judged at t_end with a short front is judged earlier in its life than one that got there);
 * a run the 45 mm rule stopped before t_end while the classifier's front (the S = 0.5 region connected to the
   inlet at the judged snapshot, its largest radius) is short of 45 mm was stopped by something else than the
-  front's arrival (the saturation jumping along an open crack, results/experiment_ca_star_eta_line/README.md):
-  :func:`stop_kind` names it "front_jump", and the count is reported beside the verdict;
+  front's arrival (the saturation jumping along an open crack, results/experiment_ca_star_eta_line/README.md), and
+  so was one whose last step moved the solver's front by more than one element (the table's
+  ``front_radius_max_last_step`` against the run's h): :func:`stop_kind` names it "front_jump", and the count is
+  reported beside the verdict;
 * a failed run carries no label: it is listed with the time it reached and its reason, and counted, never
   dropped silently;
 * the headers' label-blind fallback (declared 29 Nov 2026): a line's failed points, and only those, are rerun in
@@ -40,7 +42,8 @@ __all__ = ["L_MIN", "L_SCAN", "judge", "judge_line", "labels_along_ca_star", "st
 L_MIN, L_SCAN = 4.0, (2.0, 3.0, 4.0, 5.0, 6.0)  # mm: the headers' label and scan
 STOP_FRONT_MM, T_END_S = 45.0, 4.0  # the headers' time of judgement: front at 45 mm (stop_front_radius) or t_end
 QUANTILES = [0.0, 0.25, 0.5, 0.75, 1.0]
-RUN_COLUMNS = ["cement", "eta_o", "w_i", "Ca_star", "t_reached", "front_radius_max", "crack_length"]
+RUN_COLUMNS = ["cement", "eta_o", "w_i", "Ca_star", "t_reached", "front_radius_max", "front_radius_max_last_step",
+               "crack_length"]
 POINT = ("cement", "eta_o", "w_i", "Ca_star")  # a point of a line: C (%), eta_o (kPa s), w_i (mm/s), Ca* (-)
 FALLBACK_SUFFIX = "_upwind_fallback"  # a companion campaign's name: <line><FALLBACK_SUFFIX>
 
@@ -79,13 +82,23 @@ def verdict(fit: dict, along: dict) -> str:
     return f"no separatrix: {fit.get('error', 'no fit')}"
 
 
-def stop_kind(t_reached: float, front_mm: float) -> str:
+def stop_kind(t_reached: float, front_mm: float, last_step_mm: float | None = None,
+              h_mm: float | None = None) -> str:
     """How a labelled run's time of judgement came: "t_end" (it ran to T_END_S), "front" (stopped early with the
     classifier's front at STOP_FRONT_MM or beyond, to 1 mm: the front's arrival) or "front_jump" (stopped early
-    with the classifier's front short of it).  t_reached in s, front_mm in mm."""
+    with the classifier's front short of it, or with the solver's front moved more than one element, ``h_mm``, in
+    the run's last step, ``last_step_mm``: an arrival the time step did not resolve).  Without the last step
+    (runs recorded before it was), the classifier's front alone decides.  t_reached in s, lengths in mm."""
     if t_reached >= T_END_S - 1e-9:
         return "t_end"
-    return "front" if front_mm >= STOP_FRONT_MM - 1.0 else "front_jump"
+    jumped = last_step_mm is not None and h_mm is not None and last_step_mm > h_mm
+    return "front" if front_mm >= STOP_FRONT_MM - 1.0 and not jumped else "front_jump"
+
+
+def _number(r, column: str) -> float | None:
+    """A table cell as a float, None when the column is absent or the cell empty."""
+    v = r.get(column)
+    return None if v is None or pd.isna(v) else float(v)
 
 
 def _run_rows(df: pd.DataFrame) -> list[dict]:
@@ -93,13 +106,14 @@ def _run_rows(df: pd.DataFrame) -> list[dict]:
     label at L_min, or for a failed run its reason and no label."""
     rows = []
     for _, r in df.sort_values(["cement", "Ca_star"]).iterrows():
-        row = {c: (None if pd.isna(r.get(c)) else float(r[c])) for c in RUN_COLUMNS}
+        row = {c: _number(r, c) for c in RUN_COLUMNS}
         row["status"] = str(r["status"])
         if bool(r.get("fallback", False)):
             row["fallback"] = True
         if r["status"] == "ok" and not pd.isna(r["crack_length"]):
             row[f"fracturing_at_L{L_MIN:g}"] = bool(r["crack_length"] > L_MIN)
-            row["stop"] = stop_kind(float(r["t_reached"]), float(r["front_radius_max"]))
+            row["stop"] = stop_kind(float(r["t_reached"]), float(r["front_radius_max"]),
+                                    _number(r, "front_radius_max_last_step"), _number(r, "h"))
         else:
             row["reason"] = None if pd.isna(r.get("reason")) else str(r["reason"])
         rows.append(row)
