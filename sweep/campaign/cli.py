@@ -127,23 +127,10 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                    help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
     q.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown summary to FILE")
     q.set_defaults(func=cmd_compare)
-    _add_companion(sub)
+    from sweep.campaign.companion import add_companion_command
+
+    add_companion_command(sub)
     return camp
-
-
-def _add_companion(sub) -> None:
-    q = sub.add_parser("companion", help="write a campaign spec that reruns a campaign's failed points, and only "
-                                         "those, with changed options (sweep.campaign.companion)")
-    q.add_argument("spec", help="the campaign whose failed runs are rerun (spec TOML); it must have ended")
-    q.add_argument("--set", dest="sets", action="append", required=True, metavar="KEY=VALUE",
-                   help="an option changed in the companion; VALUE a TOML literal (h=1.0, transport='upwind') or a "
-                        "bare string (transport=upwind); repeatable")
-    q.add_argument("--suffix", required=True, help="the companion's name is the campaign's name + SUFFIX "
-                                                   "(the experiment lines' fallback: _upwind_fallback)")
-    q.add_argument("--results", default=None, metavar="DIR",
-                   help="results root holding the campaign's committed table (default: results/ of the spec's project)")
-    q.add_argument("--out", default=None, metavar="FILE", help="spec to write (default: <spec folder>/<name><SUFFIX>.toml)")
-    q.set_defaults(func=cmd_companion)
 
 
 def _guarded(fn):
@@ -579,33 +566,6 @@ def cmd_compare(args) -> int:
     print(text)
     if args.out is not None:
         write_text_atomic(args.out, text + "\n")
-    return 0
-
-
-def _set_value(item: str) -> tuple[str, object]:
-    """``KEY=VALUE`` of ``--set``: VALUE read as a TOML literal, else as a string."""
-    from solver.tomlio import tomllib
-
-    key, eq, text = item.partition("=")
-    if not eq or not key.strip():
-        raise UsageError(f"--set {item!r}: expected KEY=VALUE (e.g. transport=upwind)")
-    try:
-        value = tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = text
-    return key.strip(), value
-
-
-@_guarded
-def cmd_companion(args) -> int:
-    from sweep.campaign.companion import write_companion
-
-    options = dict(_set_value(s) for s in args.sets)
-    try:
-        out = write_companion(args.spec, args.results, options=options, suffix=args.suffix, out=args.out)
-    except (ValueError, FileExistsError) as e:
-        raise UsageError(str(e)) from None
-    print(f"wrote {out}")
     return 0
 
 

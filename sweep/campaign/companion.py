@@ -23,7 +23,8 @@ from sweep.campaign.plan import Plan, plan_campaign
 from sweep.campaign.spec import load_spec
 from sweep.campaign.spec_model import CampaignSpec, plain_value
 
-__all__ = ["companion_text", "failed_points", "write_companion"]
+__all__ = ["add_companion_command", "cmd_companion", "companion_text", "failed_points",
+           "write_companion"]
 
 _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+$")
 _SWEPT_KEYS = ("axes", "mode", "zip")   # the line's grid: replaced by the failed points
@@ -142,3 +143,50 @@ def write_companion(spec_path, results=None, *, options: Mapping[str, Any], suff
     finally:
         tmp.unlink(missing_ok=True)
     return out
+
+
+# ---------------------------------------------------------------------------
+# ``dchfrac campaign companion`` (added to the campaign commands by sweep.campaign.cli)
+# ---------------------------------------------------------------------------
+def add_companion_command(sub) -> None:
+    """Add ``companion`` to the ``dchfrac campaign`` subparsers ``sub``."""
+    q = sub.add_parser("companion", help="write a campaign spec that reruns a campaign's failed points, and only "
+                                         "those, with changed options (sweep.campaign.companion)")
+    q.add_argument("spec", help="the campaign whose failed runs are rerun (spec TOML); it must have ended")
+    q.add_argument("--set", dest="sets", action="append", required=True, metavar="KEY=VALUE",
+                   help="an option changed in the companion; VALUE a TOML literal (h=1.0, transport='upwind') or a "
+                        "bare string (transport=upwind); repeatable")
+    q.add_argument("--suffix", required=True, help="the companion's name is the campaign's name + SUFFIX "
+                                                   "(the experiment lines' fallback: _upwind_fallback)")
+    q.add_argument("--results", default=None, metavar="DIR",
+                   help="results root holding the campaign's committed table (default: results/ of the spec's project)")
+    q.add_argument("--out", default=None, metavar="FILE", help="spec to write (default: <spec folder>/<name><SUFFIX>.toml)")
+    q.set_defaults(func=cmd_companion)
+
+
+def _set_value(item: str) -> tuple[str, object]:
+    """``KEY=VALUE`` of ``--set``: VALUE read as a TOML literal, else as a string; ValueError without a KEY=."""
+    from solver.tomlio import tomllib
+
+    key, eq, text = item.partition("=")
+    if not eq or not key.strip():
+        raise ValueError(f"--set {item!r}: expected KEY=VALUE (e.g. transport=upwind)")
+    try:
+        value = tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = text
+    return key.strip(), value
+
+
+def cmd_companion(args) -> int:
+    """Write the companion spec; a bad argument or a campaign that cannot have one: one line on stderr, exit 2."""
+    import sys
+
+    try:
+        options = dict(_set_value(s) for s in args.sets)
+        out = write_companion(args.spec, args.results, options=options, suffix=args.suffix, out=args.out)
+    except (ValueError, FileExistsError) as e:   # SpecError is a ValueError
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}")
+    return 0
