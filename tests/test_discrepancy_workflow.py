@@ -1171,6 +1171,20 @@ def test_an_interval_end_the_refinement_leaves_off_the_threshold_is_flagged():
     assert pr["unconverged"] == {}
 
 
+def test_an_end_whose_bracket_closed_but_whose_own_evaluation_is_off_the_threshold_is_reported_so():
+    """An emulated profile checks its end with a real run (``check_end``): the refine bracket [44.93, 45.26] closed
+    within ``refine_tol`` (Δχ² 6.07 inside, threshold 6.97), but Δχ² at the interpolated end 45.02 is 9.87, so the
+    side carries only ``delta_chi2_at_end``.  The report says that, not a bracket it does not have."""
+    from sweep.discrepancy.report import _unconverged_line
+    pr = {"lower": 27.66, "upper": 45.02, "threshold": 6.97}
+    line = _unconverged_line("upper", {"delta_chi2_at_end": 9.87}, pr)
+    assert line.startswith("**Unconverged interval end**: the upper end 45.02")
+    assert "bracket closed" in line and "9.87" in line and "crossing lies in" not in line and ": ;" not in line
+    line = _unconverged_line("lower", {"bracket": [27.04, 28.38], "delta_chi2": [13.47, 2.12],
+                                       "delta_chi2_at_end": 10.6}, pr)
+    assert "the crossing lies in [27.04, 28.38]" in line and "Δχ² at the end itself 10.6" in line
+
+
 @pytest.mark.parametrize("cand, msg", [
     ({"probe": {"damage_viscosity": 0.0}}, "probe.damage_viscosity=0.0"),
     ({"probe": {"damage_viscosity": -5.0}}, "probe.damage_viscosity=-5.0"),

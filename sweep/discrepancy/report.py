@@ -236,7 +236,6 @@ def _fig_residuals(problem, fit, path, title):
     a1.legend(fontsize=7)
     a1.set_title(title + ": per phase", fontsize=9)
     # residual sign over parameter space (Ca*–C plane when available, else condition index)
-    cp = problem.data.conditions
     xs, ys, labels = [], [], []
     for cid in ids:
         row = problem.overrides(cid, fit.values())
@@ -402,7 +401,7 @@ def _candidate_lines(report: dict) -> list[str]:
     if len(common) > 1:
         L += ["", "Passing candidates compared under common series weights (the per-series minimum of theirs; each "
                   "ΔBIC above uses its own): BIC " + ", ".join(f"{k} {v:.4g}" for k, v in common.items())
-              + f"; a tie when they differ by less than tie_bic."]
+              + "; a tie when they differ by less than tie_bic."]
     return L
 
 
@@ -428,14 +427,7 @@ def _profile_flags(pr: dict) -> list[str]:
                   f"{' and '.join(opened)} end, so that end is the range's ({', '.join(f'{pr[s]:.4g}' for s in opened)}): the "
                   "data do not bound the strength there."]
     for side, u in (pr.get("unconverged") or {}).items():
-        L += ["", f"**Unconverged interval end**: the {side} end "
-                  f"{(pr.get('raw') or [pr['lower'], pr['upper']])[side == 'upper']:.4g} is interpolated, not a crossing the "
-                  f"profile confirmed (the `[profile] refine` evaluations did not bring Δχ² within"
-                  f" `refine_tol` of the threshold {pr['threshold']:.3g}): "
-                  + (f"the crossing lies in {_f(u['bracket'])}, Δχ² {_f(u['delta_chi2'])} there" if "bracket" in u
-                     else "")
-                  + (f"; Δχ² at the end itself {u['delta_chi2_at_end']:.3g}" if "delta_chi2_at_end" in u else "")
-                  + "."]
+        L += ["", _unconverged_line(side, u, pr)]
     if pr.get("rough"):
         L += ["", f"**Rough profile**: walking away from the fit, Δχ² falls by up to {pr['roughness']:.3g} "
                   f"(more than `[profile] rough_tol` of the threshold {pr['threshold']:.3g}).  A true profile rises "
@@ -471,6 +463,21 @@ def _correction_model_lines(cm: dict | None) -> list[str]:
                  "(`correction_slope_realizations`)." if (cm.get("slope_realizations") or 0)
                  < (cm.get("realizations") or 0) else "")]
     return L
+
+
+def _unconverged_line(side: str, u: dict, pr: dict) -> str:
+    """The report's line on an interval end the profile did not confirm: either no refine evaluation came within
+    ``refine_tol`` of the threshold (the bracket the crossing lies in), or the bracket closed but the profile
+    evaluated at the interpolated end itself is off the threshold (``delta_chi2_at_end``)."""
+    end = (pr.get("raw") or [pr["lower"], pr["upper"]])[side == "upper"]
+    head = f"**Unconverged interval end**: the {side} end {end:.4g} is interpolated, not a crossing the profile confirmed"
+    at_end = f"Δχ² at the end itself {u['delta_chi2_at_end']:.3g}" if "delta_chi2_at_end" in u else ""
+    if "bracket" in u:
+        return (f"{head} (the `[profile] refine` evaluations did not bring Δχ² within `refine_tol` of the threshold "
+                f"{pr['threshold']:.3g}): the crossing lies in {_f(u['bracket'])}, Δχ² {_f(u['delta_chi2'])} there"
+                + (f"; {at_end}" if at_end else "") + ".")
+    return (f"{head}: its bracket closed within `refine_tol` of the threshold {pr['threshold']:.3g}, but {at_end} "
+            "(the profile is not smooth between the bracket's ends).")
 
 
 def _profile_lines(report: dict) -> list[str]:
