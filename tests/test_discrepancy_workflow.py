@@ -100,6 +100,9 @@ def test_hidden_effect_is_named_with_its_strength(tmp_path, hidden, effect, trut
         md = (tmp_path / "out" / "report.md").read_text()
         assert (tmp_path / "out" / "profile_damage_viscosity.png").is_file() and "profile_damage_viscosity.png" in md
         assert "| strength | Δχ² |" in md and rep["profiles"][effect]["non_monotone"] is False
+        from sweep.discrepancy.report import render_report      # report.md regenerates from report.json alone
+        (tmp_path / "out" / "report.md").unlink()
+        assert render_report(tmp_path / "out").read_text() == md
     saved = json.loads((tmp_path / "out" / "report.json").read_text())
     assert saved["named_effect"] == effect and (tmp_path / "out" / "report.md").is_file()
     for key in ("strength", "strength_interval", "verdict", "candidates", "gap_before", "gap_after"):

@@ -1,5 +1,5 @@
 """``dchfrac discrepancy run --measured DIR --model SPEC --out DIR``, ``dchfrac discrepancy init --measured DIR``,
-``status --cache DIR`` and ``model --report OUT/report.json --model SPEC --out FILE`` (argparse),
+``status --cache DIR``, ``model --report OUT/report.json --model SPEC --out FILE`` and ``render OUT...`` (argparse),
 added by the main CLI."""
 from __future__ import annotations
 
@@ -28,11 +28,11 @@ def show_progress(quiet: bool = False) -> None:
 
 
 def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
-    """Add ``discrepancy run``, ``init``, ``status`` and ``model`` to an argparse subparsers object; each leaf
+    """Add ``discrepancy run``, ``init``, ``status``, ``model`` and ``render`` to an argparse subparsers object; each leaf
     sets ``func(args) -> int``."""
     d = subparsers.add_parser("discrepancy", help="name the missing effect between simulation and measured data",
                               description="Discrepancy workflow (see sweep/discrepancy).")
-    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init,status,model}")
+    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init,status,model,render}")
     sub.required = True
     r = sub.add_parser("run", help="calibrate, localize, screen, refit, report")
     r.add_argument("--measured", required=True, help="measured-data folder (conditions.csv, observations.csv)")
@@ -63,7 +63,27 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
                         "(default: the columns the report records; needed for a report that does not)")
     m.add_argument("--out", default="named_model.toml", help="parameter file to write (default: %(default)s)")
     m.set_defaults(func=cmd_model)
+    rd = sub.add_parser("render", help="rewrite report.md from report.json (no forward run)")
+    rd.add_argument("out", nargs="+", help="a discrepancy run's --out folder (holding report.json)")
+    rd.add_argument("--figures", action="store_true", help="also redraw the profile figures from the report")
+    rd.set_defaults(func=cmd_render)
     return d
+
+
+def cmd_render(args) -> int:
+    """Rewrite each folder's report.md from its report.json with this code's renderer (the figures made from the
+    forward runs are linked where their files exist); exit 2 with one line when a folder holds no report.json,
+    before any folder is written."""
+    from .report import render_report
+
+    missing = [o for o in args.out if not (Path(o) / "report.json").is_file()]
+    if missing:
+        print(f"dchfrac discrepancy render: {missing[0]!r} holds no report.json (a discrepancy run's --out folder "
+              "does)", file=sys.stderr)
+        return 2
+    for o in args.out:
+        print(render_report(o, figures=args.figures))
+    return 0
 
 
 def cmd_model(args) -> int:

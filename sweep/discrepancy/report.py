@@ -1,5 +1,6 @@
-"""The report of a workflow run: its dict (report.json), report.md and figures (before/after curves,
-residual maps).  Units: mm, s, kPa; residuals and gaps standardized (dimensionless)."""
+"""The report of a workflow run: its dict (report.json) and report.md, with the figures of
+:mod:`sweep.discrepancy.report_figures`; :func:`render_report` rewrites report.md from report.json alone.  Units:
+mm, s, kPa; residuals and gaps standardized (dimensionless)."""
 from __future__ import annotations
 
 import json
@@ -8,18 +9,16 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep.figio import write_figure
-
 from . import stats
-from .observables import CURVES as CURVE_OBSERVABLES
 from .observables import UNITS
 from .evidence import bound_sides
 from .problem import Fit
 from .report_measurements import confounded_lines as _confounded_lines
 from .report_measurements import discriminating_lines as _discriminating_lines
 from .report_measurements import fmt as _f
+from .report_figures import fig_curves, fig_profiles, fig_residuals
 
-__all__ = ["build_report", "write_report", "jsonable", "ROUGH_NOTE"]
+__all__ = ["build_report", "write_report", "render_markdown", "render_report", "jsonable", "ROUGH_NOTE"]
 
 
 def jsonable(o):
@@ -157,117 +156,6 @@ def code_provenance() -> dict:
 
 # what a rough profile means for the named strength's interval (report.md verdict line, CLI)
 ROUGH_NOTE = "rough profile: a lower bound on the uncertainty"
-
-
-def _fig_curves(problem, fit_before, fit_after, path):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ids = problem.data.ids
-    obs = [o for o in CURVE_OBSERVABLES if np.any(problem.obs == o)]
-    fig, axes = plt.subplots(len(obs), len(ids), figsize=(3.2 * len(ids), 2.6 * len(obs)), squeeze=False)
-    pb = problem.prediction(fit_before.params, fit_before.x, ids)
-    pa = problem.prediction(fit_after.params, fit_after.x, ids)
-    for j, cid in enumerate(ids):
-        for i, o in enumerate(obs):
-            ax = axes[i, j]
-            m = (problem.cond == cid) & (problem.obs == o)
-            if not np.any(m):              # this condition does not measure o
-                ax.axis("off")
-                continue
-            t = problem.t[m]
-            ax.errorbar(t, problem.y[m], problem.sig[m], fmt=".", ms=3, color="k", alpha=0.5, label="measured")
-            ax.plot(t, pb[cid][o], "C0-o", ms=3, label="baseline (calibrated)")
-            if fit_after is not fit_before:
-                ax.plot(t, pa[cid][o], "C3--s", ms=3, label="with named effect")
-            ax.set_title(f"{cid}{' (held out)' if cid in problem.spec.holdout(ids) else ''}", fontsize=8)
-            ax.set_xlabel("t (s)", fontsize=7)
-            ax.set_ylabel(f"{o} ({UNITS[o]})", fontsize=7)
-            ax.tick_params(labelsize=6)
-    axes[0, 0].legend(fontsize=6)
-    fig.tight_layout()
-    write_figure(fig, path, dpi=110)
-    plt.close(fig)
-
-
-def _fig_profile(eff: str, pr: dict, path, ind: dict | None = None) -> None:
-    """The profile likelihood of ``eff``: Δχ² at each evaluated strength, the threshold, the interval and, when
-    given, the independent estimate ± 2σ (strength in the effect's unit)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    pts = sorted(pr["points"], key=lambda q: q["value"])
-    fig, ax = plt.subplots(figsize=(4.6, 3.2))
-    ax.plot([q["value"] for q in pts], [q["delta_chi2"] for q in pts], "k-o", ms=3, label="profile points")
-    ax.axhline(pr["threshold"], color="C3", ls="--", lw=1, label=f"threshold {pr['threshold']:.3g}")
-    ax.axvspan(pr["lower"], pr["upper"], color="C0", alpha=0.15, label="95 % interval")
-    if ind:
-        ax.errorbar([ind["value"]], [0.0], xerr=[[2 * ind["sigma"]], [2 * ind["sigma"]]], fmt="s", color="C2",
-                    capsize=3, label="independent ± 2σ")
-    ax.set_xlabel(f"{eff} strength")
-    ax.set_ylabel("Δχ²")
-    title = "non-monotone" if pr.get("non_monotone") else ""
-    ax.set_title(title, fontsize=8, color="C3")
-    ax.legend(fontsize=6)
-    fig.tight_layout()
-    write_figure(fig, path, dpi=110)
-    plt.close(fig)
-
-
-def _fig_residuals(problem, fit, path, title):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ids = problem.data.ids
-    r = problem.residual_batch(fit.params, [fit.x], ids)[0]
-    m = problem.mask(ids)
-    ph, obs, cond = problem.phase[m], problem.obs[m], problem.cond[m]
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.4))
-    for k, o in enumerate([o for o in CURVE_OBSERVABLES if np.any(obs == o)]):
-        vals = [np.mean(r[(ph == p) & (obs == o)]) if np.any((ph == p) & (obs == o)) else 0 for p in range(4)]
-        a1.bar(np.arange(4) + 0.25 * k, vals, width=0.25, label=o)
-    a1.set_xticks(np.arange(4) + 0.25)
-    a1.set_xticklabels(stats.PHASES, fontsize=7)
-    a1.axhline(0, color="k", lw=0.5)
-    a1.set_ylabel("mean standardized residual")
-    a1.legend(fontsize=7)
-    a1.set_title(title + ": per phase", fontsize=9)
-    # residual sign over parameter space (Ca*–C plane when available, else condition index)
-    xs, ys, labels = [], [], []
-    for cid in ids:
-        row = problem.overrides(cid, fit.values())
-        try:
-            from solver import Parameters
-            from sweep.regimes.numbers import dimensionless_numbers
-
-            dn = dimensionless_numbers(Parameters.from_dict(row))
-            x = float(dn["Ca_star"]) if "Ca_star" in dn else float(ids.index(cid))
-        except Exception:
-            x = float(ids.index(cid))
-        xs.append(x)
-        ys.append(float(row.get("cement", 1.2)))
-        labels.append(cid)
-    mr = np.array([np.mean(r[(cond == cid) & (obs == "p_inj")]) if np.any((cond == cid) & (obs == "p_inj")) else 0 for cid in ids])
-    sc = a2.scatter(xs, ys, c=mr, cmap="coolwarm", vmin=-max(3, np.abs(mr).max()), vmax=max(3, np.abs(mr).max()), s=60, edgecolor="k")
-    for cid, x, y in zip(labels, xs, ys):
-        reg = problem.data.regimes.get(cid)
-        mark = ""
-        if reg is not None:
-            pr = problem.prediction(fit.params, fit.x, ids)[cid].get("regime")
-            mark = "" if pr == reg[1] else " ✗"
-        a2.annotate(cid + mark, (x, y), fontsize=7)
-    if all(x > 0 for x in xs) and max(xs) / max(min(xs), 1e-300) > 20:
-        a2.set_xscale("log")
-    a2.set_xlabel("Ca* (or condition index)")
-    a2.set_ylabel("C (%)")
-    a2.set_title("mean p_inj residual; ✗ = regime misclassified", fontsize=9)
-    fig.colorbar(sc, ax=a2)
-    fig.tight_layout()
-    write_figure(fig, path, dpi=110)
-    plt.close(fig)
 
 
 def _table(d: dict, cols) -> list[str]:
@@ -480,8 +368,8 @@ def _unconverged_line(side: str, u: dict, pr: dict) -> str:
             "(the profile is not smooth between the bracket's ends).")
 
 
-def _profile_lines(report: dict) -> list[str]:
-    """Each named strength's profile likelihood."""
+def _profile_lines(report: dict, figures: set[str] = frozenset()) -> list[str]:
+    """Each named strength's profile likelihood, with its figure where ``figures`` (file names) holds it."""
     L = []
     for eff, pr in (report.get("profiles") or {}).items():
         L += ["", f"## Profile likelihood of `{eff}` (named model, training conditions)", "",
@@ -490,7 +378,7 @@ def _profile_lines(report: dict) -> list[str]:
         L += [f"| {q['value']:.4g} | {q['delta_chi2']:.3g} |" for q in pr["points"]]
         L += _profile_flags(pr)
         L += _correction_model_lines(pr.get("correction_model"))
-        if pr.get("points"):
+        if f"profile_{eff}.png" in figures:
             L += ["", f"![Profile likelihood of {eff}](profile_{eff}.png)"]
         L += _emulator_lines(pr.get("emulator"))
         for h in pr.get("recentred", []):
@@ -569,28 +457,55 @@ def write_report(report: dict, problem, fit_before, fit_after, out_dir, figures:
     from solver.output import atomic_write_text   # a killed run never leaves a truncated report
 
     atomic_write_text(out / "report.json", json.dumps(report, indent=1) + "\n")
-    figs = []
+    made, note = set(), None
     if figures:
         try:
-            _fig_curves(problem, fit_before, fit_after, out / "curves.png")
-            figs.append(("Measured vs calibrated baseline and final model", "curves.png"))
-            _fig_residuals(problem, fit_before, out / "residuals_before.png", "baseline")
-            figs.append(("Residual map, calibrated baseline", "residuals_before.png"))
+            fig_curves(problem, fit_before, fit_after, out / "curves.png")
+            made.add("curves.png")
+            fig_residuals(problem, fit_before, out / "residuals_before.png", "baseline")
+            made.add("residuals_before.png")
             if fit_after is not fit_before:
-                _fig_residuals(problem, fit_after, out / "residuals_after.png", "with named effect")
-                figs.append(("Residual map, final model", "residuals_after.png"))
-            for eff, pr in (report.get("profiles") or {}).items():
-                if pr.get("points"):
-                    _fig_profile(eff, pr, out / f"profile_{eff}.png",
-                                 (report.get("independent_estimates") or {}).get(eff))
+                fig_residuals(problem, fit_after, out / "residuals_after.png", "with named effect")
+                made.add("residuals_after.png")
+            made |= fig_profiles(report, out)
         except Exception as exc:  # figures are optional; the verdict is not
-            figs.append((f"figures failed: {type(exc).__name__}: {exc}", None))
-    L = (_verdict_lines(report) + _caveat_lines(report) + _noise_lines(report) + _candidate_lines(report)
-         + _discriminating_lines(report) + _confounded_lines(report) + _profile_lines(report) + _independent_lines(report)
-         + _emulated_refit_lines(report.get("emulated_refits"))
-         + _gap_and_localization_lines(report))
-    for cap, f in figs:
-        L += [f"![{cap}]({f})" if f else cap, ""]
-    L += _METHOD
-    atomic_write_text(out / "report.md", "\n".join(L) + "\n")
+            note = f"figures failed: {type(exc).__name__}: {exc}"
+    atomic_write_text(out / "report.md", render_markdown(report, made, note))
     return out
+
+
+#: the figures write_report makes from the forward runs, in report.md's order (caption, file)
+RUN_FIGURES = (("Measured vs calibrated baseline and final model", "curves.png"),
+               ("Residual map, calibrated baseline", "residuals_before.png"),
+               ("Residual map, final model", "residuals_after.png"))
+
+
+def render_markdown(report: dict, figures: set[str], note: str | None = None) -> str:
+    """report.md's text: the report's sections from ``report`` (report.json's content), linking the figure files
+    in ``figures`` (file names in the report's folder), and ``note`` (why figures are missing) where given."""
+    L = (_verdict_lines(report) + _caveat_lines(report) + _noise_lines(report) + _candidate_lines(report)
+         + _discriminating_lines(report) + _confounded_lines(report) + _profile_lines(report, figures)
+         + _independent_lines(report) + _emulated_refit_lines(report.get("emulated_refits"))
+         + _gap_and_localization_lines(report))
+    for cap, f in RUN_FIGURES:
+        if f in figures:
+            L += [f"![{cap}]({f})", ""]
+    if note:
+        L += [note, ""]
+    return "\n".join(L + _METHOD) + "\n"
+
+
+def render_report(out_dir, figures: bool = False) -> Path:
+    """Rewrite ``out_dir``/report.md from ``out_dir``/report.json, without any forward run, linking the figures whose
+    files are in the folder; ``figures`` first redraws the profile figures from the report."""
+    out = Path(out_dir)
+    src = out / "report.json"
+    if not src.is_file():
+        raise ValueError(f"report folder {str(out)!r}: no report.json (a discrepancy run's --out folder holds one)")
+    report = json.loads(src.read_text())
+    if figures:
+        fig_profiles(report, out)
+    from solver.output import atomic_write_text
+
+    atomic_write_text(out / "report.md", render_markdown(report, {p.name for p in out.glob("*.png")}))
+    return out / "report.md"
