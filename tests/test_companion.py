@@ -20,7 +20,8 @@ from sweep.campaign.spec import load_spec, samplers
 def failing_at_c2_runner(params, options, run_dir):
     """Fails at cement = 2 % unless the transport of S is upwind; a known label otherwise."""
     if params["cement"] == 2.0 and options["transport"] != "upwind":
-        return {"status": "failed", "reason": f"Newton diverged at eta_o = {params['eta_o']}"}
+        return {"status": "failed", "reason": f"Newton diverged at eta_o = {params['eta_o']}: time step below dt_min "
+                                              "at t = 2.32084 s (last: Newton did not converge in 25 iterations)"}
     Path(run_dir, "out.json").write_text(json.dumps({"eta_o": params["eta_o"]}))
     return {"status": "ok", "regime": "fracturing" if params["eta_o"] > 0.3 else "porous_invasion"}
 
@@ -82,6 +83,9 @@ def test_companion_reruns_exactly_the_failed_points_with_the_changed_option(ende
     assert dict(comp.classify) == dict(load_spec(ended_line).classify) and comp.diagrams == load_spec(ended_line).diagrams
     text = out.read_text()
     assert "3 failed points of its 9 runs" in text and text.count("Newton diverged at eta_o") == 3
+    header = " ".join(ln[1:].strip() for ln in text.splitlines() if ln.startswith("#"))
+    assert header.count("(last: Newton did not converge in 25 iterations)") == 3     # each reason whole, wrapped
+    assert max(len(ln) for ln in text.splitlines() if ln.startswith("#")) <= 120
     # and the companion runs: each of its points is ok with upwind transport
     assert cli_main(["run", str(out), "--results", str(tmp_path / "results"), "--quiet"]) == 0
 

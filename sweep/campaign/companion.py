@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import textwrap
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -98,7 +99,8 @@ def _header(spec_path: Path, spec: CampaignSpec, failed, n_runs: int, options: M
              "# The failed runs (swept values; reason):"]
     for p, reason in failed:
         swept = ", ".join(f"{k} = {plain_value(v)}" for k, v in p.swept.items())
-        lines.append(f"#   {swept}; {reason[:110 - len(swept)]}")
+        wrapped = textwrap.wrap(f"{swept}; {reason}", 112)          # the whole reason, over as many lines as it takes
+        lines += [f"#   {wrapped[0]}"] + [f"#     {w}" for w in wrapped[1:]]
     return lines
 
 
