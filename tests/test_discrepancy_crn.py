@@ -19,6 +19,7 @@ from sweep.discrepancy.coverage import NOISE, SETUPS, TIMES, _spec
 from sweep.discrepancy.data import load_measured
 from sweep.discrepancy.noise import add_discretization_error
 from sweep.discrepancy.problem import Problem
+from sweep.discrepancy.linear_correction import PiecewiseCorrection
 from sweep.discrepancy.profile import StrengthCorrection, _Profile
 from sweep.discrepancy.recentre import profile_recentred
 from sweep.discrepancy.spec import spec_from_dict
@@ -349,3 +350,90 @@ def test_inside_following_each_model_is_compared_with_the_data_corrected_at_its_
         assert np.allclose(r, want, atol=1e-12)
     assert np.allclose(prob.y, prob.noise.y_measured - vec)
     assert all(np.array_equal(a, b) for a, b in zip(prob.residual_batch(params, xs, TRAIN), before))
+
+
+def test_the_piecewise_correction_interpolates_its_anchors_and_grows_without_moving_inside():
+    """Exact at every anchor, linear between two, along the end segment beyond them; an anchor added outside
+    leaves the function inside the old anchors as it was; two anchors at one strength, or anchors in two
+    parameters, are refused."""
+    c = {10.0: np.array([0.0, 1.0]), 20.0: np.array([2.0, 1.0]), 35.0: np.array([2.0, 4.0])}
+    cm = PiecewiseCorrection([35.0, 10.0, 20.0], [c[35.0], c[10.0], c[20.0]])
+    assert cm.values == [10.0, 20.0, 35.0] and all(np.allclose(cm.at(x), v) for x, v in c.items())
+    assert np.allclose(cm.at(15.0), [1.0, 1.0]) and np.allclose(cm.at(27.5), [2.0, 2.5])
+    assert np.allclose(cm.at(0.0), [-2.0, 1.0]) and np.allclose(cm.at(40.0), [2.0, 5.0])    # the end segments
+    inside = [cm.at(x) for x in np.linspace(10.0, 35.0, 11)]
+    assert cm.beyond(36.0) and not cm.beyond(35.0)
+    cm.add(50.0, np.array([0.0, 0.0]), 50.0)
+    assert cm.added == 1 and cm.values[-1] == 50.0 and not cm.beyond(45.0)
+    assert all(np.allclose(cm.at(x), v) for x, v in zip(np.linspace(10.0, 35.0, 11), inside))
+    assert np.allclose(cm.at(42.5), [1.0, 2.0])                                   # now between 35 and 50
+    with pytest.raises(ValueError, match="two anchors at one strength"):
+        cm.add(20.0, np.zeros(2), 20.0)
+    with pytest.raises(ValueError, match="follows the strength alone"):
+        PiecewiseCorrection(np.zeros((3, 2)) + np.arange(3)[:, None], [np.zeros(2)] * 3)
+
+
+def test_spec_refuses_a_piecewise_correction_without_fine_points_or_with_fewer_slope_realizations():
+    with pytest.raises(ValueError, match="profile.correction=\"piecewise\" is not allowed with profile.fine=false"):
+        _spec(SU, {"profile": {"fine": False, "correction": "piecewise"}})
+    with pytest.raises(ValueError, match="correction_slope_realizations=2 is not allowed"):
+        _spec(SU, {"profile": {"correction": "piecewise", "correction_slope_realizations": 2}})
+    with pytest.raises(ValueError, match="correction_follows"):
+        _spec(SU, {"profile": {"correction": "piecewise", "correction_follows": "all"}})
+
+
+class _Saturating(MeshToy):
+    """The coarse toy whose pressure misses A·rate·min(β, β_s)·e^{−t/0.2} (kPa): fine − coarse switches on with
+    the damage viscosity and is flat above β_s, a correction that is not linear in the strength."""
+
+    def __init__(self, beta_s: float, A: float = 1.0):
+        super().__init__(4.0, 0, spread=0.0)
+        self.beta_s, self.A = beta_s, A
+
+    def predict_one(self, overrides, times):
+        from solver import Parameters
+
+        out, p = super().predict_one(overrides, times), Parameters.from_dict(overrides)
+        t = np.asarray(times["p_inj"], float)
+        out["p_inj"] = out["p_inj"] - self.A * p.w_i / 50.0 * min(p.damage_viscosity, self.beta_s) * np.exp(-t / 0.2)
+        return out
+
+
+def _saturating_interval(mode: str, data, fine):
+    prob, params = _problem(data, _Saturating(36.0), {"correction": mode, "correction_span": 0.5})
+    add_discretization_error(prob, [fine, fine], {"E": 331.0, "effect:damage_viscosity": 40.0})
+    fit = _fit(prob, params)
+    for _ in range(4):                                   # the correction refreshed to its fixed point at the fit
+        add_discretization_error(prob, [fine, fine], fit.values())
+        fit = _fit(prob, params, float(fit.x[1]))
+    return profile_recentred(prob, fit, 1, TRAIN, fine_forward=[fine, fine])
+
+
+def test_a_correction_that_saturates_within_the_profile_needs_anchors_where_the_profile_goes():
+    """Data from the fine toy at β = 40 (no realization deviation); the coarse toy's correction rises with β up
+    to β_s = 36 kPa·s and is flat above, and the anchors sit at the fit ± half a Wald half-width (36.98–39.81):
+    all on the flat part.  The exact answer is the fine toy fitted to the data: 38.40 [35.24, 41.38].  The
+    line through the anchors carries the flat part past the kink and puts the lower end at 29.4, about 4 sd
+    low; the piecewise correction anchors where the profile goes below 36.98 and gives the exact interval to
+    0.05 sd, as the point-wise correction does."""
+    from sweep.discrepancy.profile import profile_interval
+
+    fine = MeshToy(2.0, 0, spread=0.0)
+    data = _data(fine, seed=3)
+    ex_prob, params = _problem(data, fine, {"fine": False})
+    exact_fit = _fit(ex_prob, params)
+    exact = profile_interval(ex_prob, exact_fit, 1, TRAIN)
+    sd = (exact["upper"] - exact["lower"]) / 3.92
+    assert exact["lower"] < 36.0 < float(exact_fit.x[1])                   # the premise: the kink inside it
+    _, lin = _saturating_interval("linear", data, fine)
+    assert lin["lower"] < exact["lower"] - 2.0 * sd                         # the line misses the lower end
+    fit, pw = _saturating_interval("piecewise", data, fine)
+    cm = pw["correction_model"]
+    assert pw["correction"] == "piecewise" and cm["model"] == "piecewise" and cm["added_anchors"] >= 1
+    assert min(cm["anchors"]) < 36.0 and cm["anchors"] == sorted(cm["anchors"])   # anchored below the kink
+    assert float(fit.x[1]) == pytest.approx(float(exact_fit.x[1]), abs=0.05 * sd)
+    assert pw["lower"] == pytest.approx(exact["lower"], abs=0.05 * sd)
+    assert pw["upper"] == pytest.approx(exact["upper"], abs=0.05 * sd)
+    from sweep.discrepancy.report import _correction_model_lines
+    line = _correction_model_lines(cm)[1]
+    assert "piecewise linear in the strength" in line and f"{cm['added_anchors']} of them added" in line

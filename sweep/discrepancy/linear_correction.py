@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["StrengthCorrection"]
+__all__ = ["StrengthCorrection", "PiecewiseCorrection"]
 
 
 class StrengthCorrection:
@@ -100,4 +100,61 @@ class StrengthCorrection:
             out["change_over_anchors_rms"] = ch[self.strength]
             if len(ch) > 1:
                 out["change_over_anchors_rms_by_parameter"] = {p.name: c for p, c in zip(self.params, ch)}
+        return out
+
+
+class PiecewiseCorrection(StrengthCorrection):
+    """The discretization correction (kPa / mm per curve row) as a piecewise-linear function of the profiled
+    strength's coordinate x (``[profile] correction = "piecewise"``): interpolated linearly between the anchors
+    (sorted by x) and continued along the end segments beyond them, so that it equals the estimated correction
+    at every anchor.  The profile adds an anchor wherever it evaluates beyond the anchors' range (:meth:`add`,
+    ``_Profile.extend_correction``): the correction is never extrapolated past where it was estimated, which a
+    line through a few anchors about the fit does when the correction switches on and saturates within the
+    profile's reach (results/discrepancy/coverage/beta_point/), while between anchors every point is compared
+    under the same function (common random numbers, a profile without the point-wise correction's steps).
+    One parameter only (the strength)."""
+
+    def __init__(self, xs, corrs, values=None, real=None, params=None, strength: int = 0):
+        super().__init__(xs, corrs, values, real, params, strength)
+        if self.X.shape[1] != 1:
+            raise ValueError(f"PiecewiseCorrection: anchors in {self.X.shape[1]} parameters (it follows the "
+                             "strength alone)")
+        self._sort(self.X[:, 0], np.vstack([np.asarray(c, float) for c in corrs]), list(self.values))
+        self.added = 0                         # anchors the profile added beyond the first ones
+
+    def _sort(self, x: np.ndarray, C: np.ndarray, values: list) -> None:
+        order = np.argsort(x, kind="stable")
+        self.px, self.C = np.asarray(x, float)[order], C[order]
+        if np.any(np.diff(self.px) <= 0.0):
+            raise ValueError(f"PiecewiseCorrection: two anchors at one strength ({self.px.tolist()})")
+        self.values = [values[i] for i in order]
+        self.X = self.xs = self.px[:, None]
+
+    def at(self, x) -> np.ndarray:
+        """c(x), ``x`` the strength's coordinate (a number or a one-element array)."""
+        x = float(np.asarray(x, float).reshape(-1)[0])
+        i = int(np.clip(np.searchsorted(self.px, x) - 1, 0, self.px.size - 2))
+        t = (x - self.px[i]) / (self.px[i + 1] - self.px[i])
+        return self.C[i] + t * (self.C[i + 1] - self.C[i])
+
+    def beyond(self, x: float) -> bool:
+        """Whether ``x`` (the strength's coordinate) lies outside the anchors' range."""
+        return bool(x < self.px[0] or x > self.px[-1])
+
+    def add(self, x: float, corr, value: float, real=None) -> None:
+        """One more anchor at coordinate ``x`` (strength ``value``, its unit) with its correction ``corr`` (and
+        ``real``, the same for real runs of the coarse model, into :attr:`real`)."""
+        self._sort(np.append(self.px, float(x)), np.vstack([self.C, np.asarray(corr, float)]), self.values + [value])
+        self.added += 1
+        if self.real is not None and real is not None:
+            self.real.add(x, real, value)
+
+    def summary(self, layout=None) -> dict:
+        """The anchors (strength units, sorted), how many the profile added, and the correction's RMS change
+        between the outer anchors (kPa / mm: per observable with ``layout``)."""
+        out = {"model": "piecewise", "anchors": self.values, "added_anchors": self.added,
+               "realizations": self.realizations, "slope_realizations": self.slope_realizations}
+        if layout is not None:
+            from .noise import rms_per_observable
+            out["change_over_anchors_rms"] = rms_per_observable(layout, self.C[-1] - self.C[0])
         return out

@@ -143,11 +143,13 @@ class ProfileOptions(_Checked):
                              doc="flag the interval when the profile falls by this fraction of its threshold")
     fine: bool = _rule(True, "bool", doc="with [discretization]: correct each profile point where it is "
                                          "(false: the fit's correction, far cheaper)")
-    correction: str = _rule("point", "choice", choices=("point", "linear"),
+    correction: str = _rule("point", "choice", choices=("point", "linear", "piecewise"),
                             doc="with fine = true: point (the correction re-estimated at each profile point from the "
-                                "realizations) or linear (the correction as a linear function of the strength, fitted "
+                                "realizations), linear (the correction as a linear function of the strength, fitted "
                                 "once from the realizations at correction_anchors strengths and the same for every "
-                                "point and re-centring: common random numbers, a smooth profile)")
+                                "point and re-centring: common random numbers, a smooth profile) or piecewise (linear "
+                                "between those anchors, and an anchor added wherever the profile goes beyond them: "
+                                "never extrapolated)")
     correction_follows: str = _rule(
         "strength", "choice", choices=("strength", "all"),
         doc="with correction = linear: what the correction is a linear function of: strength (the profiled "
@@ -210,9 +212,15 @@ class ProfileOptions(_Checked):
 
     def __post_init__(self):
         super().__post_init__()
-        if self.correction == "linear" and not self.fine:
-            raise ValueError("discrepancy spec: profile.correction=\"linear\" is not allowed with profile.fine=false "
-                             "(the fit's correction for every point): set fine = true or correction = \"point\"")
+        if self.correction in ("linear", "piecewise") and not self.fine:
+            raise ValueError(f"discrepancy spec: profile.correction=\"{self.correction}\" is not allowed with "
+                             "profile.fine=false (the fit's correction for every point): set fine = true or "
+                             "correction = \"point\"")
+        if self.correction == "piecewise" and self.correction_slope_realizations:
+            raise ValueError(f"discrepancy spec: profile.correction_slope_realizations="
+                             f"{self.correction_slope_realizations} is not allowed with profile.correction="
+                             "\"piecewise\" (an anchor added beyond the others runs every realization): set "
+                             "correction = \"linear\" or correction_slope_realizations = 0")
         if self.correction_follows != "strength" and self.correction != "linear":
             raise ValueError(f"discrepancy spec: profile.correction_follows=\"{self.correction_follows}\" is not allowed "
                              f"with profile.correction=\"{self.correction}\" (only the linear correction is a function "

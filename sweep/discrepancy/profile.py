@@ -17,7 +17,10 @@ distribution from k realizations).  Settings: :class:`~.options.ProfileOptions`.
 Which discretization correction each point is compared under (``[profile] fine``, ``correction``): the fit's
 (``fine = false``), re-estimated at each point from the fine realizations (``correction = "point"``), or
 modelled linearly in the strength from the realizations at a few anchor strengths (``"linear"``,
-:class:`StrengthCorrection`).  The linear model is fixed once per profile and kept through its re-centrings, so
+:class:`StrengthCorrection`), or piecewise linearly through them with an anchor added wherever the profile goes
+beyond them (``"piecewise"``, :class:`~.linear_correction.PiecewiseCorrection`, :meth:`_Profile.extend_correction`:
+never extrapolated, for a correction that switches on and saturates within the profile's reach; an added anchor
+leaves the function between the others as it was).  The linear model is fixed once per profile and kept through its re-centrings, so
 every point is evaluated with the same realizations, the same correction function and the same covariance
 (common random numbers): Δχ² differences then come from the strength alone, and the profile is as smooth as
 the coarse model.  ``[profile] correction_follows``: the model is linear in the strength alone ("strength") or
@@ -40,7 +43,7 @@ import numpy as np
 from . import stats
 from .emulator import AGREE_SD, CurveEmulator, design_points, fill_design, fit_on_emulator, wald_box
 from .evidence import wald_bounds
-from .linear_correction import StrengthCorrection
+from .linear_correction import PiecewiseCorrection, StrengthCorrection
 from .noise import coarse_and_fines, correction_at, correction_from
 from .problem import Fit, Problem
 from .realizations import realizations
@@ -80,8 +83,8 @@ class _Profile:
         self.open: set = set()           # the sides (-1, +1) not crossed within the parameter's range
         self.unconverged: dict = {}      # "lower"/"upper": a refined bound's bracket left off the threshold
         self.point_correction = None     # with fine models: the correction at the last point dchi2 evaluated
-        self.cm = None                   # with [profile] correction = "linear": the correction's model
-        if self.fines and self.po.correction == "linear":
+        self.cm = None                   # with [profile] correction = "linear" or "piecewise": its model
+        if self.fines and self.po.correction in ("linear", "piecewise"):
             self.cm = correction if correction is not None else self.linear_correction()
         # the fit's χ² under the correction it was made under, taken as the points' are: on the emulator (its
         # covariance at the fit too) when there is one, so that Δχ² stays within one likelihood
@@ -121,8 +124,8 @@ class _Profile:
         X = np.array([full if follows_all else full[self.j] for full, _ in anchors])
         values = [float(self.p.from_x(full[self.j])) for full, _ in anchors[:n_strength]]
         kw = {"params": self.fit.params if follows_all else (self.p,), "strength": self.j if follows_all else 0}
-        cm = StrengthCorrection(X, corrs, values, real=StrengthCorrection(X, real, values, **kw) if self.em else None,
-                                **kw)
+        model = PiecewiseCorrection if self.po.correction == "piecewise" else StrengthCorrection
+        cm = model(X, corrs, values, real=model(X, real, values, **kw) if self.em else None, **kw)
         cm.realizations = len(fines_used)
         cm.slope_realizations = m if 0 < m < len(self.fines) else len(fines_used)
         return cm
@@ -238,6 +241,8 @@ class _Profile:
         scale)."""
         p = self.p
         row = {"value": p.from_x(xj)}
+        if isinstance(self.cm, PiecewiseCorrection) and self.cm.beyond(xj):
+            self.extend_correction(xj)
         with self.holding(xj):
             f = self.modelled_refit(xj) if self.cm is not None else self.refit(xj, np.delete(self.x_hat, self.j))
             if self.fines and self.cm is None:
@@ -252,6 +257,19 @@ class _Profile:
         log.info("profile %s = %.5g: delta chi2 %.2f (threshold %.2f), point %d", p.name, row["value"], d,
                  self.thr, len(self.points) - 1)
         return d
+
+    def extend_correction(self, xj: float) -> None:
+        """An anchor of the piecewise correction at ``xj`` (internal coordinates, beyond its anchors), placed as
+        the first anchors are (:meth:`anchors`): the others refitted there under the fit's correction, and the
+        fine realizations' correction at that point (:meth:`PiecewiseCorrection.add`)."""
+        f = self.held(xj)
+        full = np.insert(np.asarray(f.x, float), self.j, xj)
+        coarse, fines = coarse_and_fines(self.problem, self.fines,
+                                         {q.name: q.from_x(float(v)) for q, v in zip(self.fit.params, full)})
+        real = correction_from(coarse, fines)
+        self.cm.add(xj, self.model_correction(real, f), float(self.p.from_x(xj)), real)
+        log.info("profile %s: piecewise correction anchored at %.5g (%d anchors)", self.p.name, self.p.from_x(xj),
+                 len(self.cm.values))
 
     def held(self, xj: float) -> Fit:
         """The others refitted with the parameter held at ``xj`` (from the fit's values)."""
@@ -472,7 +490,7 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
     out["monotone_fall"] = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],
                                                    low["value"])
     out["non_monotone"] = bool(out["monotone_fall"] > stats.MONOTONE_TOL * pf.thr)
-    out["correction"] = ("point" if pf.fines and pf.cm is None else "fit" if not pf.fines else "linear")
+    out["correction"] = ("point" if pf.fines and pf.cm is None else "fit" if not pf.fines else pf.po.correction)
     if pf.cm is not None:
         out["correction_model"] = pf.cm.summary(problem.layout)
     if emulator is not None:

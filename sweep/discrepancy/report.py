@@ -331,9 +331,17 @@ def _profile_flags(pr: dict) -> list[str]:
 
 
 def _correction_model_lines(cm: dict | None) -> list[str]:
-    """The profile's linear discretization correction (``[profile] correction = "linear"``), as report lines."""
+    """The profile's modelled discretization correction (``[profile] correction = "linear"`` or ``"piecewise"``), as
+    report lines."""
     if not cm:
         return []
+    if cm.get("model") == "piecewise":
+        return ["", f"Discretization correction along the profile: piecewise linear in the strength (`[profile] "
+                    f"correction = \"piecewise\"`), through the fine realizations' correction at {_f(cm['anchors'])} "
+                    f"({cm['added_anchors']} of them added where the profile went beyond the others); the same function "
+                    "for every point and re-centring (common random numbers).  Its change between the outer anchors, "
+                    "RMS: " + ", ".join(f"{o} {v:.3g}" for o, v in (cm.get("change_over_anchors_rms") or {}).items())
+                    + "."]
     L = []
     follows = cm.get("follows")
     L += ["", f"Discretization correction along the profile: linear in the strength (`[profile] correction = "

@@ -65,7 +65,8 @@ Example (units mm, s, kPa)::
     [profile]                        # the named strength's profile-likelihood interval
     expand = 3; refine = 2; refine_tol = 0.15; rough_tol = 0.25
     fine = true                      # with [discretization]: correct each profile point where it is
-    correction = "point"             # with fine: "point" (re-estimated at each point) or "linear" (linear in the
+    correction = "point"             # with fine: "point" (re-estimated at each point), "piecewise" (linear between
+                                     # the anchors below, one added where the profile goes beyond them) or "linear" (linear in the
     correction_anchors = 3           # strength from the realizations at correction_anchors strengths over the
     correction_span = 1.0            # fit ± correction_span Wald half-widths; the same for every point and
                                      # re-centring: common random numbers, a smooth profile)
