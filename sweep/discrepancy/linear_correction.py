@@ -43,13 +43,17 @@ class StrengthCorrection:
         self.strength = int(strength)          # the profiled strength's column (its anchors: ``values``)
         if self.params is not None and len(self.params) != d:
             raise ValueError(f"StrengthCorrection: {len(self.params)} parameters for anchors of {d} coordinates")
+        self.values = list(values) if values is not None else [float(x) for x in self.X[:, self.strength]]
+        self.realizations = self.slope_realizations = None   # fine realizations at the first / the other anchors
+        self._model(C)
+
+    def _model(self, C: np.ndarray) -> None:
+        """The least-squares line through the corrections ``C`` (one row per anchor) and its residual RMS."""
         self.xbar = self.X.mean(axis=0)
         U = self.X - self.xbar
         self.a = C.mean(axis=0)
         self.B = np.linalg.lstsq(U, C - self.a, rcond=None)[0]          # (d, rows)
         self.resid_rms = float(np.sqrt(np.mean((C - self.a - U @ self.B) ** 2)))
-        self.values = list(values) if values is not None else [float(x) for x in self.X[:, self.strength]]
-        self.realizations = self.slope_realizations = None   # fine realizations at the first / the other anchors
 
     def at(self, x) -> np.ndarray:
         """c(x) on every curve row; ``x`` the model's coordinates (a number for one parameter)."""
@@ -114,13 +118,14 @@ class PiecewiseCorrection(StrengthCorrection):
     under the same function (common random numbers, a profile without the point-wise correction's steps).
     One parameter only (the strength)."""
 
-    def __init__(self, xs, corrs, values=None, real=None, params=None, strength: int = 0):
-        super().__init__(xs, corrs, values, real, params, strength)
+    added = 0                                  # anchors the profile added beyond the first ones
+
+    def _model(self, C: np.ndarray) -> None:
+        """The anchors sorted by the strength, with their corrections ``C`` (the function: :meth:`at`)."""
         if self.X.shape[1] != 1:
             raise ValueError(f"PiecewiseCorrection: anchors in {self.X.shape[1]} parameters (it follows the "
                              "strength alone)")
-        self._sort(self.X[:, 0], np.vstack([np.asarray(c, float) for c in corrs]), list(self.values))
-        self.added = 0                         # anchors the profile added beyond the first ones
+        self._sort(self.X[:, 0], C, list(self.values))
 
     def _sort(self, x: np.ndarray, C: np.ndarray, values: list) -> None:
         order = np.argsort(x, kind="stable")
