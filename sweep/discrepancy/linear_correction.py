@@ -142,9 +142,15 @@ class PiecewiseCorrection(StrengthCorrection):
         t = (x - self.px[i]) / (self.px[i + 1] - self.px[i])
         return self.C[i] + t * (self.C[i + 1] - self.C[i])
 
+    #: how far outside the anchors' range (a fraction of it) a point lies before it is "beyond" them: the first
+    #: profile point is the Wald bound, which is also the outer anchor, recomputed to within rounding
+    BEYOND_TOL = 1e-6
+
     def beyond(self, x: float) -> bool:
-        """Whether ``x`` (the strength's coordinate) lies outside the anchors' range."""
-        return bool(x < self.px[0] or x > self.px[-1])
+        """Whether ``x`` (the strength's coordinate) lies outside the anchors' range by more than rounding
+        (:attr:`BEYOND_TOL` of the range)."""
+        tol = self.BEYOND_TOL * (self.px[-1] - self.px[0])
+        return bool(x < self.px[0] - tol or x > self.px[-1] + tol)
 
     def add(self, x: float, corr, value: float, real=None) -> None:
         """One more anchor at coordinate ``x`` (strength ``value``, its unit) with its correction ``corr`` (and
