@@ -60,19 +60,6 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                               metavar="{run,status,plot,report,classify,columns,compare,prune,tables,redraw,companion}")
     sub.required = True
 
-    _add_run_parser(sub)
-    _add_inspect_parsers(sub)
-    _add_table_parsers(sub)
-    from sweep.campaign.companion import add_companion_command
-    from sweep.campaign.compare import add_compare_command
-
-    add_compare_command(sub)
-    add_companion_command(sub)
-    return camp
-
-
-def _add_run_parser(sub) -> None:
-    """``campaign run``: its options."""
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
     _common(p)
     p.add_argument("--jobs", "-j", type=int, default=None, help="parallel runs (default: spec [run] jobs or 1; -1 = all cores)")
@@ -99,9 +86,6 @@ def _add_run_parser(sub) -> None:
                         "of warning (the dry run lists them)")
     p.set_defaults(func=cmd_run)
 
-
-def _add_inspect_parsers(sub) -> None:
-    """The commands that read one campaign: status, plot, report, classify, columns, prune."""
     for name, fn, helptext in (
         ("status", cmd_status, "done, failed (with reasons) and pending runs"),
         ("plot", cmd_plot, "draw the campaign's diagrams from its table"),
@@ -119,10 +103,6 @@ def _add_inspect_parsers(sub) -> None:
         if name == "report":
             q.add_argument("--html", action="store_true",
                            help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
-
-
-def _add_table_parsers(sub) -> None:
-    """The commands that rewrite committed campaigns without a run: tables, redraw."""
     for name, fn, helptext in (
         ("tables", cmd_tables, "rewrite table.parquet (units in its metadata) and columns.csv of campaigns from "
                                "their committed tables or records (no run)"),
@@ -137,6 +117,20 @@ def _add_table_parsers(sub) -> None:
         q.add_argument("--results", default=None, metavar="DIR",
                        help="results root (default: results/ of each spec's project)")
         q.set_defaults(func=fn)
+    q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
+    q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
+    q.add_argument("other", help="second campaign: spec TOML or campaign folder")
+    q.add_argument("--results", default=None, metavar="DIR",
+                   help="results root (default: results/ of each spec's project)")
+    q.add_argument("--label", default="regime", help="categorical column compared (default: regime)")
+    q.add_argument("--columns", default="", metavar="A,B",
+                   help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
+    q.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown summary to FILE")
+    q.set_defaults(func=cmd_compare)
+    from sweep.campaign.companion import add_companion_command
+
+    add_companion_command(sub)
+    return camp
 
 
 def _guarded(fn):
@@ -550,6 +544,31 @@ def cmd_redraw(args) -> int:
 
 
 @_guarded
+def cmd_compare(args) -> int:
+    from solver.output import check_writable_dir
+    from sweep.campaign.compare import compare_campaigns
+    from sweep.campaign.store import write_text_atomic
+
+    if args.out is not None:
+        try:
+            check_writable_dir(str(Path(args.out).resolve().parent), "--out folder")
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+    columns = tuple(c.strip() for c in args.columns.split(",") if c.strip())
+    for source in (args.spec, args.other):
+        _name_damaged(source, args.results)
+    try:
+        root = "results" if args.results is None else Path(args.results).resolve()
+        c = compare_campaigns(args.spec, args.other, root, label=args.label, columns=columns)
+    except (ValueError, FileNotFoundError) as e:
+        raise UsageError(str(e)) from None
+    text = c.markdown()
+    print(text)
+    if args.out is not None:
+        write_text_atomic(args.out, text + "\n")
+    return 0
+
+
 def main(argv=None) -> int:
     """Standalone entry point: the ``campaign`` subcommands without the ``dchfrac campaign`` prefix."""
     parser = argparse.ArgumentParser(prog="python -m sweep.campaign.cli")
