@@ -11,6 +11,7 @@
     dchfrac campaign prune SPEC [--results DIR]        (keep of each finished run what its label was read from)
     dchfrac campaign tables [SPEC...] [--all]         (table.parquet with units, columns.csv, from committed tables)
     dchfrac campaign redraw [SPEC...] [--all]         (every figure of committed campaigns, from their tables)
+    dchfrac campaign compare SPEC OTHER [--label L] [--columns A,B] [--out FILE]   (sweep.campaign.compare)
     dchfrac campaign companion SPEC --set KEY=VALUE --suffix S [--results DIR] [--out FILE]
                                                       (its failed points rerun with changed options: a new spec)
 
@@ -31,6 +32,7 @@ import logging
 import sys
 from pathlib import Path
 
+from sweep.campaign.cli_guard import UsageError, guarded, name_damaged
 from sweep.campaign.logs import LogStream, end_logging, setup_logging
 from sweep.campaign.scheduler import BACKENDS, check_backend
 
@@ -46,10 +48,6 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="allow grids of up to N runs (default: spec [run] max_runs, else 10000)")
 
 
-class UsageError(ValueError):
-    """A bad argument (e.g. an unwritable --results): one line on stderr, exit code 2."""
-
-
 def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
     """Add ``campaign {run,status,plot,report,classify}`` to an argparse subparsers object.
 
@@ -60,6 +58,19 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                               metavar="{run,status,plot,report,classify,columns,compare,prune,tables,redraw,companion}")
     sub.required = True
 
+    _add_run_parser(sub)
+    _add_inspect_parsers(sub)
+    _add_table_parsers(sub)
+    from sweep.campaign.companion import add_companion_command
+    from sweep.campaign.compare import add_compare_command
+
+    add_compare_command(sub)
+    add_companion_command(sub)
+    return camp
+
+
+def _add_run_parser(sub) -> None:
+    """``campaign run``: its options (jobs, backend, what is rerun, limits)."""
     p = sub.add_parser("run", help="run the pending runs of a campaign (resumable)")
     _common(p)
     p.add_argument("--jobs", "-j", type=int, default=None, help="parallel runs (default: spec [run] jobs or 1; -1 = all cores)")
@@ -86,6 +97,9 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
                         "of warning (the dry run lists them)")
     p.set_defaults(func=cmd_run)
 
+
+def _add_inspect_parsers(sub) -> None:
+    """``campaign status|plot|report|classify|columns|prune``: one campaign, no run."""
     for name, fn, helptext in (
         ("status", cmd_status, "done, failed (with reasons) and pending runs"),
         ("plot", cmd_plot, "draw the campaign's diagrams from its table"),
@@ -103,6 +117,10 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         if name == "report":
             q.add_argument("--html", action="store_true",
                            help="also write report.html: one self-contained file (table, diagrams, thumbnails, paper)")
+
+
+def _add_table_parsers(sub) -> None:
+    """``campaign tables|redraw``: many committed campaigns, from their tables."""
     for name, fn, helptext in (
         ("tables", cmd_tables, "rewrite table.parquet (units in its metadata) and columns.csv of campaigns from "
                                "their committed tables or records (no run)"),
@@ -117,51 +135,6 @@ def add_campaign_commands(subparsers) -> argparse.ArgumentParser:
         q.add_argument("--results", default=None, metavar="DIR",
                        help="results root (default: results/ of each spec's project)")
         q.set_defaults(func=fn)
-    q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
-    q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
-    q.add_argument("other", help="second campaign: spec TOML or campaign folder")
-    q.add_argument("--results", default=None, metavar="DIR",
-                   help="results root (default: results/ of each spec's project)")
-    q.add_argument("--label", default="regime", help="categorical column compared (default: regime)")
-    q.add_argument("--columns", default="", metavar="A,B",
-                   help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
-    q.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown summary to FILE")
-    q.set_defaults(func=cmd_compare)
-    from sweep.campaign.companion import add_companion_command
-
-    add_companion_command(sub)
-    return camp
-
-
-def _guarded(fn):
-    """Bad spec or arguments -> message on stderr and exit code 2 (no traceback)."""
-    import functools
-
-    @functools.wraps(fn)
-    def wrapper(args) -> int:
-        from sweep.campaign.plan import DamagedRunsError, EmptierResultError
-        from sweep.campaign.spec import SpecError
-
-        try:
-            return fn(args)
-        except (SpecError, UsageError) as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 2
-        except ValueError as e:
-            if getattr(args, "campaign_command", None) == "run" and "must be" in str(e):
-                print(f"error: {e}", file=sys.stderr)
-                return 2
-            raise
-        except (DamagedRunsError, EmptierResultError) as e:
-            print(f"error: {e}", file=sys.stderr)
-            return 1
-        except RuntimeError as e:
-            if "is in use by process" in str(e):
-                print(f"error: {e}", file=sys.stderr)
-                return 2
-            raise
-
-    return wrapper
 
 
 def _spec(args, writes: bool = True):
@@ -204,24 +177,6 @@ def _check_environment() -> None:
             logging.getLogger("dchfrac.campaign").warning("warning: %s", w)
     except ValueError as e:
         raise UsageError(str(e)) from None
-
-
-def _name_damaged(source, results) -> None:
-    """A warning on stderr naming the damaged runs of the campaign ``source`` (spec TOML, or campaign folder
-    holding its spec.toml), as ``status`` names them; nothing when the spec is not at hand."""
-    from sweep.campaign.plan import plan_campaign
-    from sweep.campaign.spec import load_spec
-
-    p = Path(source)
-    folder = p.is_dir()
-    spec_file = p / "spec.toml" if folder else p
-    if not spec_file.is_file():
-        return
-    plan = plan_campaign(load_spec(spec_file), p.parent if folder else results)
-    if plan.damaged:
-        print(f"warning: campaign {plan.spec.name}: {len(plan.damaged)} damaged run(s) (files missing, changed or "
-              f"unreadable since their record was written), left out; `dchfrac campaign run` reruns them:\n"
-              + plan.damage_text(), file=sys.stderr)
 
 
 def _fmt_s(s: float) -> str:
@@ -275,7 +230,7 @@ def _avail(e) -> str:
     return "unknown" if e.available_bytes is None else f"{e.available_bytes / 1e9:.3g} GB"
 
 
-@_guarded
+@guarded
 def cmd_run(args) -> int:
     from sweep.campaign.cost import estimate_cost
     from sweep.campaign.run import run_campaign
@@ -369,7 +324,7 @@ def _sampler_status_lines(st: dict) -> list[str]:
     return lines + [f"  stopped: {st['reason']}" if st["stopped"] else "  running: rerun `campaign run` to continue"]
 
 
-@_guarded
+@guarded
 def cmd_status(args) -> int:
     from sweep.campaign.accounting import campaign_throughput
     from sweep.campaign.plan import _archived_text, code_counts, plan_campaign
@@ -405,7 +360,7 @@ def cmd_status(args) -> int:
     return 0
 
 
-@_guarded
+@guarded
 def cmd_plot(args) -> int:
     from sweep.campaign.plot import plot_campaign
 
@@ -418,7 +373,7 @@ def cmd_plot(args) -> int:
     return 0
 
 
-@_guarded
+@guarded
 def cmd_report(args) -> int:
     from sweep.campaign.report import write_report
 
@@ -432,7 +387,7 @@ def cmd_report(args) -> int:
     return 0
 
 
-@_guarded
+@guarded
 def cmd_classify(args) -> int:
     from sweep.campaign.plan import plan_campaign
     from sweep.campaign.run import reclassify
@@ -449,7 +404,7 @@ def cmd_classify(args) -> int:
     return 1 if errors else 0
 
 
-@_guarded
+@guarded
 def cmd_prune(args) -> int:
     from sweep.campaign.archive import prune_campaign
 
@@ -464,7 +419,7 @@ def cmd_prune(args) -> int:
     return 0
 
 
-@_guarded
+@guarded
 def cmd_columns(args) -> int:
     from sweep.campaign.columns import column_dictionary, timeseries_dictionary
     from sweep.campaign.load import load_campaign
@@ -480,7 +435,7 @@ def cmd_columns(args) -> int:
         if table is None or table.empty:
             print(f"campaign {spec.name}: no finished runs yet, so no table", file=sys.stderr)
             return 1
-        _name_damaged(args.spec, args.results)
+        name_damaged(args.spec, args.results)
         cols = column_dictionary(table)
     width = max(len(n) for n in cols["name"])
     uw = max(len(u) for u in cols["unit"])
@@ -529,44 +484,18 @@ def _each_spec(args, fn) -> int:
     return rc
 
 
-@_guarded
+@guarded
 def cmd_tables(args) -> int:
     from sweep.campaign.table import refresh_table
 
     return _each_spec(args, refresh_table)
 
 
-@_guarded
+@guarded
 def cmd_redraw(args) -> int:
     from sweep.campaign.plot import plot_campaign
 
     return _each_spec(args, plot_campaign)
-
-
-@_guarded
-def cmd_compare(args) -> int:
-    from solver.output import check_writable_dir
-    from sweep.campaign.compare import compare_campaigns
-    from sweep.campaign.store import write_text_atomic
-
-    if args.out is not None:
-        try:
-            check_writable_dir(str(Path(args.out).resolve().parent), "--out folder")
-        except ValueError as e:
-            raise UsageError(str(e)) from None
-    columns = tuple(c.strip() for c in args.columns.split(",") if c.strip())
-    for source in (args.spec, args.other):
-        _name_damaged(source, args.results)
-    try:
-        root = "results" if args.results is None else Path(args.results).resolve()
-        c = compare_campaigns(args.spec, args.other, root, label=args.label, columns=columns)
-    except (ValueError, FileNotFoundError) as e:
-        raise UsageError(str(e)) from None
-    text = c.markdown()
-    print(text)
-    if args.out is not None:
-        write_text_atomic(args.out, text + "\n")
-    return 0
 
 
 def main(argv=None) -> int:

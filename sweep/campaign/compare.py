@@ -17,7 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CampaignComparison", "compare_campaigns", "matching_key"]
+from sweep.campaign.cli_guard import UsageError, guarded, name_damaged
+
+__all__ = ["CampaignComparison", "add_compare_command", "cmd_compare", "compare_campaigns", "matching_key"]
 
 _DIGITS = 12
 
@@ -199,3 +201,42 @@ def compare_campaigns(a, b, root="results", *, label: str = "regime", columns=()
     only_b = _named(tb, on)[~right["_k"].isin(set(left["_k"]))].reset_index(drop=True)
     pairs = pairs.drop(columns="_k").reset_index(drop=True)
     return CampaignComparison(name_a, name_b, on, label, columns, pairs, only_a, only_b)
+
+
+def add_compare_command(sub) -> None:
+    """Add ``compare`` to the ``dchfrac campaign`` subparsers ``sub``."""
+    q = sub.add_parser("compare", help="match two campaigns point by point: statuses, labels, column changes")
+    q.add_argument("spec", help="first campaign: spec TOML or campaign folder")
+    q.add_argument("other", help="second campaign: spec TOML or campaign folder")
+    q.add_argument("--results", default=None, metavar="DIR",
+                   help="results root (default: results/ of each spec's project)")
+    q.add_argument("--label", default="regime", help="categorical column compared (default: regime)")
+    q.add_argument("--columns", default="", metavar="A,B",
+                   help="numeric columns compared too, comma-separated (e.g. crack_length,front_radius_mean)")
+    q.add_argument("--out", default=None, metavar="FILE", help="also write the Markdown summary to FILE")
+    q.set_defaults(func=cmd_compare)
+
+
+@guarded
+def cmd_compare(args) -> int:
+    from solver.output import check_writable_dir
+    from sweep.campaign.store import write_text_atomic
+
+    if args.out is not None:
+        try:
+            check_writable_dir(str(Path(args.out).resolve().parent), "--out folder")
+        except ValueError as e:
+            raise UsageError(str(e)) from None
+    columns = tuple(c.strip() for c in args.columns.split(",") if c.strip())
+    for source in (args.spec, args.other):
+        name_damaged(source, args.results)
+    try:
+        root = "results" if args.results is None else Path(args.results).resolve()
+        c = compare_campaigns(args.spec, args.other, root, label=args.label, columns=columns)
+    except (ValueError, FileNotFoundError) as e:
+        raise UsageError(str(e)) from None
+    text = c.markdown()
+    print(text)
+    if args.out is not None:
+        write_text_atomic(args.out, text + "\n")
+    return 0
