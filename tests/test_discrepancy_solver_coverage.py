@@ -62,6 +62,48 @@ def test_solver_coverage_cli_writes_json_and_markdown_and_refuses_a_folder_witho
     out.parent.mkdir()
     assert main([str(tmp_path / "a"), "--out", str(out)]) == 0
     assert json.loads(out.read_text())["pooled"]["covered"] == 1 and out.with_suffix(".md").is_file()
-    with pytest.raises(SystemExit):
-        main([str(tmp_path / "nope")])
+    capsys.readouterr()
+    assert main([str(tmp_path / "nope")]) == 2
     assert "no summary.json" in capsys.readouterr().err
+
+
+def test_coverage_by_correction_reads_each_report_and_the_parameters_a_linear_correction_follows(tmp_path):
+    """Three twins of one set-up, each with the correction its report records ("point", "linear", and "linear"
+    following k̄ too): the row carries it, the summary counts covered / named per correction, and the Markdown
+    has one line per correction."""
+    dv = {"beta": 55.0}
+
+    def report(kind, follows=None):
+        prof = {"correction": kind}
+        if follows:
+            prof["correction_model"] = {"follows": follows}
+        return {"profiles": {"damage_viscosity": prof}}
+
+    _write(tmp_path / "point", {"dv": _entry("damage_viscosity", dv, [23.0, 68.0])}, reports={"dv": report("point")})
+    _write(tmp_path / "linear", {"dv": _entry("damage_viscosity", dv, [20.0, 46.7])}, reports={"dv": report("linear")})
+    _write(tmp_path / "all", {"dv": _entry("damage_viscosity", dv, [18.4, 47.6])},
+           reports={"dv": report("linear", ["kbar", "effect:damage_viscosity"])})
+    rows = twin_rows([tmp_path / "point", tmp_path / "linear", tmp_path / "all"])
+    assert [r["correction"] for r in rows] == ["point", "linear", "linear + kbar"]
+    by = coverage_summary(rows)["by_correction"]
+    assert {k: (c["covered"], c["named"], c["miss_low"]) for k, c in by.items()} == {
+        "point": (1, 1, 0), "linear": (0, 1, 1), "linear + kbar": (0, 1, 1)}
+    md = coverage_markdown(rows, coverage_summary(rows))
+    assert "| point | 1 / 1 | 0 / 0 | 1 of 1 |" in md and "| linear + kbar | 0 / 1 | 1 / 0 | 1 of 1 |" in md
+
+
+def test_dchfrac_discrepancy_coverage_is_the_same_command(tmp_path, capsys):
+    """`dchfrac discrepancy coverage` runs the module's command: the same files; a bad folder exits 2 in one line
+    before any file is written."""
+    from sweep.cli import main as dchfrac
+
+    _write(tmp_path / "a", {"dv": _entry("damage_viscosity", {"beta": 45.0}, [30.0, 60.0])})
+    out = tmp_path / "coverage.json"
+    assert dchfrac(["discrepancy", "coverage", str(tmp_path / "a"), "--out", str(out)]) == 0
+    by = json.loads(out.read_text())["by_correction"]
+    assert list(by) == ["fit"] and by["fit"]["covered"] == 1     # no report: the override fine=false says "fit"
+    out.unlink()
+    capsys.readouterr()
+    assert dchfrac(["discrepancy", "coverage", str(tmp_path / "a"), str(tmp_path / "b"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no summary.json" in err and not out.exists()

@@ -1,6 +1,6 @@
 """``dchfrac discrepancy run --measured DIR --model SPEC --out DIR``, ``dchfrac discrepancy init --measured DIR``,
-``status --cache DIR``, ``model --report OUT/report.json --model SPEC --out FILE`` and ``render OUT...`` (argparse),
-added by the main CLI."""
+``status --cache DIR``, ``model --report OUT/report.json --model SPEC --out FILE``, ``render OUT...`` and
+``coverage FOLDER... [--out JSON]`` (argparse), added by the main CLI."""
 from __future__ import annotations
 
 import argparse
@@ -28,11 +28,11 @@ def show_progress(quiet: bool = False) -> None:
 
 
 def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
-    """Add ``discrepancy run``, ``init``, ``status``, ``model`` and ``render`` to an argparse subparsers object; each leaf
-    sets ``func(args) -> int``."""
+    """Add ``discrepancy run``, ``init``, ``status``, ``model``, ``render`` and ``coverage`` to an argparse
+    subparsers object; each leaf sets ``func(args) -> int``."""
     d = subparsers.add_parser("discrepancy", help="name the missing effect between simulation and measured data",
                               description="Discrepancy workflow (see sweep/discrepancy).")
-    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init,status,model,render}")
+    sub = d.add_subparsers(dest="discrepancy_command", metavar="{run,init,status,model,render,coverage}")
     sub.required = True
     r = sub.add_parser("run", help="calibrate, localize, screen, refit, report")
     r.add_argument("--measured", required=True, help="measured-data folder (conditions.csv, observations.csv)")
@@ -67,6 +67,12 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     rd.add_argument("out", nargs="+", help="a discrepancy run's --out folder (holding report.json)")
     rd.add_argument("--figures", action="store_true", help="also redraw the profile figures from the report")
     rd.set_defaults(func=cmd_render)
+    from .solver_coverage import add_coverage_arguments, cmd_coverage
+
+    cv = sub.add_parser("coverage", help="coverage of the named strength's 95 % interval over twin results folders "
+                                         "(no forward run): pooled, by effect and by correction")
+    add_coverage_arguments(cv)
+    cv.set_defaults(func=cmd_coverage)
     return d
 
 
