@@ -21,7 +21,8 @@ import math
 import sys
 from pathlib import Path
 
-from .coverage import wilson
+# Light at import (argparse, json): ``dchfrac`` builds its parser from this module before any bad input is
+# refused (tests/test_budget.py); the Wilson interval's module loads in coverage_summary.
 
 __all__ = ["add_coverage_arguments", "cmd_coverage", "coverage_markdown", "coverage_summary", "twin_rows"]
 
@@ -111,6 +112,8 @@ def twin_rows(folders) -> list[dict]:
 def coverage_summary(rows: list) -> dict:
     """Pooled, per-effect and per-correction coverage: covered / named with the Wilson 95 % interval, misses by
     side."""
+    from .coverage import wilson
+
     def one(rs):
         named = [r for r in rs if r["named"] and "covered" in r]
         k, n = sum(r["covered"] for r in named), len(named)
