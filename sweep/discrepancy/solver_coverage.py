@@ -122,8 +122,10 @@ def coverage_summary(rows: list) -> dict:
                 "miss_high": sum(r["miss"] == "high" for r in named),
                 "wald_covered": sum(bool(r.get("wald_covered")) for r in named)}
     def by(key):
-        value = {id(r): str(r.get(key) or "unrecorded") for r in rows}
-        return {v: one([r for r in rows if value[id(r)] == v]) for v in sorted(set(value.values()))}
+        groups: dict[str, list] = {}
+        for r in rows:
+            groups.setdefault(str(r.get(key) or "unrecorded"), []).append(r)
+        return {v: one(rs) for v, rs in sorted(groups.items())}
 
     return {"pooled": one(rows), "by_effect": by("effect"), "by_correction": by("correction")}
 
