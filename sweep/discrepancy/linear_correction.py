@@ -55,6 +55,11 @@ class StrengthCorrection:
         self.B = np.linalg.lstsq(U, C - self.a, rcond=None)[0]          # (d, rows)
         self.resid_rms = float(np.sqrt(np.mean((C - self.a - U @ self.B) ** 2)))
 
+    def beyond(self, x: float) -> bool:
+        """Whether the profile must add an anchor at ``x`` before evaluating there: never for a line, which is
+        defined everywhere (the piecewise correction answers otherwise)."""
+        return False
+
     def at(self, x) -> np.ndarray:
         """c(x) on every curve row; ``x`` the model's coordinates (a number for one parameter)."""
         return self.a + (np.atleast_1d(np.asarray(x, float)) - self.xbar) @ self.B

@@ -112,14 +112,12 @@ class _Profile:
         corrs, real, first = [], [], None
         m = self.po.correction_slope_realizations
         for full, at in anchors:
-            vals = {q.name: q.from_x(float(v)) for q, v in zip(self.fit.params, full)}
             if first is None or not 0 < m < len(self.fines):
-                coarse, fines = coarse_and_fines(self.problem, fines_used, vals)
-                real.append(correction_from(coarse, fines))
+                c, fines = self.fine_correction(full, fines_used)
                 first = fines if first is None else first
             else:                            # the first anchor's mean carried here by m realizations' change
-                coarse, fines = coarse_and_fines(self.problem, self.fines[:m], vals)
-                real.append(correction_from(coarse, fines, ref=first))
+                c, _ = self.fine_correction(full, self.fines[:m], ref=first)
+            real.append(c)
             corrs.append(self.model_correction(real[-1], at))
         X = np.array([full if follows_all else full[self.j] for full, _ in anchors])
         values = [float(self.p.from_x(full[self.j])) for full, _ in anchors[:n_strength]]
@@ -143,10 +141,7 @@ class _Profile:
                                * np.linspace(-1.0, 1.0, po.correction_anchors), self.x_lo, self.x_hi))
         if xs.size < 2:
             xs = np.array([self.x_lo, self.x_hi])
-        out = []
-        for x in xs:
-            f = self.held(float(x))
-            out.append((np.insert(np.asarray(f.x, float), self.j, x), f))
+        out = [self.strength_anchor(float(x)) for x in xs]
         if po.correction_follows == "all":
             for i, q in enumerate(self.fit.params):
                 lo, hi = q.x_bounds
@@ -156,6 +151,19 @@ class _Profile:
                     if full[i] != self.x_hat[i]:
                         out.append((full, full))
         return out, xs.size
+
+    def strength_anchor(self, xj: float) -> tuple[np.ndarray, Fit]:
+        """An anchor at the strength's coordinate ``xj``: the point in all the fit's parameters (fit
+        coordinates), the others refitted there under the fit's correction, and that refit."""
+        f = self.held(xj)
+        return np.insert(np.asarray(f.x, float), self.j, xj), f
+
+    def fine_correction(self, full, fines, ref=None) -> tuple[np.ndarray, list]:
+        """The correction (fine minus coarse, per curve row) of the realizations ``fines`` at the point ``full``
+        (fit coordinates, all parameters), and their runs; ``ref``: :func:`~.noise.correction_from`'s."""
+        coarse, runs = coarse_and_fines(self.problem, fines,
+                                        {q.name: q.from_x(float(v)) for q, v in zip(self.fit.params, full)})
+        return correction_from(coarse, runs, ref=ref), runs
 
     def half_width(self, i: int) -> float:
         """Half the Wald interval of the fit's parameter ``i`` (fit coordinates); where it is undetermined,
@@ -241,7 +249,7 @@ class _Profile:
         scale)."""
         p = self.p
         row = {"value": p.from_x(xj)}
-        if isinstance(self.cm, PiecewiseCorrection) and self.cm.beyond(xj):
+        if self.cm is not None and self.cm.beyond(xj):
             self.extend_correction(xj)
         with self.holding(xj):
             f = self.modelled_refit(xj) if self.cm is not None else self.refit(xj, np.delete(self.x_hat, self.j))
@@ -260,13 +268,9 @@ class _Profile:
 
     def extend_correction(self, xj: float) -> None:
         """An anchor of the piecewise correction at ``xj`` (internal coordinates, beyond its anchors), placed as
-        the first anchors are (:meth:`anchors`): the others refitted there under the fit's correction, and the
-        fine realizations' correction at that point (:meth:`PiecewiseCorrection.add`)."""
-        f = self.held(xj)
-        full = np.insert(np.asarray(f.x, float), self.j, xj)
-        coarse, fines = coarse_and_fines(self.problem, self.fines,
-                                         {q.name: q.from_x(float(v)) for q, v in zip(self.fit.params, full)})
-        real = correction_from(coarse, fines)
+        the first anchors are (:meth:`strength_anchor`, :meth:`fine_correction`; :meth:`PiecewiseCorrection.add`)."""
+        full, f = self.strength_anchor(xj)
+        real, _ = self.fine_correction(full, self.fines)
         self.cm.add(xj, self.model_correction(real, f), float(self.p.from_x(xj)), real)
         log.info("profile %s: piecewise correction anchored at %.5g (%d anchors)", self.p.name, self.p.from_x(xj),
                  len(self.cm.values))
