@@ -97,6 +97,10 @@ def test_init_writes_a_commented_spec_that_loads(tmp_path):
     # the coverage study's calibrated interval: the likelihood's own error terms
     assert (spec.noise.disc_error_fraction, spec.profile.likelihood) == (0.0, "marginal")
     assert (parse_options({}).noise.disc_error_fraction, parse_options({}).profile.likelihood) == (0.5, "weighted")
+    # the correction along the profile by the coverage study's recorded rule; the library keeps "point"
+    assert (spec.profile.correction, parse_options({}).profile.correction) == ("piecewise", "point")
+    line = next(x for x in text.splitlines() if x.startswith("correction = "))
+    assert "results/discrepancy/README.md" in line and "library default" in line, line
     for word in ("w35", "front_radius_branches (mm)", "p_inj (kPa)", "regime (label)", "[profile]", "rough_tol"):
         assert word in text
     assert "'w65': 'invasive_fracturing at 0.31 s'" in text                               # each condition's observed label

@@ -98,8 +98,10 @@ STARTING = {("profile", "emulator"): ("gp", "for solver runs (library default \"
             ("profile", "emulate_refits"): (True, "for solver runs (library default false):"),
             ("noise", "disc_error_fraction"): (0.0, "a calibrated interval (library default 0.5):"),
             ("profile", "likelihood"): ("marginal", "a calibrated interval (library default \"weighted\"):"),
-            ("profile", "correction"): ("linear", "a smooth profile, the correction following the strength "
-                                                  "(library default \"point\"):"),
+            ("profile", "correction"): ("piecewise", "the correction follows the strength, never extrapolated: a "
+                                                     "smooth profile that covered the held-out twin (results/"
+                                                     "discrepancy/README.md, \"In words\"; library default "
+                                                     "\"point\"):"),
             ("profile", "threshold"): ("f_realizations", f"covers at few realizations ({_SR}, \"Few realizations\"; "
                                                          "library default \"chi2\"):"),
             ("noise", "realization_blocks"): ("observable", f"the data one realization for every condition ({_SR}, "
