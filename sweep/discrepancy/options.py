@@ -157,12 +157,13 @@ class ProfileOptions(_Checked):
             "calibrated parameter, from two more anchors per calibrated parameter at the fit +- correction_span Wald "
             "half-widths; every refit of the profile and the named model's settling evaluate it at their own "
             "trial parameters, so a fit sees how the fine-minus-coarse difference moves with what it fits)")
-    correction_anchors: int = _rule(3, "int", 2, 9, doc="with correction = linear: strengths the correction is "
-                                                        "estimated at (the fit and evenly about it)")
+    correction_anchors: int = _rule(3, "int", 2, 9, doc="with correction = linear or piecewise: strengths the "
+                                                        "correction is first estimated at (the fit and evenly about "
+                                                        "it)")
     correction_span: float = _rule(1.0, "float", 0.0, 10.0, lo_open=True,
-                                   doc="with correction = linear: the anchors' reach about the fit, in Wald "
-                                       "half-widths of the 95 % interval (of the strength; with correction_follows = "
-                                       "all also of each calibrated parameter)")
+                                   doc="with correction = linear or piecewise: the first anchors' reach about the "
+                                       "fit, in Wald half-widths of the 95 % interval (of the strength; with "
+                                       "correction_follows = all also of each calibrated parameter)")
     correction_slope_realizations: int = _rule(
         0, "int", 0, 50, doc="with correction = linear: 0 runs every fine realization at every anchor; m >= 1 runs "
                              "them all at the first anchor and the first m at the others, whose correction is the "
