@@ -21,7 +21,7 @@ from sweep.discrepancy.noise import add_discretization_error
 from sweep.discrepancy.problem import Problem
 from sweep.discrepancy.linear_correction import PiecewiseCorrection
 from sweep.discrepancy.profile import StrengthCorrection, _Profile
-from sweep.discrepancy.recentre import profile_recentred
+from sweep.discrepancy.recentre import pieces_outside, profile_recentred
 from sweep.discrepancy.spec import spec_from_dict
 from sweep.discrepancy.toy import MeshToy
 from sweep.discrepancy.twin import make_twin
@@ -132,6 +132,7 @@ def test_a_correction_held_at_one_strength_biases_it_and_the_linear_model_does_n
     add_discretization_error(lin, [fine, fine], {"E": 331.0, "effect:damage_viscosity": 20.0})
     fit, pr = profile_recentred(lin, _fit(lin, params), 1, TRAIN, fine_forward=[fine, fine])
     assert pr["recentred"] and pr["correction"] == "linear" and not pr["non_monotone"]
+    assert pr["pieces_outside"] == []                 # one minimum: no earlier point under the threshold outside
     # within 0.2 sd: the correction also depends on E (τ ∝ 1/E_h), which moves along the profile's path, so
     # a line in β is not exact there (the held correction: 3 sd off, or 0.22 of the width narrower)
     assert float(fit.x[1]) == pytest.approx(s_exact, abs=0.2 * sd)
@@ -437,3 +438,24 @@ def test_a_correction_that_saturates_within_the_profile_needs_anchors_where_the_
     from sweep.discrepancy.report import _correction_model_lines
     line = _correction_model_lines(cm)[1]
     assert "piecewise linear in the strength" in line and f"{cm['added_anchors']} of them added" in line
+
+
+def test_an_earlier_pass_under_the_same_correction_shows_a_piece_the_last_pass_does_not_walk_to():
+    """Known answer (the whole-injection b45 twin's piecewise run, results/discrepancy/coverage/
+    solver_crn_e_eta_long_piecewise/): a first pass about the fit at 39.17 finds -5.96 at 42.68 and -2.24 at
+    32.13 with 0.69 at 35.65 between; re-centred at 42.68, the last pass's interval is [37.33, 45.80].  Under
+    one correction function the passes differ by their reference chi2 alone, so 32.13 sits at -2.24 + 5.96 =
+    3.72 < 6.61 from the new minimum (a second piece), 35.65 at 6.65 (outside), 25.10 at 10.30; 42.68 is inside
+    the interval.  The report says so, with the hull."""
+    from sweep.discrepancy.report import _pieces_outside_lines
+
+    first = {"reference_chi2": 100.0, "points": [{"value": v, "delta_chi2": d} for v, d in
+                                                 ((25.10, 4.34), (32.13, -2.24), (35.65, 0.69), (42.68, -5.96))]}
+    last = {"reference_chi2": 94.04, "lower": 37.33, "upper": 45.80, "threshold": 6.61}
+    got = pieces_outside([first], last)
+    assert [q["value"] for q in got] == [32.13]
+    assert got[0]["delta_chi2"] == pytest.approx(3.72)
+    assert pieces_outside([], last) == []
+    text = "\n".join(_pieces_outside_lines({**last, "pieces_outside": got}))
+    assert "3.72 at 32.13" in text and "hull is [32.13, 45.8]" in text
+    assert _pieces_outside_lines({**last, "pieces_outside": []}) == []

@@ -488,7 +488,7 @@ def _profile_run(problem, fit, j, ids, level, fine_forward, emulator, correction
            "threshold_dof": pf.dof if math.isfinite(pf.dof) else None,
            "wald": list(pf.wald), "roughness": rough, "rough": bool(rough > po.rough_tol * pf.thr),
            "points": points, "smoothing": po.smoothing,
-           "reference_offset": float(pf.chi2_hat - pf.chi2_fit),
+           "reference_offset": float(pf.chi2_hat - pf.chi2_fit), "reference_chi2": float(pf.chi2_hat),
            "lower_open": -1 in pf.open, "upper_open": +1 in pf.open, "unconverged": pf.unconverged}
     low = min(points, key=lambda q: q["delta_chi2"])
     out["monotone_fall"] = stats.profile_roughness([q["value"] for q in points], [q["delta_chi2"] for q in points],

@@ -17,7 +17,7 @@ from .noise import correction_at
 from .problem import Fit, Problem
 from .profile import _Profile, _profile_run, emulator_for
 
-__all__ = ["recentre_target", "profile_recentred", "settled_fit"]
+__all__ = ["recentre_target", "profile_recentred", "settled_fit", "pieces_outside"]
 
 
 def recentre_target(pr: dict, tol: float = 1e-2) -> dict | None:
@@ -34,6 +34,22 @@ def recentre_target(pr: dict, tol: float = 1e-2) -> dict | None:
     if q and q.get("residual_sd") is not None:
         floor = max(floor, 2.0 * float(q["residual_sd"]))
     return best if best["delta_chi2"] < -floor else None
+
+
+def pieces_outside(earlier: list, pr: dict) -> list:
+    """Points of earlier passes, evaluated under the same correction function as the last pass ``pr``, whose
+    Δχ² re-referenced to ``pr``'s minimum (χ²_point − χ²_ref of ``pr``, from each pass's "reference_chi2") is
+    under ``pr``'s threshold while they lie outside [lower, upper]: a second piece of the confidence set that
+    the last pass, which stops walking at its first crossings, does not see.  Returns them sorted by value
+    (strength units; Δχ² dimensionless), each {"value", "delta_chi2"}."""
+    ref, lo, hi = pr["reference_chi2"], pr["lower"], pr["upper"]
+    out = {}
+    for old in earlier:
+        for q in old["points"]:
+            d = q["delta_chi2"] + old["reference_chi2"] - ref
+            if d < pr["threshold"] and not lo <= q["value"] <= hi and d < out.get(q["value"], np.inf):
+                out[q["value"]] = d
+    return [{"value": float(v), "delta_chi2": float(d)} for v, d in sorted(out.items())]
 
 
 def _profile_minimum(problem: Problem, fit: Fit, j: int, ids, pr: dict, fine_forward, em, cm) -> Fit:
@@ -111,9 +127,11 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     profile's own minimum (:func:`_profile_minimum`); only a minimum outside the anchors' range in a modelled
     parameter (:meth:`StrengthCorrection.covers`) has the model rebuilt about it for the next pass.  Without a re-centring the fit is settled under that correction at its
     own strength (:func:`settled_fit`): the model reported is always the one the profile measured from.
-    Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima, and
+    Returns (fit, profile dict with "recentred": the earlier strengths and their Δχ² minima, "pieces_outside":
+    the earlier passes' points under the threshold outside the last interval when the passes share one correction
+    function (:func:`pieces_outside`; empty otherwise), and
     "_correction": the linear correction's model or None, to be popped before the dict is serialized)."""
-    history, settled = [], None
+    history, settled, kept = [], None, []
     em = None
     if problem.spec.profile.emulator == "gp":
         em = emulator if emulator is not None else emulator_for(problem, fit, ids)
@@ -126,6 +144,7 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
                         "at": best["value"]})
         if cm is not None:                   # the same correction function: the profile's own minimum
             fit, settled = _profile_minimum(problem, fit, j, ids, pr, fine_forward, em, cm), cm
+            kept.append((pr, cm))
             if not cm.covers(fit.values()):
                 cm = None                    # outside the anchors: the next pass models it about the new fit
             pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
@@ -146,5 +165,6 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
         xj = float(fit.x[j])
         fit = settled_fit(problem, fit.params, j, xj, np.delete(np.asarray(fit.x, float), j), ids, cm, em)
     pr["recentred"] = history
+    pr["pieces_outside"] = pieces_outside([old for old, c in kept if cm is not None and c is cm], pr)
     pr["_correction"] = cm       # the linear correction's model (not JSON: the caller pops it), None otherwise
     return fit, pr

@@ -327,7 +327,20 @@ def _profile_flags(pr: dict) -> list[str]:
                   f"{pr['monotone_fall']:.3g} (more than {100 * stats.MONOTONE_TOL:.0f} % of the threshold): a second "
                   "minimum or a likelihood that is not a smooth function of the strength.  The interval is the "
                   "crossings' as evaluated; it is not smoothed or re-centred away."]
-    return L
+    return L + _pieces_outside_lines(pr)
+
+
+def _pieces_outside_lines(pr: dict) -> list[str]:
+    """The earlier passes' points under the threshold outside the interval (:func:`.recentre.pieces_outside`),
+    as report lines (none when there are none)."""
+    if not pr.get("pieces_outside"):
+        return []
+    pts = ", ".join(f"{q['delta_chi2']:.3g} at {q['value']:.4g}" for q in pr["pieces_outside"])
+    vals = [q["value"] for q in pr["pieces_outside"]] + [pr["lower"], pr["upper"]]
+    return ["", f"**A piece outside the interval**: under the same correction function an earlier pass put Δχ² "
+                f"below the threshold outside [{pr['lower']:.4g}, {pr['upper']:.4g}] (re-referenced to this pass's "
+                f"minimum: {pts}).  The last pass stops walking at its first crossings, so the confidence set is "
+                f"not one interval; its hull is [{min(vals):.4g}, {max(vals):.4g}]."]
 
 
 def _correction_model_lines(cm: dict | None) -> list[str]:
