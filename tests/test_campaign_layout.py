@@ -1,5 +1,5 @@
-"""The campaigns/ folders as the README describes them: every spec parses, and every committed campaign result
-(a results/<name>/ folder with a table) belongs to a spec of that name."""
+"""The campaigns/ folders as the README describes them: every spec parses, every committed campaign result
+(a results/<name>/ folder with a table) belongs to a spec of that name and loads as a campaign by itself."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -39,6 +39,20 @@ def test_every_committed_campaign_table_has_its_spec():
     assert tables, "no committed campaign tables under results/"
     orphans = [t for t in tables if t not in names]
     assert not orphans, f"results/<name>/table.csv without a campaign spec of that name: {orphans}"
+
+
+def test_every_committed_campaign_folder_loads_as_it_is():
+    """A committed results/<name>/ folder is itself a campaign (`dchfrac campaign compare` and `report` take the
+    folder): its spec copy loads from a fresh clone, with the [base] model files it names (base_models/)."""
+    copies = sorted((ROOT / "results").glob("*/spec.toml"))
+    assert copies, "no committed campaign folders under results/"
+    broken = []
+    for p in copies:
+        try:
+            load_spec(p)
+        except Exception as e:  # noqa: BLE001 - every failure is listed, whatever its kind
+            broken.append(f"{p.parent.name}: {e}")
+    assert not broken, "committed campaign folders whose spec copy does not load:\n" + "\n".join(broken)
 
 
 def test_no_script_outside_the_archive():
