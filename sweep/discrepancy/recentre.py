@@ -131,7 +131,7 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
     the earlier passes' points under the threshold outside the last interval when the passes share one correction
     function (:func:`pieces_outside`; empty otherwise), and
     "_correction": the linear correction's model or None, to be popped before the dict is serialized)."""
-    history, settled, kept = [], None, []
+    history, settled, same_model = [], None, []   # same_model: earlier passes under the current cm
     em = None
     if problem.spec.profile.emulator == "gp":
         em = emulator if emulator is not None else emulator_for(problem, fit, ids)
@@ -144,9 +144,9 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
                         "at": best["value"]})
         if cm is not None:                   # the same correction function: the profile's own minimum
             fit, settled = _profile_minimum(problem, fit, j, ids, pr, fine_forward, em, cm), cm
-            kept.append((pr, cm))
+            same_model.append(pr)
             if not cm.covers(fit.values()):
-                cm = None                    # outside the anchors: the next pass models it about the new fit
+                cm, same_model = None, []    # outside the anchors: the next pass models it about the new fit
             pr, cm = _profile_run(problem, fit, j, ids, 3.841, fine_forward, em, cm)
             continue
         vals = {**best.get("others", {}), fit.params[j].name: best["value"]}
@@ -165,6 +165,6 @@ def profile_recentred(problem: Problem, fit: Fit, j: int, ids, max_passes: int =
         xj = float(fit.x[j])
         fit = settled_fit(problem, fit.params, j, xj, np.delete(np.asarray(fit.x, float), j), ids, cm, em)
     pr["recentred"] = history
-    pr["pieces_outside"] = pieces_outside([old for old, c in kept if cm is not None and c is cm], pr)
+    pr["pieces_outside"] = pieces_outside(same_model, pr)
     pr["_correction"] = cm       # the linear correction's model (not JSON: the caller pops it), None otherwise
     return fit, pr
