@@ -10,6 +10,8 @@ test_threads.py).  A single-process session (``-n 0``) keeps the libraries' defa
 """
 import os
 
+import pytest
+
 
 def _workers() -> int:
     try:
@@ -21,3 +23,16 @@ def _workers() -> int:
 if os.environ.get("PYTEST_XDIST_WORKER") and _workers() > 1:
     for _var in ("MKL_NUM_THREADS", "OMP_NUM_THREADS"):
         os.environ.setdefault(_var, "1")
+
+
+@pytest.fixture
+def table_folder(tmp_path):
+    """A function writing a DataFrame as ``tmp_path/<name>/table.csv``: a campaign folder as `dchfrac judge`
+    reads it; returns the folder."""
+    def write(name, df):
+        d = tmp_path / name
+        d.mkdir()
+        df.to_csv(d / "table.csv", index=False)
+        return d
+
+    return write

@@ -69,16 +69,9 @@ def test_a_failed_run_is_listed_with_its_reason_and_carries_no_label():
     assert bad[0]["reason"].startswith("time step below") and bad[0]["t_reached"] == 2.32
 
 
-def _campaign(tmp_path, name, df):
-    d = tmp_path / name
-    d.mkdir()
-    df.to_csv(d / "table.csv", index=False)
-    return d
-
-
-def test_cli_judges_two_lines_pooled_with_a_figure(tmp_path, capsys):
-    eta = _campaign(tmp_path, "eta_line", _line(_rising()))
-    rate = _campaign(tmp_path, "rate_line", _line(_rising(), ca_star=CA_STAR * 1.3))
+def test_cli_judges_two_lines_pooled_with_a_figure(tmp_path, table_folder, capsys):
+    eta = table_folder("eta_line", _line(_rising()))
+    rate = table_folder("rate_line", _line(_rising(), ca_star=CA_STAR * 1.3))
     out, fig = tmp_path / "summary.json", tmp_path / "lines.png"
     assert main(["judge", "experiment_lines", str(eta), str(rate), "--out", str(out), "--figure", str(fig)]) == 0
     s = json.loads(out.read_text())
@@ -163,16 +156,16 @@ def test_a_fallback_run_where_the_line_did_not_fail_is_refused():
         el.judge({"eta": full}, {"rate": full.loc[[3]]})
 
 
-def test_cli_takes_a_fallback_folder_named_for_its_line(tmp_path, capsys):
+def test_cli_takes_a_fallback_folder_named_for_its_line(tmp_path, table_folder, capsys):
     full = _line(_rising())
-    eta = _campaign(tmp_path, "eta_line", _failed_at(full, [3]))
-    fb = _campaign(tmp_path, "eta_line_upwind_fallback", full.loc[[3]])
+    eta = table_folder("eta_line", _failed_at(full, [3]))
+    fb = table_folder("eta_line_upwind_fallback", full.loc[[3]])
     out, fig = tmp_path / "summary.json", tmp_path / "lines.png"
     assert main(["judge", "experiment_lines", str(eta), "--fallback", str(fb), "--out", str(out),
                  "--figure", str(fig)]) == 0
     assert json.loads(out.read_text())["secondary"]["fallback_runs"] == {"eta_line": 1}
     assert fig.stat().st_size > 0
-    wrong = _campaign(tmp_path, "other_upwind_fallback", full.loc[[3]])
+    wrong = table_folder("other_upwind_fallback", full.loc[[3]])
     assert main(["judge", "experiment_lines", str(eta), "--fallback", str(wrong)]) == 2
     assert "must be named <line>_upwind_fallback" in capsys.readouterr().err
     assert main(["judge", "draws", str(eta), "--fallback", str(fb)]) == 2

@@ -15,7 +15,7 @@ from pathlib import Path
 __all__ = ["add_closure_command", "add_cracks_command", "add_judge_command", "PROTOCOL_NAMES"]
 
 #: the judging protocols of ``dchfrac judge`` (sweep.studies.protocols.PROTOCOLS)
-PROTOCOL_NAMES = ("draws", "pockets", "pockets_tip", "experiment_lines", "nf_nb_draws")
+PROTOCOL_NAMES = ("draws", "pockets", "pockets_tip", "experiment_lines", "nf_nb_draws", "nf_nb_quadrants")
 
 
 def _deferred(module: str, name: str):
@@ -76,11 +76,13 @@ def add_judge_command(subparsers):
     j.add_argument("protocol", choices=sorted(PROTOCOL_NAMES))
     j.add_argument("campaign_dir", type=Path, help="the campaign folder (results/<name>/ or the store's)")
     j.add_argument("second_dir", type=Path, nargs="?", help="pockets: the mesh stage's campaign folder; "
-                   "experiment_lines: the w_i line's campaign folder (pooled with the first)")
+                   "experiment_lines: the w_i line's campaign folder (pooled with the first); nf_nb_quadrants: a "
+                   "reference campaign over the same grid (label by label)")
     j.add_argument("--out", type=Path, help="summary JSON (also printed)")
     j.add_argument("--figure", type=Path, help="PNG: the labels per realization and the share fracturing")
-    j.add_argument("--fallback", type=Path, action="append", help="experiment_lines: a line's fallback campaign "
-                   "folder, named <line>_upwind_fallback (its failed points rerun; the secondary verdict); repeatable")
+    j.add_argument("--fallback", type=Path, action="append", help="experiment_lines, nf_nb_quadrants: a judged "
+                   "campaign's fallback folder, named <campaign>_upwind_fallback (its failed points rerun; the "
+                   "secondary verdict); repeatable for the two lines")
     j.add_argument("--crack-map", type=Path, help="pockets: PNG of the crack length over the Ca*-C plane per mesh")
     j.set_defaults(func=_deferred(mod, "cmd_judge"))
     return j

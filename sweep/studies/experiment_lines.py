@@ -138,19 +138,21 @@ def judge_line(df: pd.DataFrame) -> dict:
             "run_rows": rows}
 
 
-def with_fallback(line: pd.DataFrame, fallback: pd.DataFrame) -> tuple[pd.DataFrame, int]:
-    """The line with each failed run replaced by the fallback campaign's run at its point (POINT values matched as
-    :func:`sweep.campaign.compare.matching_key` matches campaigns; column ``fallback`` True on those rows), and
-    how many were replaced.  A fallback run at a point where the line has no failed run, or two at one point, is
-    refused: the declared rule reruns the failed points and only those."""
+def with_fallback(line: pd.DataFrame, fallback: pd.DataFrame, *, point=POINT,
+                  who: str = "experiment_lines") -> tuple[pd.DataFrame, int]:
+    """The line (or grid) with each failed run replaced by the fallback campaign's run at its point (the values of
+    ``point``, POINT for a line, matched as :func:`sweep.campaign.compare.matching_key` matches campaigns; column
+    ``fallback`` True on those rows), and how many were replaced.  A fallback run at a point where the line has
+    no failed run, or two at one point, is refused, naming ``who``: the declared rule reruns the failed points and
+    only those."""
     from sweep.campaign.compare import matching_key
 
-    keys, fkeys = matching_key(line, POINT), matching_key(fallback, POINT)
+    keys, fkeys = matching_key(line, point), matching_key(fallback, point)
     failed = {k for k, status in zip(keys, line["status"]) if status != "ok"}
     wrong = [k for k in fkeys if k not in failed or fkeys.count(k) > 1]
     if wrong:
-        where = ", ".join(f"{c} = {v}" for c, v in zip(POINT, wrong[0]))
-        raise ValueError(f"experiment_lines: fallback run at {where}: the line has no failed run there, or the "
+        where = ", ".join(f"{c} = {v}" for c, v in zip(point, wrong[0]))
+        raise ValueError(f"{who}: fallback run at {where}: the line has no failed run there, or the "
                          "fallback has two (allowed: one fallback run per failed point of the line)")
     replaced = [k in set(fkeys) and status != "ok" for k, status in zip(keys, line["status"])]
     out = pd.concat([line[~np.array(replaced, dtype=bool)].assign(fallback=False), fallback.assign(fallback=True)],

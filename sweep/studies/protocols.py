@@ -21,7 +21,12 @@ a JSON-able summary built from :mod:`sweep.studies.label_agreement`; ``dchfrac j
   headers' fallback (:mod:`sweep.studies.experiment_lines`);
 * ``nf_nb_draws`` (campaigns/studies/nf_vs_nb_probabilities_h2.toml): the share of points whose porosity draws
   give one regime, over the grid and on each side of N_f = 1 and N_b = 1, and near each delimiter against
-  farther away (:mod:`sweep.studies.nf_nb_draws`).
+  farther away (:mod:`sweep.studies.nf_nb_draws`);
+* ``nf_nb_quadrants`` (campaigns/studies/nf_vs_nb_h2_wall_floor.toml, experiment_nf_vs_nb.toml): rows 17–17d of
+  results/README.md, the regimes on each side of the paper's delimiters N_f = 1 and N_b = 1 against the paper's,
+  with dp_cri estimated from the judged runs; with ``--fallback <campaign>_upwind_fallback`` the secondary
+  verdict, and with a second folder the label-by-label comparison with that reference campaign
+  (:mod:`sweep.studies.nf_nb_quadrants`).
 
 Units: lengths mm, C in %, eta_o in kPa s, Ca* dimensionless.
 """
@@ -161,9 +166,12 @@ def _check_fallback(a) -> str | None:
     line judged here), or None."""
     from sweep.studies.experiment_lines import FALLBACK_SUFFIX
 
-    if a.protocol != "experiment_lines":
-        return f"--fallback {a.fallback[0]}: only experiment_lines takes a fallback campaign"
-    names = {Path(d).name for d in filter(None, (a.campaign_dir, a.second_dir))}
+    if a.protocol not in FALLBACK_JUDGED:
+        return f"--fallback {a.fallback[0]}: only {' and '.join(FALLBACK_JUDGED)} take a fallback campaign"
+    if len(a.fallback) > 1 and a.protocol == "nf_nb_quadrants":
+        return f"--fallback given {len(a.fallback)} times: nf_nb_quadrants judges one campaign (allowed: once)"
+    judged = (a.campaign_dir, a.second_dir) if a.protocol == "experiment_lines" else (a.campaign_dir,)
+    names = {Path(d).name for d in filter(None, judged)}
     for d in a.fallback:
         if not Path(d).name.endswith(FALLBACK_SUFFIX) or _fallback_line(d) not in names:
             return (f"--fallback {d}: its folder must be named <line>{FALLBACK_SUFFIX} for a line judged here "
@@ -188,11 +196,21 @@ def _run_nf_nb_draws(a) -> dict:
     return nf_nb_draws.judge_dir(a.campaign_dir)
 
 
+def _run_nf_nb_quadrants(a) -> dict:
+    from sweep.studies import nf_nb_quadrants
+
+    fallback = a.fallback[0] if a.fallback else None
+    return nf_nb_quadrants.judge(a.campaign_dir, fallback_dir=fallback, reference_dir=a.second_dir)
+
+
 #: what each protocol of ``dchfrac judge`` (sweep.studies.commands.PROTOCOL_NAMES) runs
 PROTOCOLS = dict(zip(PROTOCOL_NAMES, (_run_draws, _run_pockets, _run_pockets_tip, _run_experiment_lines,
-                                      _run_nf_nb_draws)))
+                                      _run_nf_nb_draws, _run_nf_nb_quadrants)))
 #: the protocols that take a second campaign folder, and what it is
-SECOND_DIR = {"pockets": "its mesh stage", "experiment_lines": "the w_i line"}
+SECOND_DIR = {"pockets": "its mesh stage", "experiment_lines": "the w_i line",
+              "nf_nb_quadrants": "a reference campaign over the same grid"}
+#: the protocols that take a fallback campaign (``--fallback``)
+FALLBACK_JUDGED = ("experiment_lines", "nf_nb_quadrants")
 
 
 def cmd_judge(a) -> int:
