@@ -34,7 +34,8 @@ def _grid() -> pd.DataFrame:
 def test_the_rows_count_each_quadrant_against_the_paper():
     out = nq.judge_runs(_grid())
     assert 300 < out["dp_cri_kPa"] < 3000
-    assert out["17"] == {"fracture_with_N_f_above_1": {"k": 6, "n": 8}, "no_fracture_with_N_f_below_1": {"k": 6, "n": 8}}
+    assert out["17"] == {"fracture_with_N_f_above_1": {"k": 6, "n": 8},
+                         "no_fracture_with_N_f_below_1": {"k": 6, "n": 8}}
     assert out["17a"]["N_b < 1"] == {"invasive_fracturing": 1, "uniform_invasion": 3}
     assert out["17a"]["reproduced"] and out["17b"]["reproduced"]
     assert out["17b"]["paper_regime_shares"]["non_invasive_fracturing"] == {"N_b < 1": {"k": 0, "n": 4},

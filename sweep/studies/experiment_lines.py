@@ -19,8 +19,8 @@ experiment_ca_star_rate_line.toml: w_i alone at η_o = 0.29 kPa·s) are judged e
   reported beside the verdict;
 * a failed run carries no label: it is listed with the time it reached and its reason, and counted, never
   dropped silently;
-* the headers' label-blind fallback (declared 29 Nov 2026): a line's failed points, and only those, are rerun in
-  a companion campaign ``<line>_upwind_fallback`` with transport = "upwind".  :func:`judge` with ``fallback``
+* the headers' label-blind fallback (declared there before any run): a line's failed points, and only those, are
+  rerun in a companion campaign ``<line>_upwind_fallback`` with transport = "upwind".  :func:`judge` with ``fallback``
   gives the SECONDARY verdict, the failed runs replaced by the companion's runs at the same point
   (:func:`with_fallback`), beside the PRIMARY one, which stays the headers' answer.
 
