@@ -93,3 +93,12 @@ def test_cli_judges_with_a_fallback_named_for_the_campaign(tmp_path, table_folde
     wrong = table_folder("other_upwind_fallback", g.loc[[0]])
     assert main(["judge", "nf_nb_quadrants", str(grid), "--fallback", str(wrong)]) == 2
     assert "allowed lines: ['grid']" in capsys.readouterr().err
+
+
+def test_the_committed_uniform_mesh_grid_gives_row_17_as_results_readme_states():
+    """results/README.md row 17: 36 of 37 runs with N_f > 1 fracture, 32 of 39 with N_f < 1 do not; dp_cri 9.9e3."""
+    p = nq.judge(RESULTS / "nf_vs_nb_h2")["primary"]
+    assert p["dp_cri_kPa"] == pytest.approx(9.9e3, rel=0.01)
+    assert p["17"] == {"fracture_with_N_f_above_1": {"k": 36, "n": 37},
+                       "no_fracture_with_N_f_below_1": {"k": 32, "n": 39}}
+    assert p["17c"]["N_f < 1, N_b > 1"] + p["17c"]["N_f > 1, N_b < 1"] == 7

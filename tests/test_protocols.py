@@ -36,6 +36,8 @@ def test_bad_input_is_one_line_and_exit_2(argv, msg, capsys):
     ("draws", ["ca_star_boundary_h2_draws"]),
     ("pockets", ["ca_star_boundary_h2_pockets", "ca_star_boundary_h2_pockets_meshes"]),
     ("nf_nb_quadrants", ["nf_vs_nb_h2_wall_floor", "nf_vs_nb_h2_wall"]),
+    ("nf_nb_quadrants", ["nf_vs_nb_h2"]),
+    ("nf_nb_quadrants", ["nf_vs_nb_h2_wall"]),
 ])
 def test_committed_summary_regenerates_byte_for_byte(protocol, dirs, tmp_path, capsys):
     out = tmp_path / "summary.json"
