@@ -102,3 +102,36 @@ def test_bad_grid_is_refused_by_name(kw, name):
 def test_not_a_campaign_folder_is_refused(tmp_path):
     with pytest.raises(FileNotFoundError, match="table.csv"):
         crack_lengths(tmp_path, (0.99,))
+
+
+def test_lengths_from_an_earlier_output_redo_the_fits_without_run_folders(campaign, tmp_path):
+    root, _ = campaign
+    first, again = tmp_path / "first.json", tmp_path / "again.json"
+    argv = ["--phi-open", "0.99", "--l-min", "6", "--md"]
+    assert main([str(root), *argv, str(tmp_path / "first.md"), "--out", str(first)]) == 0
+    import shutil
+
+    shutil.rmtree(root / "runs")  # a fresh clone: the run folders are not committed
+    assert main([str(root), "--lengths", str(first), *argv, str(tmp_path / "again.md"), "--out", str(again)]) == 0
+    assert again.read_bytes() == first.read_bytes()
+    assert (tmp_path / "again.md").read_text() == (tmp_path / "first.md").read_text()
+    empty = tmp_path / "empty.json"
+    empty.write_text("{}")
+    with pytest.raises(ValueError, match="no 'lengths' records"):
+        main([str(root), "--lengths", str(empty), *argv, str(tmp_path / "x.md"), "--out", str(tmp_path / "x.json")])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("folder", ["ca_star_boundary_h1_floor", "ca_star_boundary_h2_floor",
+                                    "ca_star_boundary_h4_floor"])
+def test_committed_sensitivity_regenerates_from_its_own_lengths(folder, tmp_path):
+    from pathlib import Path
+
+    d = Path(__file__).resolve().parents[1] / "results" / folder
+    out, md = tmp_path / "s.json", tmp_path / "s.md"
+    assert main([str(d), "--lengths", str(d / "threshold_sensitivity.json"), "--phi-open", "0.95", "0.97", "0.98",
+                 "0.99", "0.995", "--l-min", "3", "4", "5", "--out", str(out), "--md", str(md)]) == 0
+    import json
+
+    assert json.loads(out.read_text())["fits"] == json.loads((d / "threshold_sensitivity.json").read_text())["fits"]
+    assert md.read_text() == (d / "threshold_sensitivity.md").read_text()

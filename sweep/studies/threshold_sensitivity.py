@@ -22,14 +22,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
-import numpy as np
 import pandas as pd
 
 from sweep.regimes.classify import classify_run
 from solver.output import atomic_write_text
 from sweep.campaign.store import write_json_atomic
 
-__all__ = ["ThresholdGrid", "crack_lengths", "separatrix_grid", "to_markdown", "main"]
+__all__ = ["ThresholdGrid", "crack_lengths", "lengths_from", "separatrix_grid", "to_markdown", "main"]
 
 
 @dataclass(frozen=True)
@@ -108,6 +107,22 @@ def separatrix_grid(lengths: pd.DataFrame, grid: ThresholdGrid, level: float = 0
     return out
 
 
+def _interval_text(lo: float, hi: float) -> str:
+    """An interval with its unbounded sides open: "[0.26, ∞)" where the labels do not bound it above."""
+    left = f"[{lo:.2f}" if math.isfinite(lo) else "(−∞"
+    right = f"{hi:.2f}]" if math.isfinite(hi) else "∞)"
+    return f"{left}, {right}"
+
+
+def lengths_from(path: str | Path) -> pd.DataFrame:
+    """The crack lengths (mm) per run and porosity level stored in an earlier output of :func:`main` (its
+    ``lengths`` records): the fits redone without the run folders, which a committed campaign may not carry."""
+    recs = json.loads(Path(path).read_text()).get("lengths")
+    if not recs:
+        raise ValueError(f"--lengths {path}: no 'lengths' records (allowed: a JSON this module wrote)")
+    return pd.DataFrame.from_records(recs)
+
+
 def to_markdown(fits: list[dict], lengths: pd.DataFrame) -> str:
     """A table of the grid's fits and the distinct crack lengths at each porosity level (mm)."""
     lines = ["| phi_open | L_min (mm) | fracturing | B (1/%) | 95 % interval | excludes 0 |", "|---|---|---|---|---|---|"]
@@ -115,9 +130,8 @@ def to_markdown(fits: list[dict], lengths: pd.DataFrame) -> str:
         if "error" in f:
             lines.append(f"| {f['phi_open']:g} | {f['l_min']:g} | {f['n_fracturing']}/{f['n']} | – | {f['error']} | – |")
             continue
-        lo, hi = f["B_interval"]
         lines.append(f"| {f['phi_open']:g} | {f['l_min']:g} | {f['n_fracturing']}/{f['n']} | {f['B']:.2f} | "
-                     f"[{lo:.2f}, {hi:.2f}] | {'yes' if f['excludes_zero'] else 'no'} |")
+                     f"{_interval_text(*f['B_interval'])} | {'yes' if f['excludes_zero'] else 'no'} |")
     lines += ["", "Distinct crack lengths (mm, number of runs):", ""]
     for col in [c for c in lengths.columns if c.startswith("L@")]:
         counts = lengths[col].round(2).value_counts().sort_index()
@@ -128,6 +142,8 @@ def to_markdown(fits: list[dict], lengths: pd.DataFrame) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m sweep.studies.threshold_sensitivity", description=__doc__.split("\n\n")[0])
     ap.add_argument("campaign_dir", help="a campaign results folder (table.csv and runs/)")
+    ap.add_argument("--lengths", help="take the crack lengths from this earlier output (JSON) instead of the run "
+                    "folders: the fits redone on a fresh clone, where runs/ is not committed")
     ap.add_argument("--phi-open", type=float, nargs="+", required=True, help="porosity levels of an open crack (-)")
     ap.add_argument("--l-min", type=float, nargs="+", required=True, help="crack lengths L_min of rule 1 (mm)")
     ap.add_argument("--level", type=float, default=0.95, help="level of the profile intervals (default 0.95)")
@@ -137,7 +153,7 @@ def main(argv=None) -> int:
     grid = ThresholdGrid(tuple(a.phi_open), tuple(a.l_min))
     if not 0.0 < a.level < 1.0:
         ap.error(f"--level {a.level}: must be in (0, 1)")
-    lengths = crack_lengths(a.campaign_dir, grid.phi_open)
+    lengths = lengths_from(a.lengths) if a.lengths else crack_lengths(a.campaign_dir, grid.phi_open)
     fits = separatrix_grid(lengths, grid, level=a.level)
     write_json_atomic(Path(a.out), {"campaign_dir": str(a.campaign_dir), "grid": {"phi_open": list(grid.phi_open),
                                     "l_min": list(grid.l_min)}, "level": a.level, "fits": fits,
