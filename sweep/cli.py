@@ -514,12 +514,13 @@ def build_parser() -> argparse.ArgumentParser:
     rp.set_defaults(func=cmd_report)
     from .campaign.cli import add_campaign_commands
     from .discrepancy.cli import add_discrepancy_commands
-    from .studies.commands import add_closure_command, add_cracks_command, add_judge_command
+    from .studies.commands import add_closure_command, add_cracks_command, add_judge_command, add_provenance_command
 
     add_campaign_commands(sub)
     add_judge_command(sub)
     add_closure_command(sub)
     add_cracks_command(sub)
+    add_provenance_command(sub)
     add_discrepancy_commands(sub)
     for leaf in _leaf_parsers(ap):
         if leaf is not ap:

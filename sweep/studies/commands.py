@@ -1,4 +1,5 @@
-"""The argparse front of the study commands ``dchfrac closure``, ``dchfrac cracks`` and ``dchfrac judge``.
+"""The argparse front of the study commands ``dchfrac closure``, ``dchfrac cracks``, ``dchfrac judge`` and
+``dchfrac provenance``.
 
 A command's module (:mod:`sweep.studies.closure`, :mod:`sweep.studies.cracks`, :mod:`sweep.studies.protocols`) loads
 pandas, scipy.ndimage and matplotlib; it is imported when its command runs, not when the ``dchfrac`` parser is built
@@ -12,7 +13,7 @@ from importlib import import_module
 from importlib.util import find_spec
 from pathlib import Path
 
-__all__ = ["add_closure_command", "add_cracks_command", "add_judge_command", "PROTOCOL_NAMES"]
+__all__ = ["add_closure_command", "add_cracks_command", "add_judge_command", "add_provenance_command", "PROTOCOL_NAMES"]
 
 #: the judging protocols of ``dchfrac judge`` (sweep.studies.protocols.PROTOCOLS)
 PROTOCOL_NAMES = ("draws", "pockets", "pockets_tip", "experiment_lines", "nf_nb_draws", "nf_nb_quadrants")
@@ -86,3 +87,14 @@ def add_judge_command(subparsers):
     j.add_argument("--crack-map", type=Path, help="pockets: PNG of the crack length over the Ca*-C plane per mesh")
     j.set_defaults(func=_deferred(mod, "cmd_judge"))
     return j
+
+
+def add_provenance_command(subparsers):
+    """``dchfrac provenance [--results DIR] [--check]`` (:mod:`sweep.campaign.provenance`)."""
+    mod = "sweep.campaign.provenance"
+    p = subparsers.add_parser("provenance", help="write results/PROVENANCE.md from the campaign tables' code hashes",
+                              description=_doc_head(mod))
+    p.add_argument("--results", type=Path, default=Path("results"), help="the results folder (default results)")
+    p.add_argument("--check", action="store_true", help="compare instead of writing; exit 1 when out of date")
+    p.set_defaults(func=_deferred(mod, "cmd_provenance"))
+    return p
