@@ -165,3 +165,24 @@ def test_every_run_option_declares_its_unit_and_meaning():
     names = {f.name for f in fields(RunOptions)}
     assert set(OPTION_UNITS) == names
     assert {n for n, d in option_docs().items() if d} >= names
+
+
+def _every_parser(p):
+    """``p`` and every parser below it, group parsers included (their help lists their commands' help)."""
+    import argparse
+
+    yield p
+    for a in p._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for child in dict.fromkeys(a.choices.values()):
+                yield from _every_parser(child)
+
+
+def test_every_command_s_help_renders():
+    """argparse %-formats help strings: a bare "%" (as in "95 % interval") breaks --help of the command's group."""
+    from sweep.cli import build_parser
+
+    parsers = list(_every_parser(build_parser()))
+    assert len(parsers) > 30
+    for p in parsers:
+        assert p.format_help(), p.prog

@@ -1,4 +1,5 @@
-"""The import graph of solver/ and sweep/ has no circle, and solver/ never imports sweep/ (issue #50).
+"""The import graph of solver/ and sweep/ has no circle, solver/ never imports sweep/ (issue #50), and every module
+imports only its own floor and those below (README.md, "Layout").
 
 Read statically with ``ast``: every ``import`` and ``from ... import`` of a module counts, at module level or inside a
 function (a function-level import is still an arrow of the architecture).  The check is shown to fail on a
@@ -113,3 +114,34 @@ def test_the_check_finds_a_circle_in_a_toy_package(tmp_path):
     assert circles(graph) == [["toy.low", "toy.sub.high"]]
     (pkg / "low.py").write_text("import math\n")            # the upward import removed: no circle
     assert circles(import_graph(tmp_path, ("toy",))) == []
+
+
+#: the floors of README.md "Layout", lowest first: a module imports only its own floor and those below.  figio (the
+#: figure writer) and paper (the paper's reported values) are leaves every floor may use; studies/ and discrepancy/
+#: share a floor (the discrepancy workflow's reference check reuses studies/reference).
+FLOORS = (("solver",), ("sweep.figio", "sweep.paper"), ("sweep.regimes",), ("sweep.campaign",),
+          ("sweep.studies", "sweep.discrepancy"), ("sweep.cli", "sweep.animate", "sweep"))
+
+
+def floor(module: str) -> int:
+    """The floor of a module: the longest prefix of FLOORS that names it or its package."""
+    best = (-1, -1)
+    for i, prefixes in enumerate(FLOORS):
+        for p in prefixes:
+            if module == p or module.startswith(p + "."):
+                best = max(best, (len(p), i))
+    return best[1]
+
+
+def upward(graph: dict[str, set[str]]) -> dict[str, list[str]]:
+    """{module: the modules it imports from a higher floor}, for the modules that do."""
+    up = {m: sorted(d for d in deps if floor(d) > floor(m)) for m, deps in graph.items()}
+    return {m: d for m, d in up.items() if d}
+
+
+def test_every_module_imports_only_its_floor_and_those_below():
+    graph = import_graph(ROOT)
+    assert all(floor(m) >= 0 for m in graph), [m for m in graph if floor(m) < 0]
+    assert upward(graph) == {}
+    toy = {"sweep.regimes.a": {"sweep.campaign.b", "sweep.figio"}, "sweep.campaign.b": {"sweep.regimes.a"}}
+    assert upward(toy) == {"sweep.regimes.a": ["sweep.campaign.b"]}  # the check sees an arrow up

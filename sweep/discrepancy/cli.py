@@ -69,7 +69,7 @@ def add_discrepancy_commands(subparsers) -> argparse.ArgumentParser:
     rd.set_defaults(func=cmd_render)
     from .solver_coverage import add_coverage_arguments, cmd_coverage
 
-    cv = sub.add_parser("coverage", help="coverage of the named strength's 95 % interval over twin results folders "
+    cv = sub.add_parser("coverage", help="coverage of the named strength's 95 %% interval over twin results folders "
                                          "(no forward run): pooled, by effect and by correction")
     add_coverage_arguments(cv)
     cv.set_defaults(func=cmd_coverage)
