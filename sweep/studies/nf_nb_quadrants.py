@@ -34,7 +34,7 @@ from sweep.regimes.numbers import estimate_dp_cri
 __all__ = ["POINT", "PAPER", "labelled", "judge_runs", "judge"]
 
 POINT = ("eta_o", "eta_w", "kbar")  # a grid point: η_o, η_w (kPa·s), k̄ (mm²)
-SIDES = {"N_f < 1": ("N_b < 1", "N_b > 1"), "N_f > 1": ("N_b < 1", "N_b > 1")}
+NB_SIDES = ("N_b < 1", "N_b > 1")  # the two sides of the paper's N_b = 1 delimiter
 #: the paper's regime in each quadrant (Sec. 3.8), keyed (N_f side, N_b side)
 PAPER = {("N_f < 1", "N_b < 1"): "uniform_invasion", ("N_f < 1", "N_b > 1"): "viscous_fingering",
          ("N_f > 1", "N_b < 1"): "invasive_fracturing", ("N_f > 1", "N_b > 1"): "non_invasive_fracturing"}
@@ -60,8 +60,8 @@ def _row_17ab(quads: dict, f_side: str) -> dict:
     """Rows 17a/17b: the counts on each side of N_b = 1 at one side of N_f = 1, the paper's regimes, whether the
     paper's regime is the most frequent label on both sides, and each of the two paper regimes' share on each
     side (the paper's direction, where its delimiter is not reproduced)."""
-    c = {b: quads[(f_side, b)] for b in SIDES[f_side]}
-    paper = {b: PAPER[(f_side, b)] for b in SIDES[f_side]}
+    c = {b: quads[(f_side, b)] for b in NB_SIDES}
+    paper = {b: PAPER[(f_side, b)] for b in NB_SIDES}
 
     def top(counts):  # the most frequent label; None when two labels tie for it
         best = sorted(counts.values())[-2:]
