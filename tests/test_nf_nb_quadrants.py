@@ -89,7 +89,7 @@ def test_cli_judges_with_a_fallback_named_for_the_campaign(tmp_path, table_folde
     assert s["primary"]["labelled"] == 15 and s["secondary"]["replaced"] == 1
     assert s["secondary"]["fallback_labels"] == {"uniform_invasion": 1}
     assert main(["judge", "nf_nb_quadrants", str(grid), "--fallback", str(fb), "--fallback", str(fb)]) == 2
-    assert "allowed: once" in capsys.readouterr().err
+    assert "allowed: one fallback each" in capsys.readouterr().err
     wrong = table_folder("other_upwind_fallback", g.loc[[0]])
     assert main(["judge", "nf_nb_quadrants", str(grid), "--fallback", str(wrong)]) == 2
     assert "allowed lines: ['grid']" in capsys.readouterr().err

@@ -168,10 +168,10 @@ def _check_fallback(a) -> str | None:
 
     if a.protocol not in FALLBACK_JUDGED:
         return f"--fallback {a.fallback[0]}: only {' and '.join(FALLBACK_JUDGED)} take a fallback campaign"
-    if len(a.fallback) > 1 and a.protocol == "nf_nb_quadrants":
-        return f"--fallback given {len(a.fallback)} times: nf_nb_quadrants judges one campaign (allowed: once)"
-    judged = (a.campaign_dir, a.second_dir) if a.protocol == "experiment_lines" else (a.campaign_dir,)
-    names = {Path(d).name for d in filter(None, judged)}
+    names = {Path(d).name for d in filter(None, (getattr(a, f) for f in FALLBACK_JUDGED[a.protocol]))}
+    if len(a.fallback) > len(names):
+        return (f"--fallback given {len(a.fallback)} times: {a.protocol} judges {len(names)} campaign(s) here "
+                f"(allowed: one fallback each)")
     for d in a.fallback:
         if not Path(d).name.endswith(FALLBACK_SUFFIX) or _fallback_line(d) not in names:
             return (f"--fallback {d}: its folder must be named <line>{FALLBACK_SUFFIX} for a line judged here "
@@ -209,8 +209,9 @@ PROTOCOLS = dict(zip(PROTOCOL_NAMES, (_run_draws, _run_pockets, _run_pockets_tip
 #: the protocols that take a second campaign folder, and what it is
 SECOND_DIR = {"pockets": "its mesh stage", "experiment_lines": "the w_i line",
               "nf_nb_quadrants": "a reference campaign over the same grid"}
-#: the protocols that take a fallback campaign (``--fallback``)
-FALLBACK_JUDGED = ("experiment_lines", "nf_nb_quadrants")
+#: the protocols that take a fallback campaign (``--fallback``), and the arguments naming the campaigns it may
+#: stand in for (nf_nb_quadrants' second folder is a reference, not judged)
+FALLBACK_JUDGED = {"experiment_lines": ("campaign_dir", "second_dir"), "nf_nb_quadrants": ("campaign_dir",)}
 
 
 def cmd_judge(a) -> int:
