@@ -456,6 +456,10 @@ def test_an_earlier_pass_under_the_same_correction_shows_a_piece_the_last_pass_d
     assert [q["value"] for q in got] == [32.13]
     assert got[0]["delta_chi2"] == pytest.approx(3.72)
     assert pieces_outside([], last) == []
+    again = {**first, "points": [{"value": 32.13, "delta_chi2": -2.51}, *first["points"],
+                                 {"value": 25.10, "delta_chi2": 0.5}]}  # evaluated again as the design grew
+    assert [(q["value"], round(q["delta_chi2"], 2)) for q in pieces_outside([again], last)] == [(25.10, 6.46),
+                                                                                              (32.13, 3.72)]
     text = "\n".join(_pieces_outside_lines({**last, "pieces_outside": got}))
     assert "3.72 at 32.13" in text and "hull is [32.13, 45.8]" in text
     assert _pieces_outside_lines({**last, "pieces_outside": []}) == []

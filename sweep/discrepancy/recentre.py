@@ -40,16 +40,14 @@ def pieces_outside(earlier: list, pr: dict) -> list:
     """Points of earlier passes, evaluated under the same correction function as the last pass ``pr``, whose
     Δχ² re-referenced to ``pr``'s minimum (χ²_point − χ²_ref of ``pr``, from each pass's "reference_chi2") is
     under ``pr``'s threshold while they lie outside [lower, upper]: a second piece of the confidence set that
-    the last pass, which stops walking at its first crossings, does not see.  Returns them sorted by value
-    (strength units; Δχ² dimensionless), each {"value", "delta_chi2"}."""
+    the last pass, which stops walking at its first crossings, does not see.  A value evaluated more than once
+    (again after the correction gained an anchor or the emulator a design point) counts by its latest evaluation,
+    the one nearest the last pass's state.  Returns them sorted by value (strength units; Δχ² dimensionless),
+    each {"value", "delta_chi2"}."""
     ref, lo, hi = pr["reference_chi2"], pr["lower"], pr["upper"]
-    out = {}
-    for old in earlier:
-        for q in old["points"]:
-            d = q["delta_chi2"] + old["reference_chi2"] - ref
-            if d < pr["threshold"] and not lo <= q["value"] <= hi and d < out.get(q["value"], np.inf):
-                out[q["value"]] = d
-    return [{"value": float(v), "delta_chi2": float(d)} for v, d in sorted(out.items())]
+    latest = {q["value"]: q["delta_chi2"] + old["reference_chi2"] - ref for old in earlier for q in old["points"]}
+    return [{"value": float(v), "delta_chi2": float(d)} for v, d in sorted(latest.items())
+            if d < pr["threshold"] and not lo <= v <= hi]
 
 
 def _profile_minimum(problem: Problem, fit: Fit, j: int, ids, pr: dict, fine_forward, em, cm) -> Fit:
