@@ -10,8 +10,9 @@ labelled runs (status ok with a regime):
 * rows 17a and 17b: the regime counts on each side of N_b = 1, for N_f < 1 and N_f > 1, against the paper's
   regime there (uniform invasion below N_b = 1 and viscous fingering above for N_f < 1; invasive fracturing below
   and non-invasive fracturing above for N_f > 1).  A row is reproduced when the paper's regime is the most
-  frequent label on both sides; the share of the paper's low-N_b regime below and above N_b = 1 is reported
-  beside it (the paper's direction, even where its delimiter is not reproduced);
+  frequent label on both sides; each of the two paper regimes' share below and above N_b = 1 is reported beside
+  it with its Wilson 95 % interval (the paper's direction, even where its delimiter is not reproduced, and
+  whether the runs can tell the two sides apart);
 * row 17c: where the fracturing-with-fingering runs fall; row 17d: the viscous-fingering runs with N_b > 1 and
   N_f > 1 (the paper: none);
 * with a fallback campaign (its failed points rerun by a declared fallback, named ``<campaign>_upwind_fallback``):
@@ -30,6 +31,7 @@ from pathlib import Path
 import pandas as pd
 
 from sweep.regimes.numbers import estimate_dp_cri
+from sweep.regimes.probability import wilson_interval
 
 __all__ = ["POINT", "PAPER", "labelled", "judge_runs", "judge"]
 
@@ -56,6 +58,12 @@ def _counts(labels: pd.Series) -> dict:
     return {str(k): int(v) for k, v in labels.value_counts().sort_index().items()}
 
 
+def _share(k: int, n: int) -> dict:
+    """k of n with the Wilson 95 % interval of the share (dimensionless; [0, 1] for n = 0)."""
+    lo, hi = wilson_interval(k, n)
+    return {"k": int(k), "n": int(n), "wilson_95": [round(float(lo), 4), round(float(hi), 4)]}
+
+
 def _row_17ab(quads: dict, f_side: str) -> dict:
     """Rows 17a/17b: the counts on each side of N_b = 1 at one side of N_f = 1, the paper's regimes, whether the
     paper's regime is the most frequent label on both sides, and each of the two paper regimes' share on each
@@ -67,8 +75,7 @@ def _row_17ab(quads: dict, f_side: str) -> dict:
         best = sorted(counts.values())[-2:]
         return max(counts, key=counts.get) if best and (len(best) == 1 or best[0] < best[1]) else None
 
-    shares = {regime: {b: {"k": c[b].get(regime, 0), "n": sum(c[b].values())} for b in c}
-              for regime in paper.values()}
+    shares = {regime: {b: _share(c[b].get(regime, 0), sum(c[b].values())) for b in c} for regime in paper.values()}
     return {**c, "paper": paper, "reproduced": all(top(c[b]) == paper[b] for b in c), "paper_regime_shares": shares}
 
 
