@@ -66,3 +66,13 @@ def test_crack_summary_and_rank_correlations():
     s = la.crack_summary(df)
     assert s["quantiles_0_25_50_75_100"] == [1.0, 2.0, 2.004, 4.0, 5.0] and s["distinct_values"] == [1.0, 2.0, 4.0, 5.0]
     assert la.rank_correlations(df) == {"cement": pytest.approx(-1.0), "Ca_star": pytest.approx(1.0)}
+
+
+def test_an_interval_side_the_labels_do_not_bound_is_written_open():
+    import math
+
+    from sweep.regimes.separatrix import interval_text
+
+    assert interval_text(0.262, math.inf) == "[0.26, ∞)"
+    assert interval_text(-math.inf, math.inf) == "(−∞, ∞)"
+    assert interval_text(-0.331, 1.594) == "[-0.33, 1.59]"

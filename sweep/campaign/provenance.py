@@ -35,12 +35,12 @@ from the current code (`dchfrac campaign status` counts them).  Dates are the ru
 """
 
 
-def _counts(values, empty: str = "not recorded") -> str:
-    """"`hash` (n), `hash` (n)" by decreasing count, ``empty`` (n) for the runs without a value."""
+def _counts(values) -> str:
+    """"`hash` (n), `hash` (n)" by decreasing count, "not recorded (n)" for the runs without a value."""
     c = Counter(values)
     missing = c.pop("", 0)
     parts = [f"`{k}` ({n})" for k, n in sorted(c.items(), key=lambda kv: (-kv[1], kv[0]))]
-    return ", ".join(parts + ([f"{empty} ({missing})"] if missing else []))
+    return ", ".join(parts + ([f"not recorded ({missing})"] if missing else []))
 
 
 def _classifiers(rows) -> str:

@@ -20,6 +20,7 @@ import numpy as np
 from .numbers import logistic_fit
 
 __all__ = [
+    "interval_text",
     "ExponentialSeparatrix",
     "fit_exponential_separatrix",
     "SeparatrixInterval",
@@ -33,6 +34,13 @@ __all__ = [
     "separatrix_significance",
     "separatrix_summary",
 ]
+
+
+def interval_text(lo: float, hi: float, digits: int = 2) -> str:
+    """A profile interval as text, a side the labels do not bound open: "[0.26, ∞)", "(−∞, ∞)"."""
+    left = f"[{lo:.{digits}f}" if math.isfinite(lo) else "(−∞"
+    right = f"{hi:.{digits}f}]" if math.isfinite(hi) else "∞)"
+    return f"{left}, {right}"
 
 class ExponentialSeparatrix(NamedTuple):
     """Ca*_c(C) = A exp(B C); cov: 2x2 covariance of (A, B) (delta method).

@@ -26,7 +26,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
-from sweep.regimes.separatrix import separatrix_profile_interval
+from sweep.regimes.separatrix import interval_text, separatrix_profile_interval
 from sweep.campaign.store import write_json_atomic
 from sweep.figio import write_figure
 
@@ -112,7 +112,7 @@ def separatrix_line(ax, fit: dict, C: np.ndarray, **kw) -> None:
 def _fit_title(head: str, fit: dict) -> str:
     if "B" not in fit:
         return f"{head}: no separatrix"
-    return f"{head}: B = {fit['B']:.2f} [{fit['B_interval'][0]:.2f}, {fit['B_interval'][1]:.2f}]"
+    return f"{head}: B = {fit['B']:.2f} {interval_text(*fit['B_interval'])}"
 
 
 def figure(df: pd.DataFrame, out: dict, by: str, l_min: float, path: Path, title: str) -> None:

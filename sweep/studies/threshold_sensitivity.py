@@ -25,6 +25,7 @@ from typing import Sequence
 import pandas as pd
 
 from sweep.regimes.classify import classify_run
+from sweep.regimes.separatrix import interval_text
 from solver.output import atomic_write_text
 from sweep.campaign.store import write_json_atomic
 
@@ -107,13 +108,6 @@ def separatrix_grid(lengths: pd.DataFrame, grid: ThresholdGrid, level: float = 0
     return out
 
 
-def _interval_text(lo: float, hi: float) -> str:
-    """An interval with its unbounded sides open: "[0.26, ∞)" where the labels do not bound it above."""
-    left = f"[{lo:.2f}" if math.isfinite(lo) else "(−∞"
-    right = f"{hi:.2f}]" if math.isfinite(hi) else "∞)"
-    return f"{left}, {right}"
-
-
 def lengths_from(path: str | Path) -> pd.DataFrame:
     """The crack lengths (mm) per run and porosity level stored in an earlier output of :func:`main` (its
     ``lengths`` records): the fits redone without the run folders, which a committed campaign may not carry."""
@@ -131,7 +125,7 @@ def to_markdown(fits: list[dict], lengths: pd.DataFrame) -> str:
             lines.append(f"| {f['phi_open']:g} | {f['l_min']:g} | {f['n_fracturing']}/{f['n']} | – | {f['error']} | – |")
             continue
         lines.append(f"| {f['phi_open']:g} | {f['l_min']:g} | {f['n_fracturing']}/{f['n']} | {f['B']:.2f} | "
-                     f"{_interval_text(*f['B_interval'])} | {'yes' if f['excludes_zero'] else 'no'} |")
+                     f"{interval_text(*f['B_interval'])} | {'yes' if f['excludes_zero'] else 'no'} |")
     lines += ["", "Distinct crack lengths (mm, number of runs):", ""]
     for col in [c for c in lengths.columns if c.startswith("L@")]:
         counts = lengths[col].round(2).value_counts().sort_index()
