@@ -104,3 +104,20 @@ def test_the_committed_uniform_mesh_grid_gives_row_17_as_results_readme_states()
     assert p["17"] == {"fracture_with_N_f_above_1": {"k": 36, "n": 37},
                        "no_fracture_with_N_f_below_1": {"k": 32, "n": 39}}
     assert p["17c"]["N_f < 1, N_b > 1"] + p["17c"]["N_f > 1, N_b < 1"] == 7
+
+
+def test_the_committed_experiment_grid_gives_the_verdict_its_readme_states():
+    """results/experiment_nf_vs_nb/README.md, "Verdict": rows 17, 17a and 17d reproduced, 17b not (no non-invasive
+    fracturing); the fallback's one run changes no row's verdict; 39 of 79 labels as the paper model's floor grid."""
+    out = nq.judge(RESULTS / "experiment_nf_vs_nb", reference_dir=RESULTS / "nf_vs_nb_h2_wall_floor",
+                   fallback_dir=RESULTS / "experiment_nf_vs_nb_upwind_fallback")
+    p, s = out["primary"], out["secondary"]
+    assert p["dp_cri_kPa"] == pytest.approx(1.89e3, rel=0.01)
+    assert p["17"] == {"fracture_with_N_f_above_1": {"k": 53, "n": 55},
+                       "no_fracture_with_N_f_below_1": {"k": 24, "n": 24}}
+    assert p["17a"]["reproduced"] and p["17d"]["reproduced"] and not p["17b"]["reproduced"]
+    assert p["17b"]["N_b > 1"] == {"fracturing_fingering": 30, "invasive_fracturing": 8}
+    assert (s["replaced"], s["fallback_labels"]) == (1, {"fracturing_fingering": 1})
+    assert [s[r]["reproduced"] for r in ("17a", "17b", "17d")] == [True, False, True]
+    ref = out["against_reference"]
+    assert (ref["labelled_in_both"], ref["same_label"]) == (79, 39)

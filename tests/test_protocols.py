@@ -38,8 +38,11 @@ def test_bad_input_is_one_line_and_exit_2(argv, msg, capsys):
     ("nf_nb_quadrants", ["nf_vs_nb_h2_wall_floor", "nf_vs_nb_h2_wall"]),
     ("nf_nb_quadrants", ["nf_vs_nb_h2"]),
     ("nf_nb_quadrants", ["nf_vs_nb_h2_wall"]),
+    ("nf_nb_quadrants", ["experiment_nf_vs_nb", "nf_vs_nb_h2_wall_floor",
+                         "--fallback", "experiment_nf_vs_nb_upwind_fallback"]),
 ])
 def test_committed_summary_regenerates_byte_for_byte(protocol, dirs, tmp_path, capsys):
     out = tmp_path / "summary.json"
-    assert main(["judge", protocol, *(str(RESULTS / d) for d in dirs), "--out", str(out)]) == 0
+    args = [d if d.startswith("--") else str(RESULTS / d) for d in dirs]
+    assert main(["judge", protocol, *args, "--out", str(out)]) == 0
     assert out.read_bytes() == (RESULTS / dirs[0] / "summary.json").read_bytes()
