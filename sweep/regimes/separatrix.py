@@ -42,6 +42,7 @@ def interval_text(lo: float, hi: float, digits: int = 2) -> str:
     right = f"{hi:.{digits}f}]" if math.isfinite(hi) else "∞)"
     return f"{left}, {right}"
 
+
 class ExponentialSeparatrix(NamedTuple):
     """Ca*_c(C) = A exp(B C); cov: 2x2 covariance of (A, B) (delta method).
 

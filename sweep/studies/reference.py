@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from sweep.campaign.figures import DIVERGING, save_figure
-from sweep.paper import PACKAGED_PAPER_TOML, paper_reported
+from sweep.paper import paper_reported
 
 def _figure(nrows=1, ncols=1, size=(6, 4.5)):
     from matplotlib.figure import Figure
